@@ -1,0 +1,66 @@
+//! Generates Rust bindings for Debian's MuJoCo 2.2.2 (`libmujoco-dev`) with bindgen and builds
+//! the small C shim that turns MuJoCo's fatal errors into return codes.
+use std::path::{Path, PathBuf};
+
+const INSTALL_HINT: &str =
+    "install it with `sudo apt-get install libmujoco-dev libclang-dev` (or run scripts/setup.sh)";
+
+fn fail(msg: &str) -> ! {
+    // Cargo prints a build script's stderr when it fails: keep it to one actionable line.
+    eprintln!("error: {msg}");
+    std::process::exit(1);
+}
+
+fn main() {
+    println!("cargo:rerun-if-changed=build.rs");
+    println!("cargo:rerun-if-changed=src/mujoco/shim.c");
+    println!("cargo:rerun-if-env-changed=MUJOCO_INCLUDE_DIR");
+    println!("cargo:rerun-if-env-changed=MUJOCO_LIB_DIR");
+
+    let include_dir =
+        PathBuf::from(std::env::var("MUJOCO_INCLUDE_DIR").unwrap_or_else(|_| "/usr/include".into()));
+    let header = include_dir.join("mujoco/mujoco.h");
+    if !header.exists() {
+        fail(&format!("MuJoCo header {} not found: {INSTALL_HINT}", header.display()));
+    }
+    let lib_dir = std::env::var("MUJOCO_LIB_DIR")
+        .map(PathBuf::from)
+        .unwrap_or_else(|_| PathBuf::from("/usr/lib/x86_64-linux-gnu"));
+    if !has_mujoco_library(&lib_dir) {
+        fail(&format!("MuJoCo library libmujoco.so not found in {}: {INSTALL_HINT}", lib_dir.display()));
+    }
+    println!("cargo:rustc-link-search=native={}", lib_dir.display());
+    println!("cargo:rustc-link-lib=dylib=mujoco");
+
+    let bindings = bindgen::Builder::default()
+        .header(header.to_string_lossy())
+        .clang_arg(format!("-I{}", include_dir.display()))
+        .allowlist_function("mj_.*")
+        .allowlist_function("mju_.*")
+        .allowlist_type("mj.*")
+        .allowlist_var("mj.*")
+        .allowlist_var("mju_user_.*")
+        .derive_default(true)
+        .layout_tests(false)
+        .generate()
+        .unwrap_or_else(|e| {
+            fail(&format!("bindgen could not read {} ({e}); libclang missing? {INSTALL_HINT}", header.display()))
+        });
+    let out = PathBuf::from(std::env::var("OUT_DIR").unwrap());
+    bindings.write_to_file(out.join("mujoco_bindings.rs")).expect("write bindings");
+
+    cc::Build::new()
+        .file("src/mujoco/shim.c")
+        .include(&include_dir)
+        .flag_if_supported("-std=c11")
+        .warnings(true)
+        .compile("locobench_mujoco_shim");
+}
+
+fn has_mujoco_library(dir: &Path) -> bool {
+    std::fs::read_dir(dir)
+        .map(|entries| {
+            entries.flatten().any(|e| e.file_name().to_string_lossy().starts_with("libmujoco.so"))
+        })
+        .unwrap_or(false)
+}

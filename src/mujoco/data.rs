@@ -1,0 +1,248 @@
+//! `Data`: one simulation state of a [`Model`]. One `Data` per thread; many may share a model.
+use std::ptr::NonNull;
+use std::sync::Arc;
+
+use super::error::{check, install_handlers, MjError, MjResult};
+use super::model::Model;
+use super::sys;
+
+/// Counters of MuJoCo's numerical-instability warnings (bad qpos, qvel, qacc). MuJoCo resets the
+/// state silently when these fire; comparing counts before and after a step reveals it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub struct InstabilityCounts {
+    pub bad_qpos: i32,
+    pub bad_qvel: i32,
+    pub bad_qacc: i32,
+}
+
+impl InstabilityCounts {
+    pub fn total(&self) -> i64 {
+        self.bad_qpos as i64 + self.bad_qvel as i64 + self.bad_qacc as i64
+    }
+}
+
+/// One active contact, as MuJoCo reports it.
+#[derive(Debug, Clone, Copy)]
+pub struct Contact {
+    pub geom1: usize,
+    pub geom2: usize,
+    pub pos: [f64; 3],
+    /// Contact frame, rows: normal, tangent 1, tangent 2 (world coordinates).
+    pub frame: [f64; 9],
+    pub dist: f64,
+    /// Force in the contact frame (normal, tangent 1, tangent 2).
+    pub force: [f64; 3],
+}
+
+pub struct Data {
+    ptr: NonNull<sys::mjData>,
+    model: Arc<Model>,
+}
+
+// SAFETY: an mjData is owned memory; moving it to another thread is fine. It is not `Sync`.
+unsafe impl Send for Data {}
+
+macro_rules! field_slices {
+    ($( $(#[$doc:meta])* $name:ident, $name_mut:ident, $field:ident, $len:expr; )*) => {
+        $(
+            $(#[$doc])*
+            pub fn $name(&self) -> &[f64] {
+                let n = { let m: &Model = &self.model; $len(m) };
+                if n == 0 { return &[]; }
+                unsafe { std::slice::from_raw_parts(self.raw().$field, n) }
+            }
+            $(#[$doc])*
+            pub fn $name_mut(&mut self) -> &mut [f64] {
+                let n = { let m: &Model = &self.model; $len(m) };
+                if n == 0 { return &mut []; }
+                unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().$field, n) }
+            }
+        )*
+    };
+}
+
+impl Data {
+    pub fn new(model: &Arc<Model>) -> MjResult<Data> {
+        install_handlers();
+        let mut out: *mut sys::mjData = std::ptr::null_mut();
+        check(unsafe { sys::lb_make_data(model.as_ptr(), &mut out) })?;
+        let ptr = NonNull::new(out).ok_or_else(|| MjError::Engine("mj_makeData returned NULL".into()))?;
+        Ok(Data { ptr, model: Arc::clone(model) })
+    }
+
+    pub fn model(&self) -> &Arc<Model> {
+        &self.model
+    }
+
+    fn raw(&self) -> &sys::mjData {
+        unsafe { self.ptr.as_ref() }
+    }
+
+    /// Advances the simulation by one timestep (`mj_step`).
+    pub fn step(&mut self) -> MjResult<()> {
+        check(unsafe { sys::lb_step(self.model.as_ptr(), self.ptr.as_ptr()) })
+    }
+
+    /// Recomputes every derived quantity for the current state without integrating.
+    pub fn forward(&mut self) -> MjResult<()> {
+        check(unsafe { sys::lb_forward(self.model.as_ptr(), self.ptr.as_ptr()) })
+    }
+
+    /// Fills `cfrc_ext`, `cacc` and `cfrc_int`; call after `step` when contact forces are needed.
+    pub fn rne_post_constraint(&mut self) -> MjResult<()> {
+        check(unsafe { sys::lb_rne_post_constraint(self.model.as_ptr(), self.ptr.as_ptr()) })
+    }
+
+    /// Resets to the model's initial state (qpos0, zero velocity, time 0, warnings cleared).
+    pub fn reset(&mut self) -> MjResult<()> {
+        check(unsafe { sys::lb_reset_data(self.model.as_ptr(), self.ptr.as_ptr()) })
+    }
+
+    pub fn time(&self) -> f64 {
+        self.raw().time
+    }
+
+    pub fn instability_counts(&self) -> InstabilityCounts {
+        let w = &self.raw().warning;
+        InstabilityCounts {
+            bad_qpos: w[sys::mjtWarning__mjWARN_BADQPOS as usize].number,
+            bad_qvel: w[sys::mjtWarning__mjWARN_BADQVEL as usize].number,
+            bad_qacc: w[sys::mjtWarning__mjWARN_BADQACC as usize].number,
+        }
+    }
+
+    /// Number of times each of MuJoCo's warnings fired since the last reset.
+    pub fn warning_counts(&self) -> [i32; sys::mjtWarning__mjNWARNING as usize] {
+        let mut out = [0; sys::mjtWarning__mjNWARNING as usize];
+        for (o, w) in out.iter_mut().zip(self.raw().warning.iter()) {
+            *o = w.number;
+        }
+        out
+    }
+
+    field_slices! {
+        /// Generalised positions (nq).
+        qpos, qpos_mut, qpos, |m: &Model| m.nq();
+        /// Generalised velocities (nv).
+        qvel, qvel_mut, qvel, |m: &Model| m.nv();
+        /// Generalised accelerations (nv).
+        qacc, qacc_mut, qacc, |m: &Model| m.nv();
+        /// Actuator controls (nu).
+        ctrl, ctrl_mut, ctrl, |m: &Model| m.nu();
+        /// Applied generalised forces (nv).
+        qfrc_applied, qfrc_applied_mut, qfrc_applied, |m: &Model| m.nv();
+        /// Actuator forces in joint space (nv).
+        qfrc_actuator, qfrc_actuator_mut, qfrc_actuator, |m: &Model| m.nv();
+        /// Scalar actuator forces (nu).
+        actuator_force, actuator_force_mut, actuator_force, |m: &Model| m.nu();
+        /// Body frame positions (nbody x 3).
+        xpos, xpos_mut, xpos, |m: &Model| 3 * m.nbody();
+        /// Body orientations as quaternions, MuJoCo order w, x, y, z (nbody x 4).
+        xquat, xquat_mut, xquat, |m: &Model| 4 * m.nbody();
+        /// Body orientations as row-major rotation matrices (nbody x 9).
+        xmat, xmat_mut, xmat, |m: &Model| 9 * m.nbody();
+        /// Body centre-of-mass positions (nbody x 3).
+        xipos, xipos_mut, xipos, |m: &Model| 3 * m.nbody();
+        /// Geom positions (ngeom x 3).
+        geom_xpos, geom_xpos_mut, geom_xpos, |m: &Model| 3 * m.ngeom();
+        /// Geom orientations (ngeom x 9).
+        geom_xmat, geom_xmat_mut, geom_xmat, |m: &Model| 9 * m.ngeom();
+        /// Site positions (nsite x 3).
+        site_xpos, site_xpos_mut, site_xpos, |m: &Model| 3 * m.nsite();
+        /// Site orientations (nsite x 9).
+        site_xmat, site_xmat_mut, site_xmat, |m: &Model| 9 * m.nsite();
+        /// Composite inertia in the centre-of-mass frame (nbody x 10).
+        cinert, cinert_mut, cinert, |m: &Model| 10 * m.nbody();
+        /// Centre-of-mass based velocities, rotation first (nbody x 6).
+        cvel, cvel_mut, cvel, |m: &Model| 6 * m.nbody();
+        /// External contact forces per body, torque first (nbody x 6); needs `rne_post_constraint`.
+        cfrc_ext, cfrc_ext_mut, cfrc_ext, |m: &Model| 6 * m.nbody();
+        /// Sensor readings (nsensordata).
+        sensordata, sensordata_mut, sensordata, |m: &Model| m.nsensordata();
+    }
+
+    /// Sets qpos and qvel together, checking lengths, then runs `forward`.
+    pub fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> MjResult<()> {
+        let (nq, nv) = (self.model.nq(), self.model.nv());
+        if qpos.len() != nq {
+            return Err(MjError::BadLength { what: "qpos", expected: nq, got: qpos.len() });
+        }
+        if qvel.len() != nv {
+            return Err(MjError::BadLength { what: "qvel", expected: nv, got: qvel.len() });
+        }
+        self.qpos_mut().copy_from_slice(qpos);
+        self.qvel_mut().copy_from_slice(qvel);
+        self.forward()
+    }
+
+    /// Copies `ctrl` after checking its length.
+    pub fn set_ctrl(&mut self, ctrl: &[f64]) -> MjResult<()> {
+        let nu = self.model.nu();
+        if ctrl.len() != nu {
+            return Err(MjError::BadLength { what: "ctrl", expected: nu, got: ctrl.len() });
+        }
+        self.ctrl_mut().copy_from_slice(ctrl);
+        Ok(())
+    }
+
+    /// Translational and rotational Jacobians (3 x nv each, row-major) of a site.
+    pub fn jacobian_site(&mut self, site: usize) -> MjResult<(Vec<f64>, Vec<f64>)> {
+        let count = self.model.nsite();
+        if site >= count {
+            return Err(MjError::BadIndex { kind: "site", index: site, count });
+        }
+        let nv = self.model.nv();
+        let (mut jacp, mut jacr) = (vec![0.0; 3 * nv], vec![0.0; 3 * nv]);
+        check(unsafe {
+            sys::lb_jac_site(self.model.as_ptr(), self.ptr.as_ptr(), jacp.as_mut_ptr(), jacr.as_mut_ptr(), site as i32)
+        })?;
+        Ok((jacp, jacr))
+    }
+
+    /// Translational and rotational Jacobians (3 x nv each, row-major) of a body's frame origin.
+    pub fn jacobian_body(&mut self, body: usize) -> MjResult<(Vec<f64>, Vec<f64>)> {
+        let count = self.model.nbody();
+        if body >= count {
+            return Err(MjError::BadIndex { kind: "body", index: body, count });
+        }
+        let nv = self.model.nv();
+        let (mut jacp, mut jacr) = (vec![0.0; 3 * nv], vec![0.0; 3 * nv]);
+        check(unsafe {
+            sys::lb_jac_body(self.model.as_ptr(), self.ptr.as_ptr(), jacp.as_mut_ptr(), jacr.as_mut_ptr(), body as i32)
+        })?;
+        Ok((jacp, jacr))
+    }
+
+    /// The active contacts with their forces in the contact frame.
+    pub fn contacts(&self) -> Vec<Contact> {
+        let n = self.raw().ncon.max(0) as usize;
+        let list = if n == 0 { &[][..] } else { unsafe { std::slice::from_raw_parts(self.raw().contact, n) } };
+        list.iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let mut f = [0.0f64; 6];
+                unsafe { sys::mj_contactForce(self.model.as_ptr(), self.ptr.as_ptr(), i as i32, f.as_mut_ptr()) };
+                Contact {
+                    geom1: c.geom1 as usize,
+                    geom2: c.geom2 as usize,
+                    pos: c.pos,
+                    frame: c.frame,
+                    dist: c.dist,
+                    force: [f[0], f[1], f[2]],
+                }
+            })
+            .collect()
+    }
+}
+
+impl Drop for Data {
+    fn drop(&mut self) {
+        unsafe { sys::mj_deleteData(self.ptr.as_ptr()) };
+    }
+}
+
+impl std::fmt::Debug for Data {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Data(time={}, model={:?})", self.time(), self.model)
+    }
+}

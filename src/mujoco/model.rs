@@ -1,0 +1,243 @@
+//! `Model`: a compiled, read-only `mjModel`, shareable between threads.
+use std::ffi::{CStr, CString};
+use std::os::raw::c_char;
+use std::path::Path;
+use std::ptr::NonNull;
+
+use super::error::{check, install_handlers, MjError, MjResult};
+use super::sys;
+
+/// The kinds of named model elements that can be looked up.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ObjKind {
+    Body,
+    Joint,
+    Geom,
+    Site,
+    Actuator,
+    Sensor,
+}
+
+impl ObjKind {
+    fn raw(self) -> i32 {
+        (match self {
+            ObjKind::Body => sys::mjtObj__mjOBJ_BODY,
+            ObjKind::Joint => sys::mjtObj__mjOBJ_JOINT,
+            ObjKind::Geom => sys::mjtObj__mjOBJ_GEOM,
+            ObjKind::Site => sys::mjtObj__mjOBJ_SITE,
+            ObjKind::Actuator => sys::mjtObj__mjOBJ_ACTUATOR,
+            ObjKind::Sensor => sys::mjtObj__mjOBJ_SENSOR,
+        }) as i32
+    }
+
+    pub fn label(self) -> &'static str {
+        match self {
+            ObjKind::Body => "body",
+            ObjKind::Joint => "joint",
+            ObjKind::Geom => "geom",
+            ObjKind::Site => "site",
+            ObjKind::Actuator => "actuator",
+            ObjKind::Sensor => "sensor",
+        }
+    }
+}
+
+pub struct Model {
+    ptr: NonNull<sys::mjModel>,
+}
+
+// SAFETY: after compilation an mjModel is plain memory that MuJoCo only reads during simulation;
+// MuJoCo documents sharing one model between threads that each own an mjData.
+unsafe impl Send for Model {}
+unsafe impl Sync for Model {}
+
+const ERR_LEN: usize = 1000;
+
+fn error_text(buf: &[c_char]) -> String {
+    let bytes: Vec<u8> = buf.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
+    String::from_utf8_lossy(&bytes).trim().to_string()
+}
+
+impl Model {
+    /// Loads and compiles an MJCF file.
+    pub fn from_xml_path(path: impl AsRef<Path>) -> MjResult<Model> {
+        install_handlers();
+        let path = path.as_ref();
+        let c_path = CString::new(path.to_string_lossy().as_bytes())
+            .map_err(|_| MjError::Load(format!("path {} contains a NUL byte", path.display())))?;
+        let mut err = [0 as c_char; ERR_LEN];
+        let mut out: *mut sys::mjModel = std::ptr::null_mut();
+        let rc = unsafe { sys::lb_load_xml_file(c_path.as_ptr(), err.as_mut_ptr(), ERR_LEN as i32, &mut out) };
+        Self::finish_load(rc, out, &err, &path.display().to_string())
+    }
+
+    /// Compiles an MJCF document held in memory (through MuJoCo's virtual file system).
+    pub fn from_xml_str(xml: &str) -> MjResult<Model> {
+        install_handlers();
+        if xml.contains('\0') {
+            return Err(MjError::Load("model text contains a NUL byte".into()));
+        }
+        let len = i32::try_from(xml.len()).map_err(|_| MjError::Load("model text too large".into()))?;
+        let name = CString::new("locobench_model.xml").unwrap();
+        let mut err = [0 as c_char; ERR_LEN];
+        let mut out: *mut sys::mjModel = std::ptr::null_mut();
+        let rc = unsafe {
+            sys::lb_load_xml_string(
+                name.as_ptr(),
+                xml.as_ptr() as *const c_char,
+                len,
+                err.as_mut_ptr(),
+                ERR_LEN as i32,
+                &mut out,
+            )
+        };
+        Self::finish_load(rc, out, &err, "<string>")
+    }
+
+    fn finish_load(rc: i32, out: *mut sys::mjModel, err: &[c_char], source: &str) -> MjResult<Model> {
+        if rc < 0 {
+            return Err(MjError::Load(format!("{source}: {}", super::error::last_engine_error())));
+        }
+        match NonNull::new(out) {
+            Some(ptr) if rc == 0 => Ok(Model { ptr }),
+            _ => {
+                let msg = error_text(err);
+                Err(MjError::Load(format!(
+                    "{source}: {}",
+                    if msg.is_empty() { "unknown error" } else { &msg }
+                )))
+            }
+        }
+    }
+
+    /// A deep copy whose parameters (masses, friction) may then be changed.
+    pub fn try_clone(&self) -> MjResult<Model> {
+        let mut out: *mut sys::mjModel = std::ptr::null_mut();
+        check(unsafe { sys::lb_copy_model(self.ptr.as_ptr(), &mut out) })?;
+        NonNull::new(out)
+            .map(|ptr| Model { ptr })
+            .ok_or_else(|| MjError::Engine("mj_copyModel returned NULL".into()))
+    }
+
+    pub(crate) fn raw(&self) -> &sys::mjModel {
+        unsafe { self.ptr.as_ref() }
+    }
+
+    pub(crate) fn as_ptr(&self) -> *const sys::mjModel {
+        self.ptr.as_ptr()
+    }
+
+    pub fn nq(&self) -> usize { self.raw().nq as usize }
+    pub fn nv(&self) -> usize { self.raw().nv as usize }
+    pub fn nu(&self) -> usize { self.raw().nu as usize }
+    pub fn nbody(&self) -> usize { self.raw().nbody as usize }
+    pub fn njnt(&self) -> usize { self.raw().njnt as usize }
+    pub fn ngeom(&self) -> usize { self.raw().ngeom as usize }
+    pub fn nsite(&self) -> usize { self.raw().nsite as usize }
+    pub fn nsensordata(&self) -> usize { self.raw().nsensordata as usize }
+    pub fn neq(&self) -> usize { self.raw().neq as usize }
+    pub fn timestep(&self) -> f64 { self.raw().opt.timestep }
+    pub fn gravity(&self) -> [f64; 3] { self.raw().opt.gravity }
+
+    fn count(&self, kind: ObjKind) -> usize {
+        match kind {
+            ObjKind::Body => self.nbody(),
+            ObjKind::Joint => self.njnt(),
+            ObjKind::Geom => self.ngeom(),
+            ObjKind::Site => self.nsite(),
+            ObjKind::Actuator => self.nu(),
+            ObjKind::Sensor => self.raw().nsensor as usize,
+        }
+    }
+
+    /// Name → index; an unknown name is an error.
+    pub fn id(&self, kind: ObjKind, name: &str) -> MjResult<usize> {
+        let unknown = || MjError::UnknownName { kind: kind.label(), name: name.to_string() };
+        let c_name = CString::new(name).map_err(|_| unknown())?;
+        let id = unsafe { sys::mj_name2id(self.as_ptr(), kind.raw(), c_name.as_ptr()) };
+        if id < 0 { Err(unknown()) } else { Ok(id as usize) }
+    }
+
+    /// Index → name (None for unnamed elements); an index out of range is an error.
+    pub fn name(&self, kind: ObjKind, index: usize) -> MjResult<Option<String>> {
+        let count = self.count(kind);
+        if index >= count {
+            return Err(MjError::BadIndex { kind: kind.label(), index, count });
+        }
+        let p = unsafe { sys::mj_id2name(self.as_ptr(), kind.raw(), index as i32) };
+        if p.is_null() {
+            return Ok(None);
+        }
+        let s = unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned();
+        Ok(if s.is_empty() { None } else { Some(s) })
+    }
+
+    pub fn body_id(&self, name: &str) -> MjResult<usize> { self.id(ObjKind::Body, name) }
+    pub fn joint_id(&self, name: &str) -> MjResult<usize> { self.id(ObjKind::Joint, name) }
+    pub fn geom_id(&self, name: &str) -> MjResult<usize> { self.id(ObjKind::Geom, name) }
+    pub fn site_id(&self, name: &str) -> MjResult<usize> { self.id(ObjKind::Site, name) }
+    pub fn actuator_id(&self, name: &str) -> MjResult<usize> { self.id(ObjKind::Actuator, name) }
+
+    /// Address of a joint's first coordinate in qpos.
+    pub fn joint_qpos_adr(&self, joint: usize) -> usize { self.slice_i32(self.raw().jnt_qposadr, self.njnt())[joint] as usize }
+    /// Address of a joint's first degree of freedom in qvel.
+    pub fn joint_dof_adr(&self, joint: usize) -> usize { self.slice_i32(self.raw().jnt_dofadr, self.njnt())[joint] as usize }
+
+    pub fn qpos0(&self) -> &[f64] { self.slice_f64(self.raw().qpos0, self.nq()) }
+    pub fn body_mass(&self) -> &[f64] { self.slice_f64(self.raw().body_mass, self.nbody()) }
+    pub fn body_parent(&self) -> &[i32] { self.slice_i32(self.raw().body_parentid, self.nbody()) }
+    /// Actuator control ranges as (low, high) pairs; `ctrl_limited` says which apply.
+    pub fn actuator_ctrlrange(&self) -> &[f64] { self.slice_f64(self.raw().actuator_ctrlrange, 2 * self.nu()) }
+    pub fn actuator_ctrllimited(&self) -> Vec<bool> {
+        let r = self.raw();
+        unsafe { std::slice::from_raw_parts(r.actuator_ctrllimited, self.nu()) }.iter().map(|&b| b != 0).collect()
+    }
+    pub fn actuator_trnid(&self) -> &[i32] { self.slice_i32(self.raw().actuator_trnid, 2 * self.nu()) }
+    pub fn geom_type(&self) -> &[i32] { self.slice_i32(self.raw().geom_type, self.ngeom()) }
+    pub fn geom_size(&self) -> &[f64] { self.slice_f64(self.raw().geom_size, 3 * self.ngeom()) }
+    pub fn geom_rgba(&self) -> &[f32] {
+        let r = self.raw();
+        unsafe { std::slice::from_raw_parts(r.geom_rgba, 4 * self.ngeom()) }
+    }
+    pub fn geom_body(&self) -> &[i32] { self.slice_i32(self.raw().geom_bodyid, self.ngeom()) }
+    pub fn geom_friction(&self) -> &[f64] { self.slice_f64(self.raw().geom_friction, 3 * self.ngeom()) }
+    pub fn jnt_range(&self) -> &[f64] { self.slice_f64(self.raw().jnt_range, 2 * self.njnt()) }
+
+    /// Mutable parameters for domain randomisation. Needs exclusive access (a fresh
+    /// [`Model::try_clone`]), so shared models can never change under a running simulation.
+    pub fn body_mass_mut(&mut self) -> &mut [f64] {
+        let n = self.nbody();
+        unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().body_mass, n) }
+    }
+    pub fn geom_friction_mut(&mut self) -> &mut [f64] {
+        let n = 3 * self.ngeom();
+        unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().geom_friction, n) }
+    }
+    pub fn set_timestep(&mut self, dt: f64) {
+        unsafe { self.ptr.as_mut().opt.timestep = dt };
+    }
+
+    fn slice_f64(&self, p: *const f64, n: usize) -> &[f64] {
+        if n == 0 { &[] } else { unsafe { std::slice::from_raw_parts(p, n) } }
+    }
+    fn slice_i32(&self, p: *const i32, n: usize) -> &[i32] {
+        if n == 0 { &[] } else { unsafe { std::slice::from_raw_parts(p, n) } }
+    }
+}
+
+impl Drop for Model {
+    fn drop(&mut self) {
+        unsafe { sys::mj_deleteModel(self.ptr.as_ptr()) };
+    }
+}
+
+impl std::fmt::Debug for Model {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "Model(nq={}, nv={}, nu={}, nbody={})", self.nq(), self.nv(), self.nu(), self.nbody())
+    }
+}
+
+/// MuJoCo's library version (222 for 2.2.2).
+pub fn version() -> i32 {
+    unsafe { sys::mj_version() }
+}
