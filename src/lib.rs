@@ -1,1 +1,3 @@
+//! locobench: legged-locomotion reinforcement learning and classical control on MuJoCo.
+pub mod envs;
 pub mod mujoco;

@@ -246,3 +246,27 @@ impl std::fmt::Debug for Data {
         write!(f, "Data(time={}, model={:?})", self.time(), self.model)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fatal_engine_error_becomes_err_and_process_survives() {
+        let xml = r#"<mujoco><worldbody><body><freejoint/><geom type="sphere" size="0.1"/></body></worldbody></mujoco>"#;
+        let mut model = Model::from_xml_str(xml).unwrap();
+        // An integrator id MuJoCo does not know: mj_step calls mju_error("Invalid integrator"),
+        // whose default handler would wait on stdin and then exit the process.
+        unsafe { (*(model.as_ptr() as *mut sys::mjModel)).opt.integrator = 77 };
+        let _ = &mut model;
+        let model = Arc::new(model);
+        let mut d = Data::new(&model).unwrap();
+        match d.step() {
+            Err(MjError::Engine(msg)) => assert!(msg.contains("integrator"), "{msg}"),
+            other => panic!("expected an engine error, got {other:?}"),
+        }
+        d.reset().unwrap();
+        assert!(d.step().is_err(), "the same call fails the same way again");
+        d.forward().unwrap();
+    }
+}

@@ -1,0 +1,119 @@
+//! InvertedPendulum as Gymnasium v5 defines it: observation qpos + qvel (4), reward 1 per step
+//! while the pole stays within 0.2 rad and the state is finite, terminates otherwise.
+use serde::{Deserialize, Serialize};
+
+use super::options::Check;
+use super::simulation::{unstable_step, EnvRng, Simulation};
+use super::{clip_action, BoxSpace, Env, EnvError, EnvSpec, EpisodeClock, Info, Step};
+use crate::mujoco::Data;
+
+pub const MODEL_XML: &str = include_str!("../../models/inverted_pendulum.xml");
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct InvertedPendulumOptions {
+    /// The episode terminates once |pole angle| exceeds this (radians).
+    pub max_pole_angle: f64,
+    /// qpos and qvel += U(-s, s) at reset.
+    pub reset_noise_scale: f64,
+    pub max_episode_steps: usize,
+    pub frame_skip: usize,
+}
+
+impl Default for InvertedPendulumOptions {
+    fn default() -> Self {
+        InvertedPendulumOptions { max_pole_angle: 0.2, reset_noise_scale: 0.01, max_episode_steps: 1000, frame_skip: 2 }
+    }
+}
+
+impl InvertedPendulumOptions {
+    pub fn validate(&self) -> Result<(), EnvError> {
+        let c = Check { env: "inverted-pendulum" };
+        c.within("max_pole_angle", self.max_pole_angle, 0.0, std::f64::consts::FRAC_PI_2)?;
+        c.non_negative("reset_noise_scale", self.reset_noise_scale)?;
+        c.positive_count("max_episode_steps", self.max_episode_steps)?;
+        c.positive_count("frame_skip", self.frame_skip)
+    }
+}
+
+pub struct InvertedPendulum {
+    opts: InvertedPendulumOptions,
+    sim: Simulation,
+    spec: EnvSpec,
+    rng: EnvRng,
+    clock: EpisodeClock,
+    last_obs: Vec<f64>,
+}
+
+impl InvertedPendulum {
+    pub fn new(opts: InvertedPendulumOptions) -> Result<Self, EnvError> {
+        opts.validate()?;
+        let sim = Simulation::from_xml(MODEL_XML)?;
+        let m = &sim.model;
+        let spec = EnvSpec {
+            name: "inverted-pendulum",
+            observation_space: BoxSpace::unbounded(m.nq() + m.nv()),
+            action_space: BoxSpace::uniform(m.nu(), -3.0, 3.0),
+            dt: m.timestep() * opts.frame_skip as f64,
+            max_episode_steps: opts.max_episode_steps,
+            reward_terms: vec!["healthy"],
+        };
+        Ok(InvertedPendulum { opts, sim, spec, rng: EnvRng::new(), clock: EpisodeClock::default(), last_obs: vec![] })
+    }
+
+    fn observation(&self) -> Vec<f64> {
+        let d = &self.sim.data;
+        d.qpos().iter().chain(d.qvel()).copied().collect()
+    }
+}
+
+impl Env for InvertedPendulum {
+    fn spec(&self) -> &EnvSpec {
+        &self.spec
+    }
+
+    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
+        self.rng.reseed(seed);
+        let s = self.opts.reset_noise_scale;
+        let qpos_noise = self.rng.uniform(self.sim.model.nq(), s);
+        let qvel_noise = self.rng.uniform(self.sim.model.nv(), s);
+        self.sim.reset_to(&qpos_noise, &qvel_noise)?;
+        self.clock.start();
+        self.last_obs = self.observation();
+        Ok((self.last_obs.clone(), Info::default()))
+    }
+
+    fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
+        self.clock.check_can_step()?;
+        let (action, clipped) = clip_action(&self.spec.action_space, action)?;
+        let adv = self.sim.advance(&action, self.opts.frame_skip)?;
+        if adv.unstable {
+            self.clock.finish_if(true);
+            return Ok(unstable_step(&self.last_obs, &self.spec, clipped, adv.warnings));
+        }
+        let observation = self.observation();
+        let terminated =
+            !observation.iter().all(|v| v.is_finite()) || observation[1].abs() > self.opts.max_pole_angle;
+        let reward = if terminated { 0.0 } else { 1.0 };
+        let truncated = self.clock.tick(self.opts.max_episode_steps);
+        self.clock.finish_if(terminated || truncated);
+        self.last_obs.clone_from(&observation);
+        Ok(Step {
+            observation,
+            reward,
+            terminated,
+            truncated,
+            info: Info {
+                reward_terms: vec![("healthy", reward)],
+                metrics: vec![("cart_position", self.sim.data.qpos()[0]), ("pole_angle", self.sim.data.qpos()[1])],
+                clipped_actions: clipped,
+                unstable: false,
+                warnings: adv.warnings,
+            },
+        })
+    }
+
+    fn data(&self) -> &Data {
+        &self.sim.data
+    }
+}

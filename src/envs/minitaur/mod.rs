@@ -1,0 +1,397 @@
+//! Minitaur as PyBullet's `MinitaurBulletEnv` defines it (REFERENCE §3): 28-dim observation
+//! (motor angles, velocities, observed torques, base quaternion x-y-z-w), 8 actions through the
+//! leg model, PD motor model applied every 0.002 s physics step, 100 Hz control, reward
+//! distance * dx - energy * |tau . qdot| * dt - drift * |dy| - shake * |dz|, falls end episodes.
+pub mod leg_model;
+pub mod motor;
+
+use std::f64::consts::FRAC_PI_2;
+use std::sync::Arc;
+
+use rand::Rng;
+use serde::{Deserialize, Serialize};
+
+use self::leg_model::{motor_angles_from_leg_model, NUM_MOTORS};
+use self::motor::{MotorParams, MAX_TORQUE, OBSERVED_TORQUE_LIMIT, OVERHEAT_SECONDS, OVERHEAT_TORQUE};
+use super::options::Check;
+use super::simulation::{unstable_step, EnvRng, Simulation};
+use super::{clip_action, BoxSpace, Env, EnvError, EnvSpec, EpisodeClock, Info, Step};
+use crate::mujoco::{Data, Model};
+
+pub const MODEL_XML: &str = include_str!("../../../models/minitaur.xml");
+
+/// How actions are read.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ActionMode {
+    /// 4 swings + 4 extensions in [-1, 1] through the leg model (PyBullet's default).
+    Leg,
+    /// 8 desired motor angles in [0, pi] tracked by the motor's PD loop.
+    MotorAngle,
+    /// 8 desired torques in [-3.5, 3.5] N m, passed through the motor's electrical limits.
+    Torque,
+}
+
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct MinitaurOptions {
+    pub distance_weight: f64,
+    pub energy_weight: f64,
+    pub drift_weight: f64,
+    pub shake_weight: f64,
+    pub action_mode: ActionMode,
+    /// Fallen when the base's up vector has a world-z component below this.
+    pub fall_up_threshold: f64,
+    /// Fallen when the base is lower than this (m).
+    pub fall_height: f64,
+    pub max_episode_steps: usize,
+    /// Physics steps (0.002 s) per control step.
+    pub action_repeat: usize,
+    /// The motors are held at pi/2 + U(-s, s) during the reset hold.
+    pub reset_noise_scale: f64,
+    /// Seconds the motors are held at their reset angles before the episode starts.
+    pub reset_hold_time: f64,
+    /// PyBullet's default randomisation at each reset: masses x U(0.8, 1.2), battery
+    /// U(14.8, 16.8) V, motor viscous damping U(0, 0.01), foot friction U(0.8, 1.5).
+    pub randomize_dynamics: bool,
+    /// Motor PD gains (PWM per rad and per rad/s).
+    pub motor_kp: f64,
+    pub motor_kd: f64,
+    /// Switch a motor off after 1 s above 2.45 N m, as the real robot does.
+    pub overheat_protection: bool,
+}
+
+impl Default for MinitaurOptions {
+    fn default() -> Self {
+        MinitaurOptions {
+            distance_weight: 1.0,
+            energy_weight: 0.005,
+            drift_weight: 0.0,
+            shake_weight: 0.0,
+            action_mode: ActionMode::Leg,
+            fall_up_threshold: 0.85,
+            fall_height: 0.13,
+            max_episode_steps: 1000,
+            action_repeat: 5,
+            reset_noise_scale: 0.0,
+            reset_hold_time: 0.2,
+            randomize_dynamics: true,
+            motor_kp: 1.0,
+            motor_kd: 0.02,
+            overheat_protection: true,
+        }
+    }
+}
+
+impl MinitaurOptions {
+    pub fn validate(&self) -> Result<(), EnvError> {
+        let c = Check { env: "minitaur" };
+        c.non_negative("distance_weight", self.distance_weight)?;
+        c.non_negative("energy_weight", self.energy_weight)?;
+        c.non_negative("drift_weight", self.drift_weight)?;
+        c.non_negative("shake_weight", self.shake_weight)?;
+        c.within("fall_up_threshold", self.fall_up_threshold, -1.0, 1.0)?;
+        c.non_negative("fall_height", self.fall_height)?;
+        c.positive_count("max_episode_steps", self.max_episode_steps)?;
+        c.positive_count("action_repeat", self.action_repeat)?;
+        c.within("reset_noise_scale", self.reset_noise_scale, 0.0, 0.5)?;
+        c.within("reset_hold_time", self.reset_hold_time, 0.0, 10.0)?;
+        c.non_negative("motor_kp", self.motor_kp)?;
+        c.non_negative("motor_kd", self.motor_kd)
+    }
+}
+
+/// Indices of one motor in the model.
+#[derive(Debug, Clone, Copy)]
+struct MotorJoint {
+    qpos: usize,
+    dof: usize,
+}
+
+pub struct Minitaur {
+    opts: MinitaurOptions,
+    base_model: Arc<Model>,
+    sim: Simulation,
+    spec: EnvSpec,
+    rng: EnvRng,
+    clock: EpisodeClock,
+    last_obs: Vec<f64>,
+    motors: [MotorJoint; NUM_MOTORS],
+    base_body: usize,
+    foot_geoms: Vec<usize>,
+    params: [MotorParams; NUM_MOTORS],
+    observed_torque: [f64; NUM_MOTORS],
+    applied_torque: [f64; NUM_MOTORS],
+    overheat_time: [f64; NUM_MOTORS],
+    enabled: [bool; NUM_MOTORS],
+}
+
+/// Physics step of the Minitaur model (s).
+pub const SIM_DT: f64 = 0.002;
+
+impl Minitaur {
+    pub fn new(opts: MinitaurOptions) -> Result<Self, EnvError> {
+        opts.validate()?;
+        let base_model = Arc::new(Model::from_xml_str(MODEL_XML)?);
+        let sim = Simulation::from_model(Arc::clone(&base_model))?;
+        let m = &base_model;
+        let trn = m.actuator_trnid();
+        let mut motors = [MotorJoint { qpos: 0, dof: 0 }; NUM_MOTORS];
+        for (i, motor) in motors.iter_mut().enumerate() {
+            let joint = trn[2 * i] as usize;
+            *motor = MotorJoint { qpos: m.joint_qpos_adr(joint), dof: m.joint_dof_adr(joint) };
+        }
+        let foot_geoms = ["foot_fl", "foot_bl", "foot_fr", "foot_br"]
+            .iter()
+            .map(|n| m.geom_id(n))
+            .collect::<Result<Vec<_>, _>>()?;
+        let action_space = match opts.action_mode {
+            ActionMode::Leg => BoxSpace::uniform(NUM_MOTORS, -1.0, 1.0),
+            ActionMode::MotorAngle => BoxSpace::uniform(NUM_MOTORS, 0.0, std::f64::consts::PI),
+            ActionMode::Torque => BoxSpace::uniform(NUM_MOTORS, -MAX_TORQUE, MAX_TORQUE),
+        };
+        let params = MotorParams { kp: opts.motor_kp, kd: opts.motor_kd, ..MotorParams::default() };
+        let speed = params.speed_limit();
+        let mut low = vec![-std::f64::consts::PI; 8];
+        low.extend([-speed; 8]);
+        low.extend([-OBSERVED_TORQUE_LIMIT; 8]);
+        low.extend([-1.0; 4]);
+        let high = low.iter().map(|v| -v).collect();
+        let spec = EnvSpec {
+            name: "minitaur",
+            observation_space: BoxSpace::new(low, high),
+            action_space,
+            dt: SIM_DT * opts.action_repeat as f64,
+            max_episode_steps: opts.max_episode_steps,
+            reward_terms: vec!["distance", "energy", "drift", "shake"],
+        };
+        let base_body = m.body_id("base")?;
+        Ok(Minitaur {
+            params: [params; NUM_MOTORS],
+            opts,
+            base_model,
+            sim,
+            spec,
+            rng: EnvRng::new(),
+            clock: EpisodeClock::default(),
+            last_obs: vec![],
+            motors,
+            base_body,
+            foot_geoms,
+            observed_torque: [0.0; NUM_MOTORS],
+            applied_torque: [0.0; NUM_MOTORS],
+            overheat_time: [0.0; NUM_MOTORS],
+            enabled: [true; NUM_MOTORS],
+        })
+    }
+
+    pub fn options(&self) -> &MinitaurOptions {
+        &self.opts
+    }
+
+    /// Motor angles in the observation's convention (radians from straight up).
+    pub fn motor_angles(&self) -> [f64; NUM_MOTORS] {
+        std::array::from_fn(|i| self.sim.data.qpos()[self.motors[i].qpos])
+    }
+
+    pub fn motor_velocities(&self) -> [f64; NUM_MOTORS] {
+        std::array::from_fn(|i| self.sim.data.qvel()[self.motors[i].dof])
+    }
+
+    /// Torques applied to the joints during the last physics step.
+    pub fn applied_torques(&self) -> [f64; NUM_MOTORS] {
+        self.applied_torque
+    }
+
+    pub fn base_position(&self) -> [f64; 3] {
+        let p = &self.sim.data.xpos()[3 * self.base_body..];
+        [p[0], p[1], p[2]]
+    }
+
+    /// World-z component of the base's up axis.
+    pub fn base_up_z(&self) -> f64 {
+        self.sim.data.xmat()[9 * self.base_body + 8]
+    }
+
+    pub fn is_fallen(&self) -> bool {
+        self.base_up_z() < self.opts.fall_up_threshold || self.base_position()[2] < self.opts.fall_height
+    }
+
+    fn observation(&self) -> Vec<f64> {
+        let mut obs = Vec::with_capacity(28);
+        obs.extend(self.motor_angles());
+        obs.extend(self.motor_velocities());
+        obs.extend(self.observed_torque);
+        let q = &self.sim.data.xquat()[4 * self.base_body..4 * self.base_body + 4];
+        obs.extend([q[1], q[2], q[3], q[0]]);
+        obs
+    }
+
+    /// One physics step with the motors driven towards `targets` (angles) or by `torques`.
+    fn physics_step(&mut self, command: &Command) -> Result<(bool, f64), EnvError> {
+        let angles = self.motor_angles();
+        let velocities = self.motor_velocities();
+        let mut ctrl = [0.0; NUM_MOTORS];
+        let mut power = 0.0;
+        for i in 0..NUM_MOTORS {
+            let p = &self.params[i];
+            let pwm = match command {
+                Command::Angles(t) => p.pwm_for_angle(t[i], angles[i], velocities[i]),
+                Command::Torques(t) => p.pwm_for_torque(t[i]),
+            };
+            let (applied, observed) = p.torque(pwm, velocities[i]);
+            let applied = if self.enabled[i] { applied } else { 0.0 };
+            if self.opts.overheat_protection {
+                self.overheat_time[i] = if applied.abs() > OVERHEAT_TORQUE { self.overheat_time[i] + SIM_DT } else { 0.0 };
+                if self.overheat_time[i] >= OVERHEAT_SECONDS {
+                    self.enabled[i] = false;
+                }
+            }
+            self.observed_torque[i] = if self.enabled[i] { observed } else { 0.0 };
+            self.applied_torque[i] = applied;
+            ctrl[i] = applied;
+            power += (applied * velocities[i]).abs();
+        }
+        self.sim.data.set_ctrl(&ctrl)?;
+        let unstable = self.sim.step_once()?;
+        Ok((unstable, power * SIM_DT))
+    }
+
+    fn randomized_simulation(&mut self) -> Result<Simulation, EnvError> {
+        let mut model = self.base_model.try_clone()?;
+        let rng = self.rng.rng();
+        for m in model.body_mass_mut().iter_mut().skip(1) {
+            *m *= rng.random_range(0.8..1.2);
+        }
+        let friction = rng.random_range(0.8..1.5);
+        let friction_all = model.geom_friction_mut();
+        for &g in &self.foot_geoms {
+            friction_all[3 * g] = friction;
+        }
+        for p in self.params.iter_mut() {
+            p.voltage = rng.random_range(14.8..16.8);
+            p.viscous_damping = rng.random_range(0.0..0.01);
+        }
+        Simulation::from_model(Arc::new(model))
+    }
+}
+
+enum Command {
+    Angles([f64; NUM_MOTORS]),
+    Torques([f64; NUM_MOTORS]),
+}
+
+impl Env for Minitaur {
+    fn spec(&self) -> &EnvSpec {
+        &self.spec
+    }
+
+    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
+        self.rng.reseed(seed);
+        let nominal = MotorParams { kp: self.opts.motor_kp, kd: self.opts.motor_kd, ..MotorParams::default() };
+        self.params = [nominal; NUM_MOTORS];
+        if self.opts.randomize_dynamics {
+            self.sim = self.randomized_simulation()?;
+        } else if !Arc::ptr_eq(&self.sim.model, &self.base_model) {
+            self.sim = Simulation::from_model(Arc::clone(&self.base_model))?;
+        }
+        self.enabled = [true; NUM_MOTORS];
+        self.overheat_time = [0.0; NUM_MOTORS];
+        self.observed_torque = [0.0; NUM_MOTORS];
+        self.applied_torque = [0.0; NUM_MOTORS];
+
+        let noise = self.rng.uniform(NUM_MOTORS, self.opts.reset_noise_scale);
+        let mut qpos_noise = vec![0.0; self.sim.model.nq()];
+        for (i, n) in noise.iter().enumerate() {
+            qpos_noise[self.motors[i].qpos] = *n;
+        }
+        let nv = self.sim.model.nv();
+        self.sim.reset_to(&qpos_noise, &vec![0.0; nv])?;
+        let hold = Command::Angles(std::array::from_fn(|i| FRAC_PI_2 + noise[i]));
+        let hold_steps = (self.opts.reset_hold_time / SIM_DT).round() as usize;
+        for _ in 0..hold_steps {
+            if self.physics_step(&hold)?.0 {
+                return Err(EnvError::Mujoco(crate::mujoco::MjError::Engine(
+                    "Minitaur physics became unstable during the reset hold".into(),
+                )));
+            }
+        }
+        crate::mujoco::take_warnings();
+        self.clock.start();
+        self.last_obs = self.observation();
+        let p = self.base_position();
+        let info = Info { metrics: vec![("x_position", p[0]), ("y_position", p[1]), ("base_height", p[2])], ..Info::default() };
+        Ok((self.last_obs.clone(), info))
+    }
+
+    fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
+        self.clock.check_can_step()?;
+        let (action, clipped) = clip_action(&self.spec.action_space, action)?;
+        let command = match self.opts.action_mode {
+            ActionMode::Leg => Command::Angles(motor_angles_from_leg_model(&action)),
+            ActionMode::MotorAngle => Command::Angles(std::array::from_fn(|i| action[i])),
+            ActionMode::Torque => Command::Torques(std::array::from_fn(|i| action[i])),
+        };
+        let before = self.base_position();
+        let mut mechanical_energy = 0.0;
+        let mut unstable = false;
+        for _ in 0..self.opts.action_repeat {
+            let (bad, energy) = self.physics_step(&command)?;
+            mechanical_energy += energy;
+            if bad {
+                unstable = true;
+                break;
+            }
+        }
+        let warnings = crate::mujoco::take_warnings();
+        if unstable {
+            self.clock.finish_if(true);
+            return Ok(unstable_step(&self.last_obs, &self.spec, clipped, warnings));
+        }
+        let after = self.base_position();
+        let (dx, dy, dz) = (after[0] - before[0], after[1] - before[1], after[2] - before[2]);
+        // PyBullet's energy term: |observed torque . velocity| times one physics step.
+        let velocities = self.motor_velocities();
+        let power: f64 = self.observed_torque.iter().zip(&velocities).map(|(t, v)| t * v).sum();
+        let o = &self.opts;
+        let distance = o.distance_weight * dx;
+        let energy = -o.energy_weight * power.abs() * SIM_DT;
+        let drift = -o.drift_weight * dy.abs();
+        let shake = -o.shake_weight * dz.abs();
+        let reward = distance + energy + drift + shake;
+
+        let observation = self.observation();
+        let terminated = self.is_fallen();
+        let truncated = self.clock.tick(self.opts.max_episode_steps);
+        self.clock.finish_if(terminated || truncated);
+        self.last_obs.clone_from(&observation);
+        Ok(Step {
+            observation,
+            reward,
+            terminated,
+            truncated,
+            info: Info {
+                reward_terms: vec![("distance", distance), ("energy", energy), ("drift", drift), ("shake", shake)],
+                metrics: vec![
+                    ("x_position", after[0]),
+                    ("y_position", after[1]),
+                    ("base_height", after[2]),
+                    ("x_velocity", dx / self.spec.dt),
+                    ("dx", dx),
+                    ("dy", dy),
+                    ("dz", dz),
+                    ("up_z", self.base_up_z()),
+                    ("mechanical_energy", mechanical_energy),
+                    ("motors_disabled", self.enabled.iter().filter(|e| !**e).count() as f64),
+                ],
+                clipped_actions: clipped,
+                unstable: false,
+                warnings,
+            },
+        })
+    }
+
+    fn data(&self) -> &Data {
+        &self.sim.data
+    }
+}

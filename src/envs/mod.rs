@@ -1,0 +1,174 @@
+//! Environments with Gymnasium semantics: `reset(seed)` then `step(action)` until `terminated`
+//! or `truncated`. Every reward term is reported by name in [`Info`].
+//!
+//! Action policy: entries outside the action space are clipped to its bounds before they reach
+//! the physics or any cost term, and the number of clipped entries is counted in
+//! [`Info::clipped_actions`]. Wrong length, NaN or infinite entries are errors.
+//!
+//! Physics blow-ups: MuJoCo silently resets a state whose accelerations become NaN. The
+//! environments watch MuJoCo's instability counters and non-finite state; when either fires the
+//! step returns the last good observation, zero reward, `truncated = true` and
+//! [`Info::unstable`] set. Learners must not store that transition (it is not a real one).
+mod ant;
+mod error;
+mod half_cheetah;
+mod humanoid;
+mod inverted_pendulum;
+pub mod minitaur;
+mod options;
+mod registry;
+mod simulation;
+
+pub use ant::{Ant, AntOptions};
+pub use error::EnvError;
+pub use half_cheetah::{HalfCheetah, HalfCheetahOptions};
+pub use humanoid::{Humanoid, HumanoidOptions};
+pub use inverted_pendulum::{InvertedPendulum, InvertedPendulumOptions};
+pub use minitaur::{Minitaur, MinitaurOptions};
+pub use registry::{env_names, make, parse_overrides, EnvConfig};
+
+use crate::mujoco::Data;
+
+/// A box-shaped space: one `[low, high]` interval per dimension (bounds may be infinite).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BoxSpace {
+    pub low: Vec<f64>,
+    pub high: Vec<f64>,
+}
+
+impl BoxSpace {
+    pub fn new(low: Vec<f64>, high: Vec<f64>) -> BoxSpace {
+        assert_eq!(low.len(), high.len());
+        BoxSpace { low, high }
+    }
+    pub fn uniform(dim: usize, low: f64, high: f64) -> BoxSpace {
+        BoxSpace { low: vec![low; dim], high: vec![high; dim] }
+    }
+    pub fn unbounded(dim: usize) -> BoxSpace {
+        Self::uniform(dim, f64::NEG_INFINITY, f64::INFINITY)
+    }
+    pub fn dim(&self) -> usize {
+        self.low.len()
+    }
+    pub fn contains(&self, x: &[f64]) -> bool {
+        x.len() == self.dim() && x.iter().zip(&self.low).zip(&self.high).all(|((v, l), h)| v >= l && v <= h)
+    }
+}
+
+/// What an environment is: its name, spaces, control period and episode length.
+#[derive(Debug, Clone)]
+pub struct EnvSpec {
+    pub name: &'static str,
+    pub observation_space: BoxSpace,
+    pub action_space: BoxSpace,
+    /// Seconds of simulated time per `step`.
+    pub dt: f64,
+    pub max_episode_steps: usize,
+    /// Names of the reward terms, in the order `Info::reward_terms` lists them.
+    pub reward_terms: Vec<&'static str>,
+}
+
+/// Per-step details besides the reward.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Info {
+    /// Each term's signed contribution to the reward (costs are negative); they sum to the reward.
+    pub reward_terms: Vec<(&'static str, f64)>,
+    /// Diagnostics such as positions and velocities (`x_position`, `x_velocity`, ...).
+    pub metrics: Vec<(&'static str, f64)>,
+    /// Action entries that were outside the action space and were clipped.
+    pub clipped_actions: usize,
+    /// The physics became unstable during this step (see the module docs).
+    pub unstable: bool,
+    /// MuJoCo warnings raised during this step.
+    pub warnings: Vec<String>,
+}
+
+impl Info {
+    pub fn term(&self, name: &str) -> Option<f64> {
+        self.reward_terms.iter().find(|(n, _)| *n == name).map(|(_, v)| *v)
+    }
+    pub fn metric(&self, name: &str) -> Option<f64> {
+        self.metrics.iter().find(|(n, _)| *n == name).map(|(_, v)| *v)
+    }
+}
+
+/// The result of one `step`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Step {
+    pub observation: Vec<f64>,
+    pub reward: f64,
+    /// The episode reached a terminal state (e.g. the robot fell); do not bootstrap from it.
+    pub terminated: bool,
+    /// The episode was cut short (time limit, instability); the state is not terminal.
+    pub truncated: bool,
+    pub info: Info,
+}
+
+impl Step {
+    pub fn done(&self) -> bool {
+        self.terminated || self.truncated
+    }
+}
+
+pub trait Env: Send {
+    fn spec(&self) -> &EnvSpec;
+    /// Starts an episode. `Some(seed)` reseeds the environment's random stream; `None` continues
+    /// it (an environment never seeded behaves as if seeded with 0).
+    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError>;
+    fn step(&mut self, action: &[f64]) -> Result<Step, EnvError>;
+    /// The simulation state, for recorders and model-based controllers.
+    fn data(&self) -> &Data;
+}
+
+/// Checks an action against the space and returns a clipped copy and the number clipped.
+pub(crate) fn clip_action(space: &BoxSpace, action: &[f64]) -> Result<(Vec<f64>, usize), EnvError> {
+    if action.len() != space.dim() {
+        return Err(EnvError::ActionLength { expected: space.dim(), got: action.len() });
+    }
+    if let Some(index) = action.iter().position(|a| !a.is_finite()) {
+        return Err(EnvError::NonFiniteAction { index, value: action[index] });
+    }
+    let mut clipped = 0;
+    let out = action
+        .iter()
+        .zip(space.low.iter().zip(&space.high))
+        .map(|(&a, (&l, &h))| {
+            if a < l || a > h {
+                clipped += 1;
+            }
+            a.clamp(l, h)
+        })
+        .collect();
+    Ok((out, clipped))
+}
+
+/// Counts steps and refuses to step a finished episode.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct EpisodeClock {
+    pub steps: usize,
+    started: bool,
+    finished: bool,
+}
+
+impl EpisodeClock {
+    pub fn start(&mut self) {
+        *self = EpisodeClock { steps: 0, started: true, finished: false };
+    }
+    pub fn check_can_step(&self) -> Result<(), EnvError> {
+        if !self.started {
+            Err(EnvError::NotReset)
+        } else if self.finished {
+            Err(EnvError::EpisodeOver)
+        } else {
+            Ok(())
+        }
+    }
+    /// Advances one step and returns whether the time limit truncates the episode.
+    pub fn tick(&mut self, max_steps: usize) -> bool {
+        self.steps += 1;
+        self.steps >= max_steps
+    }
+    pub fn finish_if(&mut self, done: bool) {
+        self.finished |= done;
+    }
+}

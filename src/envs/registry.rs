@@ -1,0 +1,110 @@
+//! Environment names → constructors, with typed options read from TOML.
+use serde::de::DeserializeOwned;
+use serde::{Deserialize, Serialize};
+
+use super::{
+    Ant, AntOptions, Env, EnvError, HalfCheetah, HalfCheetahOptions, Humanoid, HumanoidOptions, InvertedPendulum,
+    InvertedPendulumOptions, Minitaur, MinitaurOptions,
+};
+
+const NAMES: [&str; 5] = ["half-cheetah", "ant", "humanoid", "inverted-pendulum", "minitaur"];
+
+pub fn env_names() -> &'static [&'static str] {
+    &NAMES
+}
+
+/// An environment name plus its options as a TOML table (keys not given take their defaults).
+/// This is what run directories store, so a run can rebuild exactly the environment it used.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct EnvConfig {
+    pub name: String,
+    #[serde(default)]
+    pub options: toml::Table,
+}
+
+impl EnvConfig {
+    pub fn new(name: &str) -> EnvConfig {
+        EnvConfig { name: name.to_string(), options: toml::Table::new() }
+    }
+
+    /// Reads `name = "..."` and an `[options]` table from TOML text.
+    pub fn from_toml(text: &str) -> Result<EnvConfig, EnvError> {
+        toml::from_str(text)
+            .map_err(|e| EnvError::InvalidOption { env: "<config>".into(), message: e.message().to_string() })
+    }
+
+    /// Sets options from `key=value` pairs (values parsed as TOML: numbers, booleans, arrays,
+    /// bare words as strings). The result is validated when the environment is built.
+    pub fn with_overrides(mut self, pairs: &[(String, String)]) -> Result<EnvConfig, EnvError> {
+        for (key, value) in pairs {
+            let parsed = parse_value(value);
+            self.options.insert(key.clone(), parsed);
+        }
+        Ok(self)
+    }
+
+    /// Every option with its effective value (defaults filled in), validated.
+    pub fn resolved_options(&self) -> Result<toml::Table, EnvError> {
+        fn resolve<T: DeserializeOwned + Serialize>(c: &EnvConfig) -> Result<toml::Table, EnvError> {
+            let typed: T = typed_options(c)?;
+            Ok(toml::Table::try_from(&typed).expect("options serialise to a table"))
+        }
+        check_name(&self.name)?;
+        make(self)?; // validates
+        match self.name.as_str() {
+            "half-cheetah" => resolve::<HalfCheetahOptions>(self),
+            "ant" => resolve::<AntOptions>(self),
+            "humanoid" => resolve::<HumanoidOptions>(self),
+            "inverted-pendulum" => resolve::<InvertedPendulumOptions>(self),
+            _ => resolve::<MinitaurOptions>(self),
+        }
+    }
+}
+
+fn parse_value(text: &str) -> toml::Value {
+    let wrapped = format!("v = {text}");
+    match wrapped.parse::<toml::Table>() {
+        Ok(mut t) => t.remove("v").unwrap_or_else(|| toml::Value::String(text.to_string())),
+        Err(_) => toml::Value::String(text.to_string()),
+    }
+}
+
+/// Splits `a=1,b=2` into pairs; an entry without `=` is an error.
+pub fn parse_overrides(text: &str) -> Result<Vec<(String, String)>, EnvError> {
+    text.split(',')
+        .filter(|s| !s.trim().is_empty())
+        .map(|item| {
+            let (k, v) = item.split_once('=').ok_or_else(|| EnvError::InvalidOption {
+                env: "<overrides>".into(),
+                message: format!("'{item}' is not key=value"),
+            })?;
+            Ok((k.trim().to_string(), v.trim().to_string()))
+        })
+        .collect()
+}
+
+fn check_name(name: &str) -> Result<(), EnvError> {
+    if NAMES.contains(&name) {
+        Ok(())
+    } else {
+        Err(EnvError::UnknownEnv { name: name.to_string(), known: NAMES.join(", ") })
+    }
+}
+
+fn typed_options<T: DeserializeOwned>(c: &EnvConfig) -> Result<T, EnvError> {
+    toml::Value::Table(c.options.clone())
+        .try_into()
+        .map_err(|e: toml::de::Error| EnvError::InvalidOption { env: c.name.clone(), message: e.message().to_string() })
+}
+
+/// Builds the environment a config names.
+pub fn make(config: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
+    check_name(&config.name)?;
+    Ok(match config.name.as_str() {
+        "half-cheetah" => Box::new(HalfCheetah::new(typed_options(config)?)?),
+        "ant" => Box::new(Ant::new(typed_options(config)?)?),
+        "humanoid" => Box::new(Humanoid::new(typed_options(config)?)?),
+        "inverted-pendulum" => Box::new(InvertedPendulum::new(typed_options(config)?)?),
+        _ => Box::new(Minitaur::new(typed_options(config)?)?),
+    })
+}

@@ -1,0 +1,139 @@
+//! Minitaur: standing, leg model through the env, motor model, falls, reward terms.
+use locobench::envs::minitaur::leg_model::motor_angles_from_leg_model;
+use locobench::envs::minitaur::{ActionMode, SIM_DT};
+use locobench::envs::{Env, Minitaur, MinitaurOptions};
+
+fn env(opts: MinitaurOptions) -> Minitaur {
+    Minitaur::new(opts).unwrap()
+}
+
+#[test]
+fn stands_for_ten_seconds_under_default_targets() {
+    for randomize in [false, true] {
+        let mut e = env(MinitaurOptions { randomize_dynamics: randomize, ..Default::default() });
+        let (obs, info) = e.reset(Some(3)).unwrap();
+        assert_eq!(obs.len(), 28);
+        let h0 = info.metric("base_height").unwrap();
+        assert!(h0 > 0.14 && h0 < 0.19, "height after the reset hold {h0}");
+        let mut min_h = f64::INFINITY;
+        for t in 0..1000 {
+            let s = e.step(&[0.0; 8]).unwrap();
+            assert!(!s.terminated, "fell at step {t} (randomize={randomize})");
+            assert!(!s.info.unstable);
+            min_h = min_h.min(s.info.metric("base_height").unwrap());
+            if t == 999 {
+                assert!(s.truncated);
+            }
+        }
+        let p = e.base_position();
+        assert!(p[2] > 0.17 && p[2] < 0.24, "standing height {p:?}");
+        assert!(p[0].abs() < 0.05 && p[1].abs() < 0.05, "drifted to {p:?}");
+        assert!(e.base_up_z() > 0.99);
+        assert!(min_h > 0.13);
+    }
+}
+
+#[test]
+fn motors_track_the_leg_model_targets() {
+    let mut e = env(MinitaurOptions { randomize_dynamics: false, ..Default::default() });
+    e.reset(Some(0)).unwrap();
+    let action = [0.2, 0.2, -0.1, -0.1, 0.2, 0.2, 0.2, 0.2];
+    let targets = motor_angles_from_leg_model(&action);
+    for _ in 0..100 {
+        e.step(&action).unwrap();
+    }
+    // The PD loop is soft (kp = 1 PWM/rad, about 8 N m/rad) and carries the body's weight, so a
+    // loaded motor sits a little off its target; the differential (swing) part tracks closely.
+    let angles = e.motor_angles();
+    for i in 0..8 {
+        assert!((angles[i] - targets[i]).abs() < 0.2, "motor {i}: {} vs {}", angles[i], targets[i]);
+    }
+    for leg in 0..4 {
+        let swing = (angles[2 * leg] - angles[2 * leg + 1]) / 2.0;
+        let wanted = (targets[2 * leg] - targets[2 * leg + 1]) / 2.0;
+        assert!((swing - wanted).abs() < 0.05, "leg {leg}: swing {swing} vs {wanted}");
+    }
+}
+
+#[test]
+fn extension_raises_and_lowers_the_base() {
+    let height_with = |ext: f64| {
+        let mut e = env(MinitaurOptions { randomize_dynamics: false, ..Default::default() });
+        e.reset(Some(0)).unwrap();
+        let a = [0.0, 0.0, 0.0, 0.0, ext, ext, ext, ext];
+        for _ in 0..200 {
+            e.step(&a).unwrap();
+        }
+        e.base_position()[2]
+    };
+    let (low, mid, high) = (height_with(0.5), height_with(0.0), height_with(-0.5));
+    assert!(low < mid && mid < high, "{low} {mid} {high}");
+    assert!(mid - low > 0.03, "extension +0.5 should lower the base by several cm: {low} {mid}");
+}
+
+#[test]
+fn reward_terms_match_the_definition() {
+    let opts = MinitaurOptions {
+        randomize_dynamics: false,
+        drift_weight: 0.3,
+        shake_weight: 0.2,
+        energy_weight: 0.01,
+        distance_weight: 1.5,
+        ..Default::default()
+    };
+    let mut e = env(opts);
+    e.reset(Some(1)).unwrap();
+    for t in 0..30 {
+        let before = e.base_position();
+        let a: Vec<f64> = (0..8).map(|i| ((t + i) as f64 * 0.7).sin() * 0.6).collect();
+        let s = e.step(&a).unwrap();
+        let after = e.base_position();
+        let obs = &s.observation;
+        let power: f64 = (0..8).map(|i| obs[16 + i] * obs[8 + i]).sum();
+        let expect = [
+            ("distance", 1.5 * (after[0] - before[0])),
+            ("energy", -0.01 * power.abs() * SIM_DT),
+            ("drift", -0.3 * (after[1] - before[1]).abs()),
+            ("shake", -0.2 * (after[2] - before[2]).abs()),
+        ];
+        for (name, v) in expect {
+            let got = s.info.term(name).unwrap();
+            assert!((got - v).abs() < 1e-12, "{name}: {got} vs {v}");
+        }
+        let sum: f64 = s.info.reward_terms.iter().map(|(_, v)| v).sum();
+        assert!((sum - s.reward).abs() < 1e-12);
+    }
+}
+
+#[test]
+fn fall_thresholds_end_the_episode() {
+    // Legs fully retracted and swung hard: the robot drops below a strict height threshold.
+    let mut e = env(MinitaurOptions { randomize_dynamics: false, fall_height: 0.17, ..Default::default() });
+    e.reset(Some(0)).unwrap();
+    let mut terminated = false;
+    for _ in 0..300 {
+        let s = e.step(&[0.0, 0.0, 0.0, 0.0, 1.0, 1.0, 1.0, 1.0]).unwrap();
+        if s.terminated {
+            terminated = true;
+            assert!(e.base_position()[2] < 0.17);
+            break;
+        }
+    }
+    assert!(terminated);
+    assert!(e.step(&[0.0; 8]).is_err(), "stepping a finished episode is an error");
+}
+
+#[test]
+fn torque_mode_drives_motors_within_limits() {
+    let mut e = env(MinitaurOptions { randomize_dynamics: false, action_mode: ActionMode::Torque, ..Default::default() });
+    assert_eq!(e.spec().action_space.high[0], 3.5);
+    e.reset(Some(0)).unwrap();
+    let s = e.step(&[1.0; 8]).unwrap();
+    for t in e.applied_torques() {
+        assert!(t.abs() <= 3.5 + 1e-12 && t > 0.0);
+    }
+    // Out-of-range torque commands are clipped and counted.
+    assert_eq!(s.info.clipped_actions, 0);
+    let s = e.step(&[9.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -9.0]).unwrap();
+    assert_eq!(s.info.clipped_actions, 2);
+}
