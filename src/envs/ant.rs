@@ -185,4 +185,8 @@ impl Env for Ant {
     fn data(&self) -> &Data {
         &self.sim.data
     }
+
+    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
+        Ok(self.sim.data.set_state(qpos, qvel)?)
+    }
 }

@@ -125,5 +125,9 @@ impl Env for HalfCheetah {
     fn data(&self) -> &Data {
         &self.sim.data
     }
+
+    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
+        Ok(self.sim.data.set_state(qpos, qvel)?)
+    }
 }
 

@@ -118,6 +118,21 @@ pub trait Env: Send {
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError>;
     /// The simulation state, for recorders and model-based controllers.
     fn data(&self) -> &Data;
+    /// Overwrites positions and velocities mid-episode (Gymnasium's `set_state`), e.g. to start
+    /// from a recorded state. Lengths are checked; the values are the caller's responsibility.
+    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError>;
+}
+
+/// The MJCF text an environment is built from.
+pub fn model_xml(env_name: &str) -> Option<&'static str> {
+    Some(match env_name {
+        "half-cheetah" => half_cheetah::MODEL_XML,
+        "ant" => ant::MODEL_XML,
+        "humanoid" => humanoid::MODEL_XML,
+        "inverted-pendulum" => inverted_pendulum::MODEL_XML,
+        "minitaur" => minitaur::MODEL_XML,
+        _ => return None,
+    })
 }
 
 /// Checks an action against the space and returns a clipped copy and the number clipped.

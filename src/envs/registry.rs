@@ -92,9 +92,20 @@ fn check_name(name: &str) -> Result<(), EnvError> {
 }
 
 fn typed_options<T: DeserializeOwned>(c: &EnvConfig) -> Result<T, EnvError> {
-    toml::Value::Table(c.options.clone())
-        .try_into()
-        .map_err(|e: toml::de::Error| EnvError::InvalidOption { env: c.name.clone(), message: e.message().to_string() })
+    let parse = |table: toml::Table| toml::Value::Table(table).try_into::<T>();
+    parse(c.options.clone()).map_err(|e| {
+        // serde's message may not say which key was wrong: find it by parsing keys one by one.
+        let culprit = c.options.iter().find(|(k, v)| {
+            let mut single = toml::Table::new();
+            single.insert((*k).clone(), (*v).clone());
+            parse(single).is_err()
+        });
+        let message = match culprit {
+            Some((key, _)) if !e.message().contains(key.as_str()) => format!("option '{key}': {}", e.message()),
+            _ => e.message().to_string(),
+        };
+        EnvError::InvalidOption { env: c.name.clone(), message }
+    })
 }
 
 /// Builds the environment a config names.

@@ -394,4 +394,8 @@ impl Env for Minitaur {
     fn data(&self) -> &Data {
         &self.sim.data
     }
+
+    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
+        Ok(self.sim.data.set_state(qpos, qvel)?)
+    }
 }
