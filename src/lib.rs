@@ -1,3 +1,6 @@
 //! locobench: legged-locomotion reinforcement learning and classical control on MuJoCo.
 pub mod envs;
+pub mod io;
 pub mod mujoco;
+pub mod policy;
+pub mod rollout;

@@ -10,7 +10,10 @@ fn env(opts: MinitaurOptions) -> Minitaur {
 #[test]
 fn stands_for_ten_seconds_under_default_targets() {
     for randomize in [false, true] {
-        let mut e = env(MinitaurOptions { randomize_dynamics: randomize, ..Default::default() });
+        let mut e = env(MinitaurOptions {
+            randomize_dynamics: randomize,
+            ..Default::default()
+        });
         let (obs, info) = e.reset(Some(3)).unwrap();
         assert_eq!(obs.len(), 28);
         let h0 = info.metric("base_height").unwrap();
@@ -35,7 +38,10 @@ fn stands_for_ten_seconds_under_default_targets() {
 
 #[test]
 fn motors_track_the_leg_model_targets() {
-    let mut e = env(MinitaurOptions { randomize_dynamics: false, ..Default::default() });
+    let mut e = env(MinitaurOptions {
+        randomize_dynamics: false,
+        ..Default::default()
+    });
     e.reset(Some(0)).unwrap();
     let action = [0.2, 0.2, -0.1, -0.1, 0.2, 0.2, 0.2, 0.2];
     let targets = motor_angles_from_leg_model(&action);
@@ -46,19 +52,30 @@ fn motors_track_the_leg_model_targets() {
     // loaded motor sits a little off its target; the differential (swing) part tracks closely.
     let angles = e.motor_angles();
     for i in 0..8 {
-        assert!((angles[i] - targets[i]).abs() < 0.2, "motor {i}: {} vs {}", angles[i], targets[i]);
+        assert!(
+            (angles[i] - targets[i]).abs() < 0.2,
+            "motor {i}: {} vs {}",
+            angles[i],
+            targets[i]
+        );
     }
     for leg in 0..4 {
         let swing = (angles[2 * leg] - angles[2 * leg + 1]) / 2.0;
         let wanted = (targets[2 * leg] - targets[2 * leg + 1]) / 2.0;
-        assert!((swing - wanted).abs() < 0.05, "leg {leg}: swing {swing} vs {wanted}");
+        assert!(
+            (swing - wanted).abs() < 0.05,
+            "leg {leg}: swing {swing} vs {wanted}"
+        );
     }
 }
 
 #[test]
 fn extension_raises_and_lowers_the_base() {
     let height_with = |ext: f64| {
-        let mut e = env(MinitaurOptions { randomize_dynamics: false, ..Default::default() });
+        let mut e = env(MinitaurOptions {
+            randomize_dynamics: false,
+            ..Default::default()
+        });
         e.reset(Some(0)).unwrap();
         let a = [0.0, 0.0, 0.0, 0.0, ext, ext, ext, ext];
         for _ in 0..200 {
@@ -68,7 +85,10 @@ fn extension_raises_and_lowers_the_base() {
     };
     let (low, mid, high) = (height_with(0.5), height_with(0.0), height_with(-0.5));
     assert!(low < mid && mid < high, "{low} {mid} {high}");
-    assert!(mid - low > 0.03, "extension +0.5 should lower the base by several cm: {low} {mid}");
+    assert!(
+        mid - low > 0.03,
+        "extension +0.5 should lower the base by several cm: {low} {mid}"
+    );
 }
 
 #[test]
@@ -108,7 +128,11 @@ fn reward_terms_match_the_definition() {
 #[test]
 fn fall_thresholds_end_the_episode() {
     // Legs fully retracted and swung hard: the robot drops below a strict height threshold.
-    let mut e = env(MinitaurOptions { randomize_dynamics: false, fall_height: 0.17, ..Default::default() });
+    let mut e = env(MinitaurOptions {
+        randomize_dynamics: false,
+        fall_height: 0.17,
+        ..Default::default()
+    });
     e.reset(Some(0)).unwrap();
     let mut terminated = false;
     for _ in 0..300 {
@@ -120,12 +144,19 @@ fn fall_thresholds_end_the_episode() {
         }
     }
     assert!(terminated);
-    assert!(e.step(&[0.0; 8]).is_err(), "stepping a finished episode is an error");
+    assert!(
+        e.step(&[0.0; 8]).is_err(),
+        "stepping a finished episode is an error"
+    );
 }
 
 #[test]
 fn torque_mode_drives_motors_within_limits() {
-    let mut e = env(MinitaurOptions { randomize_dynamics: false, action_mode: ActionMode::Torque, ..Default::default() });
+    let mut e = env(MinitaurOptions {
+        randomize_dynamics: false,
+        action_mode: ActionMode::Torque,
+        ..Default::default()
+    });
     assert_eq!(e.spec().action_space.high[0], 3.5);
     e.reset(Some(0)).unwrap();
     let s = e.step(&[1.0; 8]).unwrap();

@@ -83,12 +83,24 @@ impl Ant {
             reward_terms: vec!["forward", "healthy", "ctrl_cost", "contact_cost"],
         };
         let torso = m.body_id("torso")?;
-        Ok(Ant { opts, sim, spec, rng: EnvRng::new(), clock: EpisodeClock::default(), last_obs: vec![], torso })
+        Ok(Ant {
+            opts,
+            sim,
+            spec,
+            rng: EnvRng::new(),
+            clock: EpisodeClock::default(),
+            last_obs: vec![],
+            torso,
+        })
     }
 
     fn clipped_contact_forces(&self) -> impl Iterator<Item = f64> + '_ {
         let [lo, hi] = self.opts.contact_force_range;
-        self.sim.data.cfrc_ext().iter().map(move |f| f.clamp(lo, hi))
+        self.sim
+            .data
+            .cfrc_ext()
+            .iter()
+            .map(move |f| f.clamp(lo, hi))
     }
 
     fn observation(&self) -> Vec<f64> {
@@ -125,7 +137,10 @@ impl Env for Ant {
         self.clock.start();
         self.last_obs = self.observation();
         let q = self.sim.data.qpos();
-        let info = Info { metrics: vec![("x_position", q[0]), ("y_position", q[1])], ..Info::default() };
+        let info = Info {
+            metrics: vec![("x_position", q[0]), ("y_position", q[1])],
+            ..Info::default()
+        };
         Ok((self.last_obs.clone(), info))
     }
 
@@ -136,7 +151,12 @@ impl Env for Ant {
         let adv = self.sim.advance(&action, self.opts.frame_skip)?;
         if adv.unstable {
             self.clock.finish_if(true);
-            return Ok(unstable_step(&self.last_obs, &self.spec, clipped, adv.warnings));
+            return Ok(unstable_step(
+                &self.last_obs,
+                &self.spec,
+                clipped,
+                adv.warnings,
+            ));
         }
         self.sim.data.rne_post_constraint()?;
         let after = self.torso_xy();
@@ -145,9 +165,14 @@ impl Env for Ant {
 
         let healthy = self.is_healthy();
         let forward = self.opts.forward_reward_weight * x_velocity;
-        let healthy_reward = if healthy { self.opts.healthy_reward } else { 0.0 };
+        let healthy_reward = if healthy {
+            self.opts.healthy_reward
+        } else {
+            0.0
+        };
         let ctrl_cost = self.opts.ctrl_cost_weight * action.iter().map(|a| a * a).sum::<f64>();
-        let contact_cost = self.opts.contact_cost_weight * self.clipped_contact_forces().map(|f| f * f).sum::<f64>();
+        let contact_cost = self.opts.contact_cost_weight
+            * self.clipped_contact_forces().map(|f| f * f).sum::<f64>();
         let reward = forward + healthy_reward - ctrl_cost - contact_cost;
 
         let observation = self.observation();

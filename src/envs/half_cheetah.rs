@@ -34,7 +34,9 @@ impl Default for HalfCheetahOptions {
 
 impl HalfCheetahOptions {
     pub fn validate(&self) -> Result<(), EnvError> {
-        let c = Check { env: "half-cheetah" };
+        let c = Check {
+            env: "half-cheetah",
+        };
         c.non_negative("forward_reward_weight", self.forward_reward_weight)?;
         c.non_negative("ctrl_cost_weight", self.ctrl_cost_weight)?;
         c.non_negative("reset_noise_scale", self.reset_noise_scale)?;
@@ -64,7 +66,14 @@ impl HalfCheetah {
             max_episode_steps: opts.max_episode_steps,
             reward_terms: vec!["forward", "ctrl_cost"],
         };
-        Ok(HalfCheetah { opts, sim, spec, rng: EnvRng::new(), clock: EpisodeClock::default(), last_obs: vec![] })
+        Ok(HalfCheetah {
+            opts,
+            sim,
+            spec,
+            rng: EnvRng::new(),
+            clock: EpisodeClock::default(),
+            last_obs: vec![],
+        })
     }
 
     fn observation(&self) -> Vec<f64> {
@@ -86,7 +95,10 @@ impl Env for HalfCheetah {
         self.sim.reset_to(&qpos_noise, &qvel_noise)?;
         self.clock.start();
         self.last_obs = self.observation();
-        let info = Info { metrics: vec![("x_position", self.sim.data.qpos()[0])], ..Info::default() };
+        let info = Info {
+            metrics: vec![("x_position", self.sim.data.qpos()[0])],
+            ..Info::default()
+        };
         Ok((self.last_obs.clone(), info))
     }
 
@@ -97,7 +109,12 @@ impl Env for HalfCheetah {
         let adv = self.sim.advance(&action, self.opts.frame_skip)?;
         if adv.unstable {
             self.clock.finish_if(true);
-            return Ok(unstable_step(&self.last_obs, &self.spec, clipped, adv.warnings));
+            return Ok(unstable_step(
+                &self.last_obs,
+                &self.spec,
+                clipped,
+                adv.warnings,
+            ));
         }
         let x_after = self.sim.data.qpos()[0];
         let x_velocity = (x_after - x_before) / self.spec.dt;
@@ -130,4 +147,3 @@ impl Env for HalfCheetah {
         Ok(self.sim.data.set_state(qpos, qvel)?)
     }
 }
-

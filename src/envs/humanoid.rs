@@ -88,7 +88,14 @@ impl Humanoid {
             max_episode_steps: opts.max_episode_steps,
             reward_terms: vec!["forward", "healthy", "ctrl_cost", "contact_cost"],
         };
-        Ok(Humanoid { opts, sim, spec, rng: EnvRng::new(), clock: EpisodeClock::default(), last_obs: vec![] })
+        Ok(Humanoid {
+            opts,
+            sim,
+            spec,
+            rng: EnvRng::new(),
+            clock: EpisodeClock::default(),
+            last_obs: vec![],
+        })
     }
 
     fn observation(&self) -> Vec<f64> {
@@ -137,7 +144,10 @@ impl Env for Humanoid {
         self.clock.start();
         self.last_obs = self.observation();
         let q = self.sim.data.qpos();
-        let info = Info { metrics: vec![("x_position", q[0]), ("y_position", q[1])], ..Info::default() };
+        let info = Info {
+            metrics: vec![("x_position", q[0]), ("y_position", q[1])],
+            ..Info::default()
+        };
         Ok((self.last_obs.clone(), info))
     }
 
@@ -148,7 +158,12 @@ impl Env for Humanoid {
         let adv = self.sim.advance(&action, self.opts.frame_skip)?;
         if adv.unstable {
             self.clock.finish_if(true);
-            return Ok(unstable_step(&self.last_obs, &self.spec, clipped, adv.warnings));
+            return Ok(unstable_step(
+                &self.last_obs,
+                &self.spec,
+                clipped,
+                adv.warnings,
+            ));
         }
         self.sim.data.rne_post_constraint()?;
         let after = self.mass_center();
@@ -158,10 +173,15 @@ impl Env for Humanoid {
         let d = &self.sim.data;
         let healthy = self.is_healthy();
         let forward = self.opts.forward_reward_weight * x_velocity;
-        let healthy_reward = if healthy { self.opts.healthy_reward } else { 0.0 };
+        let healthy_reward = if healthy {
+            self.opts.healthy_reward
+        } else {
+            0.0
+        };
         let ctrl_cost = self.opts.ctrl_cost_weight * d.ctrl().iter().map(|a| a * a).sum::<f64>();
-        let contact_cost = (self.opts.contact_cost_weight * d.cfrc_ext().iter().map(|f| f * f).sum::<f64>())
-            .min(self.opts.contact_cost_max);
+        let contact_cost = (self.opts.contact_cost_weight
+            * d.cfrc_ext().iter().map(|f| f * f).sum::<f64>())
+        .min(self.opts.contact_cost_max);
         let reward = forward + healthy_reward - ctrl_cost - contact_cost;
 
         let observation = self.observation();

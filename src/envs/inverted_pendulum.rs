@@ -22,14 +22,26 @@ pub struct InvertedPendulumOptions {
 
 impl Default for InvertedPendulumOptions {
     fn default() -> Self {
-        InvertedPendulumOptions { max_pole_angle: 0.2, reset_noise_scale: 0.01, max_episode_steps: 1000, frame_skip: 2 }
+        InvertedPendulumOptions {
+            max_pole_angle: 0.2,
+            reset_noise_scale: 0.01,
+            max_episode_steps: 1000,
+            frame_skip: 2,
+        }
     }
 }
 
 impl InvertedPendulumOptions {
     pub fn validate(&self) -> Result<(), EnvError> {
-        let c = Check { env: "inverted-pendulum" };
-        c.within("max_pole_angle", self.max_pole_angle, 0.0, std::f64::consts::FRAC_PI_2)?;
+        let c = Check {
+            env: "inverted-pendulum",
+        };
+        c.within(
+            "max_pole_angle",
+            self.max_pole_angle,
+            0.0,
+            std::f64::consts::FRAC_PI_2,
+        )?;
         c.non_negative("reset_noise_scale", self.reset_noise_scale)?;
         c.positive_count("max_episode_steps", self.max_episode_steps)?;
         c.positive_count("frame_skip", self.frame_skip)
@@ -58,7 +70,14 @@ impl InvertedPendulum {
             max_episode_steps: opts.max_episode_steps,
             reward_terms: vec!["healthy"],
         };
-        Ok(InvertedPendulum { opts, sim, spec, rng: EnvRng::new(), clock: EpisodeClock::default(), last_obs: vec![] })
+        Ok(InvertedPendulum {
+            opts,
+            sim,
+            spec,
+            rng: EnvRng::new(),
+            clock: EpisodeClock::default(),
+            last_obs: vec![],
+        })
     }
 
     fn observation(&self) -> Vec<f64> {
@@ -89,11 +108,16 @@ impl Env for InvertedPendulum {
         let adv = self.sim.advance(&action, self.opts.frame_skip)?;
         if adv.unstable {
             self.clock.finish_if(true);
-            return Ok(unstable_step(&self.last_obs, &self.spec, clipped, adv.warnings));
+            return Ok(unstable_step(
+                &self.last_obs,
+                &self.spec,
+                clipped,
+                adv.warnings,
+            ));
         }
         let observation = self.observation();
-        let terminated =
-            !observation.iter().all(|v| v.is_finite()) || observation[1].abs() > self.opts.max_pole_angle;
+        let terminated = !observation.iter().all(|v| v.is_finite())
+            || observation[1].abs() > self.opts.max_pole_angle;
         let reward = if terminated { 0.0 } else { 1.0 };
         let truncated = self.clock.tick(self.opts.max_episode_steps);
         self.clock.finish_if(terminated || truncated);
@@ -105,7 +129,10 @@ impl Env for InvertedPendulum {
             truncated,
             info: Info {
                 reward_terms: vec![("healthy", reward)],
-                metrics: vec![("cart_position", self.sim.data.qpos()[0]), ("pole_angle", self.sim.data.qpos()[1])],
+                metrics: vec![
+                    ("cart_position", self.sim.data.qpos()[0]),
+                    ("pole_angle", self.sim.data.qpos()[1]),
+                ],
                 clipped_actions: clipped,
                 unstable: false,
                 warnings: adv.warnings,

@@ -34,7 +34,12 @@ impl EnvRng {
     }
     /// `n` samples of scale * N(0, 1).
     pub fn normal(&mut self, n: usize, scale: f64) -> Vec<f64> {
-        (0..n).map(|_| { let z: f64 = StandardNormal.sample(&mut self.0); scale * z }).collect()
+        (0..n)
+            .map(|_| {
+                let z: f64 = StandardNormal.sample(&mut self.0);
+                scale * z
+            })
+            .collect()
     }
 }
 
@@ -65,7 +70,13 @@ impl Simulation {
     /// Gymnasium's `set_state` does; `cfrc_ext` stays zero until the first step).
     pub fn reset_to(&mut self, qpos_noise: &[f64], qvel_noise: &[f64]) -> Result<(), EnvError> {
         self.data.reset()?;
-        let qpos: Vec<f64> = self.model.qpos0().iter().zip(qpos_noise).map(|(a, b)| a + b).collect();
+        let qpos: Vec<f64> = self
+            .model
+            .qpos0()
+            .iter()
+            .zip(qpos_noise)
+            .map(|(a, b)| a + b)
+            .collect();
         self.data.set_state(&qpos, qvel_noise)?;
         take_warnings();
         Ok(())
@@ -92,13 +103,23 @@ impl Simulation {
         let after = self.data.instability_counts();
         // MuJoCo's automatic reset also rewinds time, which catches a repeat of the same warning.
         let rewound = self.data.time() <= time_before;
-        let finite = self.data.qpos().iter().chain(self.data.qvel()).all(|v| v.is_finite());
+        let finite = self
+            .data
+            .qpos()
+            .iter()
+            .chain(self.data.qvel())
+            .all(|v| v.is_finite());
         Ok(after != before || rewound || !finite)
     }
 }
 
 /// The step reported when the physics blew up: last good observation, zero reward, truncated.
-pub(crate) fn unstable_step(last_obs: &[f64], spec: &EnvSpec, clipped: usize, warnings: Vec<String>) -> Step {
+pub(crate) fn unstable_step(
+    last_obs: &[f64],
+    spec: &EnvSpec,
+    clipped: usize,
+    warnings: Vec<String>,
+) -> Step {
     Step {
         observation: last_obs.to_vec(),
         reward: 0.0,

@@ -54,7 +54,11 @@ unsafe impl Sync for Model {}
 const ERR_LEN: usize = 1000;
 
 fn error_text(buf: &[c_char]) -> String {
-    let bytes: Vec<u8> = buf.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
+    let bytes: Vec<u8> = buf
+        .iter()
+        .take_while(|&&c| c != 0)
+        .map(|&c| c as u8)
+        .collect();
     String::from_utf8_lossy(&bytes).trim().to_string()
 }
 
@@ -67,7 +71,9 @@ impl Model {
             .map_err(|_| MjError::Load(format!("path {} contains a NUL byte", path.display())))?;
         let mut err = [0 as c_char; ERR_LEN];
         let mut out: *mut sys::mjModel = std::ptr::null_mut();
-        let rc = unsafe { sys::lb_load_xml_file(c_path.as_ptr(), err.as_mut_ptr(), ERR_LEN as i32, &mut out) };
+        let rc = unsafe {
+            sys::lb_load_xml_file(c_path.as_ptr(), err.as_mut_ptr(), ERR_LEN as i32, &mut out)
+        };
         Self::finish_load(rc, out, &err, &path.display().to_string())
     }
 
@@ -77,7 +83,8 @@ impl Model {
         if xml.contains('\0') {
             return Err(MjError::Load("model text contains a NUL byte".into()));
         }
-        let len = i32::try_from(xml.len()).map_err(|_| MjError::Load("model text too large".into()))?;
+        let len =
+            i32::try_from(xml.len()).map_err(|_| MjError::Load("model text too large".into()))?;
         let name = CString::new("locobench_model.xml").unwrap();
         let mut err = [0 as c_char; ERR_LEN];
         let mut out: *mut sys::mjModel = std::ptr::null_mut();
@@ -94,9 +101,17 @@ impl Model {
         Self::finish_load(rc, out, &err, "<string>")
     }
 
-    fn finish_load(rc: i32, out: *mut sys::mjModel, err: &[c_char], source: &str) -> MjResult<Model> {
+    fn finish_load(
+        rc: i32,
+        out: *mut sys::mjModel,
+        err: &[c_char],
+        source: &str,
+    ) -> MjResult<Model> {
         if rc < 0 {
-            return Err(MjError::Load(format!("{source}: {}", super::error::last_engine_error())));
+            return Err(MjError::Load(format!(
+                "{source}: {}",
+                super::error::last_engine_error()
+            )));
         }
         match NonNull::new(out) {
             Some(ptr) if rc == 0 => Ok(Model { ptr }),
@@ -104,7 +119,11 @@ impl Model {
                 let msg = error_text(err);
                 Err(MjError::Load(format!(
                     "{source}: {}",
-                    if msg.is_empty() { "unknown error" } else { &msg }
+                    if msg.is_empty() {
+                        "unknown error"
+                    } else {
+                        &msg
+                    }
                 )))
             }
         }
@@ -127,17 +146,45 @@ impl Model {
         self.ptr.as_ptr()
     }
 
-    pub fn nq(&self) -> usize { self.raw().nq as usize }
-    pub fn nv(&self) -> usize { self.raw().nv as usize }
-    pub fn nu(&self) -> usize { self.raw().nu as usize }
-    pub fn nbody(&self) -> usize { self.raw().nbody as usize }
-    pub fn njnt(&self) -> usize { self.raw().njnt as usize }
-    pub fn ngeom(&self) -> usize { self.raw().ngeom as usize }
-    pub fn nsite(&self) -> usize { self.raw().nsite as usize }
-    pub fn nsensordata(&self) -> usize { self.raw().nsensordata as usize }
-    pub fn neq(&self) -> usize { self.raw().neq as usize }
-    pub fn timestep(&self) -> f64 { self.raw().opt.timestep }
-    pub fn gravity(&self) -> [f64; 3] { self.raw().opt.gravity }
+    /// The raw pointer, for calling MuJoCo functions this layer does not wrap (benchmarks use it
+    /// to time bare `mj_step`). The model stays owned by `self`.
+    pub fn as_raw(&self) -> *const sys::mjModel {
+        self.ptr.as_ptr()
+    }
+
+    pub fn nq(&self) -> usize {
+        self.raw().nq as usize
+    }
+    pub fn nv(&self) -> usize {
+        self.raw().nv as usize
+    }
+    pub fn nu(&self) -> usize {
+        self.raw().nu as usize
+    }
+    pub fn nbody(&self) -> usize {
+        self.raw().nbody as usize
+    }
+    pub fn njnt(&self) -> usize {
+        self.raw().njnt as usize
+    }
+    pub fn ngeom(&self) -> usize {
+        self.raw().ngeom as usize
+    }
+    pub fn nsite(&self) -> usize {
+        self.raw().nsite as usize
+    }
+    pub fn nsensordata(&self) -> usize {
+        self.raw().nsensordata as usize
+    }
+    pub fn neq(&self) -> usize {
+        self.raw().neq as usize
+    }
+    pub fn timestep(&self) -> f64 {
+        self.raw().opt.timestep
+    }
+    pub fn gravity(&self) -> [f64; 3] {
+        self.raw().opt.gravity
+    }
 
     fn count(&self, kind: ObjKind) -> usize {
         match kind {
@@ -152,17 +199,28 @@ impl Model {
 
     /// Name → index; an unknown name is an error.
     pub fn id(&self, kind: ObjKind, name: &str) -> MjResult<usize> {
-        let unknown = || MjError::UnknownName { kind: kind.label(), name: name.to_string() };
+        let unknown = || MjError::UnknownName {
+            kind: kind.label(),
+            name: name.to_string(),
+        };
         let c_name = CString::new(name).map_err(|_| unknown())?;
         let id = unsafe { sys::mj_name2id(self.as_ptr(), kind.raw(), c_name.as_ptr()) };
-        if id < 0 { Err(unknown()) } else { Ok(id as usize) }
+        if id < 0 {
+            Err(unknown())
+        } else {
+            Ok(id as usize)
+        }
     }
 
     /// Index → name (None for unnamed elements); an index out of range is an error.
     pub fn name(&self, kind: ObjKind, index: usize) -> MjResult<Option<String>> {
         let count = self.count(kind);
         if index >= count {
-            return Err(MjError::BadIndex { kind: kind.label(), index, count });
+            return Err(MjError::BadIndex {
+                kind: kind.label(),
+                index,
+                count,
+            });
         }
         let p = unsafe { sys::mj_id2name(self.as_ptr(), kind.raw(), index as i32) };
         if p.is_null() {
@@ -172,36 +230,73 @@ impl Model {
         Ok(if s.is_empty() { None } else { Some(s) })
     }
 
-    pub fn body_id(&self, name: &str) -> MjResult<usize> { self.id(ObjKind::Body, name) }
-    pub fn joint_id(&self, name: &str) -> MjResult<usize> { self.id(ObjKind::Joint, name) }
-    pub fn geom_id(&self, name: &str) -> MjResult<usize> { self.id(ObjKind::Geom, name) }
-    pub fn site_id(&self, name: &str) -> MjResult<usize> { self.id(ObjKind::Site, name) }
-    pub fn actuator_id(&self, name: &str) -> MjResult<usize> { self.id(ObjKind::Actuator, name) }
+    pub fn body_id(&self, name: &str) -> MjResult<usize> {
+        self.id(ObjKind::Body, name)
+    }
+    pub fn joint_id(&self, name: &str) -> MjResult<usize> {
+        self.id(ObjKind::Joint, name)
+    }
+    pub fn geom_id(&self, name: &str) -> MjResult<usize> {
+        self.id(ObjKind::Geom, name)
+    }
+    pub fn site_id(&self, name: &str) -> MjResult<usize> {
+        self.id(ObjKind::Site, name)
+    }
+    pub fn actuator_id(&self, name: &str) -> MjResult<usize> {
+        self.id(ObjKind::Actuator, name)
+    }
 
     /// Address of a joint's first coordinate in qpos.
-    pub fn joint_qpos_adr(&self, joint: usize) -> usize { self.slice_i32(self.raw().jnt_qposadr, self.njnt())[joint] as usize }
+    pub fn joint_qpos_adr(&self, joint: usize) -> usize {
+        self.slice_i32(self.raw().jnt_qposadr, self.njnt())[joint] as usize
+    }
     /// Address of a joint's first degree of freedom in qvel.
-    pub fn joint_dof_adr(&self, joint: usize) -> usize { self.slice_i32(self.raw().jnt_dofadr, self.njnt())[joint] as usize }
+    pub fn joint_dof_adr(&self, joint: usize) -> usize {
+        self.slice_i32(self.raw().jnt_dofadr, self.njnt())[joint] as usize
+    }
 
-    pub fn qpos0(&self) -> &[f64] { self.slice_f64(self.raw().qpos0, self.nq()) }
-    pub fn body_mass(&self) -> &[f64] { self.slice_f64(self.raw().body_mass, self.nbody()) }
-    pub fn body_parent(&self) -> &[i32] { self.slice_i32(self.raw().body_parentid, self.nbody()) }
+    pub fn qpos0(&self) -> &[f64] {
+        self.slice_f64(self.raw().qpos0, self.nq())
+    }
+    pub fn body_mass(&self) -> &[f64] {
+        self.slice_f64(self.raw().body_mass, self.nbody())
+    }
+    pub fn body_parent(&self) -> &[i32] {
+        self.slice_i32(self.raw().body_parentid, self.nbody())
+    }
     /// Actuator control ranges as (low, high) pairs; `ctrl_limited` says which apply.
-    pub fn actuator_ctrlrange(&self) -> &[f64] { self.slice_f64(self.raw().actuator_ctrlrange, 2 * self.nu()) }
+    pub fn actuator_ctrlrange(&self) -> &[f64] {
+        self.slice_f64(self.raw().actuator_ctrlrange, 2 * self.nu())
+    }
     pub fn actuator_ctrllimited(&self) -> Vec<bool> {
         let r = self.raw();
-        unsafe { std::slice::from_raw_parts(r.actuator_ctrllimited, self.nu()) }.iter().map(|&b| b != 0).collect()
+        unsafe { std::slice::from_raw_parts(r.actuator_ctrllimited, self.nu()) }
+            .iter()
+            .map(|&b| b != 0)
+            .collect()
     }
-    pub fn actuator_trnid(&self) -> &[i32] { self.slice_i32(self.raw().actuator_trnid, 2 * self.nu()) }
-    pub fn geom_type(&self) -> &[i32] { self.slice_i32(self.raw().geom_type, self.ngeom()) }
-    pub fn geom_size(&self) -> &[f64] { self.slice_f64(self.raw().geom_size, 3 * self.ngeom()) }
+    pub fn actuator_trnid(&self) -> &[i32] {
+        self.slice_i32(self.raw().actuator_trnid, 2 * self.nu())
+    }
+    pub fn geom_type(&self) -> &[i32] {
+        self.slice_i32(self.raw().geom_type, self.ngeom())
+    }
+    pub fn geom_size(&self) -> &[f64] {
+        self.slice_f64(self.raw().geom_size, 3 * self.ngeom())
+    }
     pub fn geom_rgba(&self) -> &[f32] {
         let r = self.raw();
         unsafe { std::slice::from_raw_parts(r.geom_rgba, 4 * self.ngeom()) }
     }
-    pub fn geom_body(&self) -> &[i32] { self.slice_i32(self.raw().geom_bodyid, self.ngeom()) }
-    pub fn geom_friction(&self) -> &[f64] { self.slice_f64(self.raw().geom_friction, 3 * self.ngeom()) }
-    pub fn jnt_range(&self) -> &[f64] { self.slice_f64(self.raw().jnt_range, 2 * self.njnt()) }
+    pub fn geom_body(&self) -> &[i32] {
+        self.slice_i32(self.raw().geom_bodyid, self.ngeom())
+    }
+    pub fn geom_friction(&self) -> &[f64] {
+        self.slice_f64(self.raw().geom_friction, 3 * self.ngeom())
+    }
+    pub fn jnt_range(&self) -> &[f64] {
+        self.slice_f64(self.raw().jnt_range, 2 * self.njnt())
+    }
 
     /// Mutable parameters for domain randomisation. Needs exclusive access (a fresh
     /// [`Model::try_clone`]), so shared models can never change under a running simulation.
@@ -218,10 +313,18 @@ impl Model {
     }
 
     fn slice_f64(&self, p: *const f64, n: usize) -> &[f64] {
-        if n == 0 { &[] } else { unsafe { std::slice::from_raw_parts(p, n) } }
+        if n == 0 {
+            &[]
+        } else {
+            unsafe { std::slice::from_raw_parts(p, n) }
+        }
     }
     fn slice_i32(&self, p: *const i32, n: usize) -> &[i32] {
-        if n == 0 { &[] } else { unsafe { std::slice::from_raw_parts(p, n) } }
+        if n == 0 {
+            &[]
+        } else {
+            unsafe { std::slice::from_raw_parts(p, n) }
+        }
     }
 }
 
@@ -233,7 +336,14 @@ impl Drop for Model {
 
 impl std::fmt::Debug for Model {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(f, "Model(nq={}, nv={}, nu={}, nbody={})", self.nq(), self.nv(), self.nu(), self.nbody())
+        write!(
+            f,
+            "Model(nq={}, nv={}, nu={}, nbody={})",
+            self.nq(),
+            self.nv(),
+            self.nu(),
+            self.nbody()
+        )
     }
 }
 

@@ -17,7 +17,14 @@ pub struct MotorParams {
 
 impl Default for MotorParams {
     fn default() -> Self {
-        MotorParams { kp: 1.0, kd: 0.02, voltage: 16.0, resistance: 0.186, torque_constant: 0.0954, viscous_damping: 0.0 }
+        MotorParams {
+            kp: 1.0,
+            kd: 0.02,
+            voltage: 16.0,
+            resistance: 0.186,
+            torque_constant: 0.0954,
+            viscous_damping: 0.0,
+        }
     }
 }
 
@@ -52,7 +59,8 @@ impl MotorParams {
     pub fn torque(&self, pwm: f64, velocity: f64) -> (f64, f64) {
         let observed = (self.torque_constant * pwm * self.voltage / self.resistance)
             .clamp(-OBSERVED_TORQUE_LIMIT, OBSERVED_TORQUE_LIMIT);
-        let net_voltage = (pwm * self.voltage - (self.torque_constant + self.viscous_damping) * velocity)
+        let net_voltage = (pwm * self.voltage
+            - (self.torque_constant + self.viscous_damping) * velocity)
             .clamp(-VOLTAGE_CLIP, VOLTAGE_CLIP);
         let current = net_voltage / self.resistance;
         let applied = current.signum() * interpolate(current.abs(), &CURRENT_TABLE, &TORQUE_TABLE);

@@ -1,0 +1,68 @@
+//! The `locobench` command line.
+mod envs;
+mod rollout;
+
+use anyhow::Result;
+use clap::{Parser, Subcommand};
+
+#[derive(Parser)]
+#[command(
+    name = "locobench",
+    version,
+    about = "Legged-locomotion RL and classical control on MuJoCo"
+)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// List the environments with their observation/action sizes and control period.
+    Envs,
+    /// Run a simple policy (random, zero, or recorded actions) and write every step to CSV.
+    Rollout(rollout::RolloutArgs),
+}
+
+pub fn run() -> Result<()> {
+    match Cli::parse().command {
+        Command::Envs => envs::run(),
+        Command::Rollout(args) => rollout::run(args),
+    }
+}
+
+/// Options every command that builds an environment accepts.
+#[derive(clap::Args, Debug, Clone)]
+pub struct EnvArgs {
+    /// Environment name (see `locobench envs`).
+    #[arg(long)]
+    pub env: String,
+    /// TOML file with environment options (`[options]` table or bare keys).
+    #[arg(long, value_name = "FILE")]
+    pub env_config: Option<std::path::PathBuf>,
+    /// Environment option overrides, e.g. `--option drift_weight=0.25,max_episode_steps=500`.
+    #[arg(long = "option", value_name = "KEY=VALUE,...")]
+    pub options: Vec<String>,
+}
+
+impl EnvArgs {
+    pub fn config(&self) -> Result<locobench::envs::EnvConfig> {
+        use anyhow::Context;
+        let mut cfg = locobench::envs::EnvConfig::new(&self.env);
+        if let Some(path) = &self.env_config {
+            let text = std::fs::read_to_string(path)
+                .with_context(|| format!("reading {}", path.display()))?;
+            let table: toml::Table = text
+                .parse()
+                .with_context(|| format!("parsing {}", path.display()))?;
+            cfg.options = match table.get("options") {
+                Some(toml::Value::Table(t)) => t.clone(),
+                _ => table,
+            };
+        }
+        for o in &self.options {
+            cfg = cfg.with_overrides(&locobench::envs::parse_overrides(o)?)?;
+        }
+        Ok(cfg)
+    }
+}

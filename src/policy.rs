@@ -1,0 +1,180 @@
+//! Policies that drive an environment: the interface every controller and agent implements,
+//! and the simple ones (zero, uniform random, replay of recorded actions).
+use anyhow::{bail, Context, Result};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use crate::envs::{BoxSpace, Env};
+
+/// Chooses an action from the environment's current observation (and, for model-based
+/// controllers, its physics state).
+pub trait Policy {
+    fn name(&self) -> String;
+    /// Called after every reset, with the episode index.
+    fn begin_episode(&mut self, _episode: usize) {}
+    fn act(&mut self, env: &dyn Env, observation: &[f64]) -> Result<Vec<f64>>;
+    /// True when the policy has nothing more to say this episode (a replay ran out of actions).
+    fn exhausted(&self) -> bool {
+        false
+    }
+}
+
+pub struct ZeroPolicy;
+
+impl Policy for ZeroPolicy {
+    fn name(&self) -> String {
+        "zero".into()
+    }
+    fn act(&mut self, env: &dyn Env, _: &[f64]) -> Result<Vec<f64>> {
+        Ok(vec![0.0; env.spec().action_space.dim()])
+    }
+}
+
+/// Uniform samples from the action space, from its own seeded stream.
+pub struct RandomPolicy {
+    rng: ChaCha8Rng,
+}
+
+impl RandomPolicy {
+    pub fn new(seed: u64) -> RandomPolicy {
+        RandomPolicy {
+            rng: ChaCha8Rng::seed_from_u64(seed),
+        }
+    }
+    pub fn sample(&mut self, space: &BoxSpace) -> Vec<f64> {
+        space
+            .low
+            .iter()
+            .zip(&space.high)
+            .map(|(&l, &h)| self.rng.random_range(l..=h))
+            .collect()
+    }
+}
+
+impl Policy for RandomPolicy {
+    fn name(&self) -> String {
+        "random".into()
+    }
+    fn act(&mut self, env: &dyn Env, _: &[f64]) -> Result<Vec<f64>> {
+        Ok(self.sample(&env.spec().action_space))
+    }
+}
+
+/// Replays actions read from a CSV file: either a `locobench rollout` output (columns
+/// `episode` and `action_0..`) or plain rows of numbers, one action per row, reused for every
+/// episode.
+pub struct ReplayPolicy {
+    episodes: Vec<Vec<Vec<f64>>>,
+    current: usize,
+    cursor: usize,
+    path: String,
+}
+
+impl ReplayPolicy {
+    pub fn from_csv(path: &str) -> Result<ReplayPolicy> {
+        let text =
+            std::fs::read_to_string(path).with_context(|| format!("reading action file {path}"))?;
+        let mut lines = text.lines().filter(|l| !l.trim().is_empty()).peekable();
+        let first = lines.peek().copied().unwrap_or("");
+        let header: Vec<&str> = first.split(',').map(str::trim).collect();
+        let is_header = header.iter().any(|c| c.parse::<f64>().is_err());
+        let mut episodes: Vec<Vec<Vec<f64>>> = Vec::new();
+        if is_header {
+            lines.next();
+            let action_cols: Vec<usize> = header
+                .iter()
+                .enumerate()
+                .filter(|(_, c)| c.starts_with("action_"))
+                .map(|(i, _)| i)
+                .collect();
+            if action_cols.is_empty() {
+                bail!("{path}: header has no action_0, action_1, ... columns");
+            }
+            let episode_col = header.iter().position(|c| *c == "episode");
+            for (n, line) in lines.enumerate() {
+                let fields: Vec<&str> = line.split(',').map(str::trim).collect();
+                let episode = match episode_col {
+                    Some(c) => fields
+                        .get(c)
+                        .and_then(|v| v.parse::<usize>().ok())
+                        .with_context(|| format!("{path}: line {}: bad episode number", n + 2))?,
+                    None => 0,
+                };
+                let action = action_cols
+                    .iter()
+                    .map(|&c| parse_number(fields.get(c).copied(), path, n + 2))
+                    .collect::<Result<Vec<f64>>>()?;
+                if episodes.len() <= episode {
+                    episodes.resize(episode + 1, Vec::new());
+                }
+                episodes[episode].push(action);
+            }
+        } else {
+            let rows = lines
+                .enumerate()
+                .map(|(n, line)| {
+                    line.split(',')
+                        .map(|v| parse_number(Some(v.trim()), path, n + 1))
+                        .collect()
+                })
+                .collect::<Result<Vec<Vec<f64>>>>()?;
+            episodes.push(rows);
+        }
+        if episodes.iter().all(|e| e.is_empty()) {
+            bail!("{path}: no actions found");
+        }
+        Ok(ReplayPolicy {
+            episodes,
+            current: 0,
+            cursor: 0,
+            path: path.to_string(),
+        })
+    }
+
+    fn episode_actions(&self) -> &Vec<Vec<f64>> {
+        // A plain file (one episode) is reused for every episode.
+        &self.episodes[self.current.min(self.episodes.len() - 1)]
+    }
+}
+
+fn parse_number(field: Option<&str>, path: &str, line: usize) -> Result<f64> {
+    let text = field.with_context(|| format!("{path}: line {line}: missing value"))?;
+    text.parse::<f64>()
+        .with_context(|| format!("{path}: line {line}: '{text}' is not a number"))
+}
+
+impl Policy for ReplayPolicy {
+    fn name(&self) -> String {
+        format!("actions:{}", self.path)
+    }
+    fn begin_episode(&mut self, episode: usize) {
+        self.current = episode;
+        self.cursor = 0;
+    }
+    fn exhausted(&self) -> bool {
+        self.cursor >= self.episode_actions().len()
+    }
+    fn act(&mut self, env: &dyn Env, _: &[f64]) -> Result<Vec<f64>> {
+        let actions = self.episode_actions();
+        let Some(a) = actions.get(self.cursor) else {
+            bail!(
+                "{}: no recorded action for step {} of episode {}",
+                self.path,
+                self.cursor,
+                self.current
+            );
+        };
+        let expected = env.spec().action_space.dim();
+        if a.len() != expected {
+            bail!(
+                "{}: actions have {} entries, {} expects {expected}",
+                self.path,
+                a.len(),
+                env.spec().name
+            );
+        }
+        let a = a.clone();
+        self.cursor += 1;
+        Ok(a)
+    }
+}

@@ -1,0 +1,202 @@
+//! The `locobench` binary: envs listing, rollouts to CSV, exact replays, clear errors.
+use std::process::Command;
+
+fn locobench(args: &[&str]) -> (bool, String, String) {
+    let out = Command::new(env!("CARGO_BIN_EXE_locobench"))
+        .args(args)
+        .output()
+        .unwrap();
+    (
+        out.status.success(),
+        String::from_utf8_lossy(&out.stdout).into(),
+        String::from_utf8_lossy(&out.stderr).into(),
+    )
+}
+
+#[test]
+fn envs_lists_every_environment_with_sizes() {
+    let (ok, out, _) = locobench(&["envs"]);
+    assert!(ok);
+    for (name, obs, act) in [
+        ("half-cheetah", 17, 6),
+        ("ant", 105, 8),
+        ("humanoid", 348, 17),
+        ("inverted-pendulum", 4, 1),
+        ("minitaur", 28, 8),
+    ] {
+        let line = out
+            .lines()
+            .find(|l| l.starts_with(name))
+            .unwrap_or_else(|| panic!("{name} missing:\n{out}"));
+        let cols: Vec<&str> = line.split_whitespace().collect();
+        assert_eq!(cols[1], obs.to_string(), "{line}");
+        assert_eq!(cols[2], act.to_string(), "{line}");
+    }
+}
+
+#[test]
+fn rollout_writes_one_row_per_step_and_replays_exactly() {
+    let dir = tempfile::tempdir().unwrap();
+    let first = dir.path().join("first.csv");
+    let (ok, out, err) = locobench(&[
+        "rollout",
+        "--env",
+        "half-cheetah",
+        "--policy",
+        "random",
+        "--episodes",
+        "2",
+        "--seed",
+        "7",
+        "--option",
+        "max_episode_steps=30",
+        "--out",
+        first.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(out.contains("episode 1"));
+    let text = std::fs::read_to_string(&first).unwrap();
+    let mut lines = text.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    assert_eq!(&header[..3], &["episode", "step", "action_0"]);
+    for col in [
+        "reward",
+        "forward",
+        "ctrl_cost",
+        "terminated",
+        "truncated",
+        "obs_16",
+    ] {
+        assert!(header.contains(&col), "missing {col}");
+    }
+    let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
+    assert_eq!(rows.len(), 60);
+    let truncated = header.iter().position(|c| *c == "truncated").unwrap();
+    assert_eq!(rows[29][truncated], "1");
+    assert_eq!(rows[30][0], "1");
+    // reward = sum of the terms in every row
+    let (r, f, c) = (
+        header.iter().position(|c| *c == "reward").unwrap(),
+        header.iter().position(|c| *c == "forward").unwrap(),
+        header.iter().position(|c| *c == "ctrl_cost").unwrap(),
+    );
+    for row in &rows {
+        let v = |i: usize| row[i].parse::<f64>().unwrap();
+        assert!((v(r) - v(f) - v(c)).abs() < 1e-12);
+    }
+
+    let replay = dir.path().join("replay.csv");
+    let actions = format!("actions:{}", first.display());
+    let (ok, _, err) = locobench(&[
+        "rollout",
+        "--env",
+        "half-cheetah",
+        "--policy",
+        &actions,
+        "--episodes",
+        "2",
+        "--seed",
+        "7",
+        "--option",
+        "max_episode_steps=30",
+        "--out",
+        replay.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert_eq!(
+        std::fs::read_to_string(&replay).unwrap(),
+        text,
+        "a replay must reproduce the trajectory exactly"
+    );
+}
+
+#[test]
+fn plain_action_files_and_reset_noise() {
+    let dir = tempfile::tempdir().unwrap();
+    let actions = dir.path().join("a.csv");
+    std::fs::write(&actions, "0.5\n-0.5\n0.25\n").unwrap();
+    let out = dir.path().join("out.csv");
+    let (ok, stdout, err) = locobench(&[
+        "rollout",
+        "--env",
+        "inverted-pendulum",
+        "--policy",
+        &format!("actions:{}", actions.display()),
+        "--reset-noise",
+        "0",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    assert!(stdout.contains("over 3 steps"), "{stdout}");
+    let text = std::fs::read_to_string(&out).unwrap();
+    let row: Vec<&str> = text.lines().nth(1).unwrap().split(',').collect();
+    assert_eq!(row[2], "0.5");
+}
+
+#[test]
+fn bad_input_fails_with_a_clear_message_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("never.csv");
+    let o = out.to_str().unwrap();
+    let cases: [(&[&str], &str); 5] = [
+        (
+            &["rollout", "--env", "hopper", "--out", o],
+            "unknown environment 'hopper'",
+        ),
+        (
+            &["rollout", "--env", "ant", "--policy", "smart", "--out", o],
+            "unknown policy 'smart'",
+        ),
+        (
+            &[
+                "rollout",
+                "--env",
+                "ant",
+                "--policy",
+                "actions:/no/such.csv",
+                "--out",
+                o,
+            ],
+            "/no/such.csv",
+        ),
+        (
+            &[
+                "rollout",
+                "--env",
+                "ant",
+                "--option",
+                "ctrl_cost_weight=-2",
+                "--out",
+                o,
+            ],
+            "ctrl_cost_weight",
+        ),
+        (
+            &["rollout", "--env", "ant", "--option", "bogus", "--out", o],
+            "not key=value",
+        ),
+    ];
+    for (args, expect) in cases {
+        let (ok, _, err) = locobench(args);
+        assert!(!ok, "{args:?} should fail");
+        assert!(err.contains(expect), "{args:?}: {err}");
+    }
+    // An action file for another env: wrong action length.
+    let wrong = dir.path().join("wrong.csv");
+    std::fs::write(&wrong, "0.1,0.2\n").unwrap();
+    let (ok, _, err) = locobench(&[
+        "rollout",
+        "--env",
+        "ant",
+        "--policy",
+        &format!("actions:{}", wrong.display()),
+        "--out",
+        o,
+    ]);
+    assert!(!ok && err.contains("expects 8"), "{err}");
+    assert!(
+        !out.exists(),
+        "a failed rollout must not leave a partial file"
+    );
+}
