@@ -1,6 +1,8 @@
 //! locobench: legged-locomotion reinforcement learning and classical control on MuJoCo.
+pub mod agents;
 pub mod envs;
 pub mod io;
 pub mod mujoco;
 pub mod policy;
 pub mod rollout;
+pub mod train;

@@ -1,6 +1,13 @@
 mod cli;
 
 fn main() {
+    // candle's default thread pools busy-wait; one thread is fastest at these sizes (REFERENCE
+    // §6). Set before any candle code runs; users can still choose otherwise.
+    for var in ["RAYON_NUM_THREADS", "CANDLE_NUM_THREADS"] {
+        if std::env::var_os(var).is_none() {
+            std::env::set_var(var, "1");
+        }
+    }
     if let Err(e) = cli::run() {
         eprintln!("error: {e:#}");
         std::process::exit(1);

@@ -1,6 +1,8 @@
 //! The `locobench` command line.
 mod envs;
+mod eval;
 mod rollout;
+mod train;
 
 use anyhow::Result;
 use clap::{Parser, Subcommand};
@@ -22,12 +24,18 @@ enum Command {
     Envs,
     /// Run a simple policy (random, zero, or recorded actions) and write every step to CSV.
     Rollout(rollout::RolloutArgs),
+    /// Train TD3, SAC or DDPG; resume a run; fine-tune from a checkpoint.
+    Train(train::TrainArgs),
+    /// Evaluate a checkpoint: mean and std of the return and of every reward term.
+    Eval(eval::EvalArgs),
 }
 
 pub fn run() -> Result<()> {
     match Cli::parse().command {
         Command::Envs => envs::run(),
         Command::Rollout(args) => rollout::run(args),
+        Command::Train(args) => train::run(args),
+        Command::Eval(args) => eval::run(args),
     }
 }
 

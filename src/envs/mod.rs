@@ -25,7 +25,7 @@ pub use half_cheetah::{HalfCheetah, HalfCheetahOptions};
 pub use humanoid::{Humanoid, HumanoidOptions};
 pub use inverted_pendulum::{InvertedPendulum, InvertedPendulumOptions};
 pub use minitaur::{Minitaur, MinitaurOptions};
-pub use registry::{env_names, make, parse_overrides, EnvConfig};
+pub use registry::{env_names, make, parse_overrides, reward_weight_option, EnvConfig};
 
 use crate::mujoco::Data;
 

@@ -100,6 +100,32 @@ pub fn parse_overrides(text: &str) -> Result<Vec<(String, String)>, EnvError> {
         .collect()
 }
 
+/// The option that weighs a reward term: `drift` -> `drift_weight` on Minitaur, `forward` ->
+/// `forward_reward_weight`, `ctrl` -> `ctrl_cost_weight`, ... on the others.
+pub fn reward_weight_option(env: &str, term: &str) -> Result<&'static str, EnvError> {
+    check_name(env)?;
+    let key = match (env, term) {
+        ("minitaur", "distance") => "distance_weight",
+        ("minitaur", "energy") => "energy_weight",
+        ("minitaur", "drift") => "drift_weight",
+        ("minitaur", "shake") => "shake_weight",
+        ("minitaur", _) => "",
+        ("inverted-pendulum", _) => "",
+        (_, "forward") => "forward_reward_weight",
+        (_, "ctrl" | "ctrl_cost") => "ctrl_cost_weight",
+        ("ant" | "humanoid", "contact" | "contact_cost") => "contact_cost_weight",
+        ("ant" | "humanoid", "healthy") => "healthy_reward",
+        _ => "",
+    };
+    if key.is_empty() {
+        return Err(EnvError::InvalidOption {
+            env: env.to_string(),
+            message: format!("'{term}' is not a weighted reward term of {env}"),
+        });
+    }
+    Ok(key)
+}
+
 fn check_name(name: &str) -> Result<(), EnvError> {
     if NAMES.contains(&name) {
         Ok(())

@@ -1,0 +1,337 @@
+//! Replay buffer: preallocated contiguous f32 storage, uniform sampling from the caller's RNG.
+//!
+//! Layout: each observation is stored once. The next observation of transition `i` is the
+//! observation of transition `i + 1`, except where an episode ended (or the caller passed a
+//! next observation that is not the following observation): those few are kept in a side table.
+//! Terminated and truncated are stored separately: learners bootstrap through truncation, never
+//! through termination.
+use std::collections::HashMap;
+
+use rand::Rng;
+
+const TERMINATED: u8 = 1;
+const TRUNCATED: u8 = 2;
+
+pub struct ReplayBuffer {
+    capacity: usize,
+    obs_dim: usize,
+    act_dim: usize,
+    obs: Vec<f32>,
+    actions: Vec<f32>,
+    rewards: Vec<f32>,
+    flags: Vec<u8>,
+    /// Next observations that are not the following slot's observation.
+    side_next: HashMap<usize, Vec<f32>>,
+    /// The newest transition's next observation (its slot's successor is not written yet).
+    newest_next: Vec<f32>,
+    write: usize,
+    len: usize,
+}
+
+/// A sampled minibatch, row-major, reused between samples (no per-sample allocation).
+#[derive(Debug, Clone, Default)]
+pub struct Batch {
+    pub size: usize,
+    pub obs: Vec<f32>,
+    pub actions: Vec<f32>,
+    pub rewards: Vec<f32>,
+    pub next_obs: Vec<f32>,
+    /// 1.0 where the transition terminated (no bootstrap), else 0.0.
+    pub terminated: Vec<f32>,
+}
+
+impl Batch {
+    pub fn new(size: usize, obs_dim: usize, act_dim: usize) -> Batch {
+        Batch {
+            size,
+            obs: vec![0.0; size * obs_dim],
+            actions: vec![0.0; size * act_dim],
+            rewards: vec![0.0; size],
+            next_obs: vec![0.0; size * obs_dim],
+            terminated: vec![0.0; size],
+        }
+    }
+}
+
+impl ReplayBuffer {
+    pub fn new(capacity: usize, obs_dim: usize, act_dim: usize) -> ReplayBuffer {
+        assert!(capacity > 0);
+        ReplayBuffer {
+            capacity,
+            obs_dim,
+            act_dim,
+            obs: vec![0.0; capacity * obs_dim],
+            actions: vec![0.0; capacity * act_dim],
+            rewards: vec![0.0; capacity],
+            flags: vec![0; capacity],
+            side_next: HashMap::new(),
+            newest_next: vec![0.0; obs_dim],
+            write: 0,
+            len: 0,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+    pub fn capacity(&self) -> usize {
+        self.capacity
+    }
+    pub fn dims(&self) -> (usize, usize) {
+        (self.obs_dim, self.act_dim)
+    }
+
+    /// Bytes of preallocated storage per transition (the side table adds one observation per
+    /// episode end on top).
+    pub fn bytes_per_transition(&self) -> usize {
+        4 * (self.obs_dim + self.act_dim + 1) + 1
+    }
+
+    fn newest(&self) -> Option<usize> {
+        (self.len > 0).then(|| (self.write + self.capacity - 1) % self.capacity)
+    }
+
+    pub fn add(
+        &mut self,
+        obs: &[f32],
+        action: &[f32],
+        reward: f32,
+        next_obs: &[f32],
+        terminated: bool,
+        truncated: bool,
+    ) {
+        assert_eq!(obs.len(), self.obs_dim);
+        assert_eq!(next_obs.len(), self.obs_dim);
+        assert_eq!(action.len(), self.act_dim);
+        if let Some(prev) = self.newest() {
+            let ended = self.flags[prev] != 0;
+            if !ended && self.newest_next.as_slice() != obs {
+                self.side_next.insert(prev, self.newest_next.clone());
+            }
+        }
+        let i = self.write;
+        self.side_next.remove(&i);
+        self.obs[i * self.obs_dim..(i + 1) * self.obs_dim].copy_from_slice(obs);
+        self.actions[i * self.act_dim..(i + 1) * self.act_dim].copy_from_slice(action);
+        self.rewards[i] = reward;
+        self.flags[i] = (terminated as u8) * TERMINATED | (truncated as u8) * TRUNCATED;
+        if truncated && !terminated {
+            self.side_next.insert(i, next_obs.to_vec());
+        }
+        self.newest_next.copy_from_slice(next_obs);
+        self.write = (self.write + 1) % self.capacity;
+        self.len = (self.len + 1).min(self.capacity);
+    }
+
+    /// The next observation of transition `i` (for a terminated one, any finite vector: it is
+    /// never bootstrapped; the transition's own observation is used).
+    pub fn next_obs(&self, i: usize) -> &[f32] {
+        if let Some(v) = self.side_next.get(&i) {
+            return v;
+        }
+        if self.flags[i] & TERMINATED != 0 {
+            return &self.obs[i * self.obs_dim..(i + 1) * self.obs_dim];
+        }
+        if Some(i) == self.newest() {
+            return &self.newest_next;
+        }
+        let j = (i + 1) % self.capacity;
+        &self.obs[j * self.obs_dim..(j + 1) * self.obs_dim]
+    }
+
+    pub fn terminated(&self, i: usize) -> bool {
+        self.flags[i] & TERMINATED != 0
+    }
+    pub fn truncated(&self, i: usize) -> bool {
+        self.flags[i] & TRUNCATED != 0
+    }
+    pub fn obs(&self, i: usize) -> &[f32] {
+        &self.obs[i * self.obs_dim..(i + 1) * self.obs_dim]
+    }
+    pub fn action(&self, i: usize) -> &[f32] {
+        &self.actions[i * self.act_dim..(i + 1) * self.act_dim]
+    }
+    pub fn reward(&self, i: usize) -> f32 {
+        self.rewards[i]
+    }
+
+    /// Fills `batch` with `batch.size` transitions drawn uniformly (with replacement).
+    pub fn sample_into(&self, batch: &mut Batch, rng: &mut impl Rng) {
+        assert!(self.len > 0, "sampling an empty replay buffer");
+        let (od, ad) = (self.obs_dim, self.act_dim);
+        for k in 0..batch.size {
+            let i = rng.random_range(0..self.len);
+            batch.obs[k * od..(k + 1) * od].copy_from_slice(self.obs(i));
+            batch.actions[k * ad..(k + 1) * ad].copy_from_slice(self.action(i));
+            batch.rewards[k] = self.rewards[i];
+            batch.next_obs[k * od..(k + 1) * od].copy_from_slice(self.next_obs(i));
+            batch.terminated[k] = if self.terminated(i) { 1.0 } else { 0.0 };
+        }
+    }
+
+    /// Everything needed to restore the buffer exactly, as named flat arrays.
+    pub fn export(&self) -> BufferSnapshot {
+        let n = self.len;
+        let mut side_index: Vec<u32> = self.side_next.keys().map(|&k| k as u32).collect();
+        side_index.sort_unstable();
+        let side_values = side_index
+            .iter()
+            .flat_map(|k| self.side_next[&(*k as usize)].iter().copied())
+            .collect();
+        BufferSnapshot {
+            capacity: self.capacity,
+            obs_dim: self.obs_dim,
+            act_dim: self.act_dim,
+            write: self.write,
+            len: n,
+            obs: self.obs[..n * self.obs_dim].to_vec(),
+            actions: self.actions[..n * self.act_dim].to_vec(),
+            rewards: self.rewards[..n].to_vec(),
+            flags: self.flags[..n].to_vec(),
+            side_index,
+            side_values,
+            newest_next: self.newest_next.clone(),
+        }
+    }
+
+    pub fn import(s: BufferSnapshot) -> anyhow::Result<ReplayBuffer> {
+        let ok = s.len <= s.capacity
+            && s.write < s.capacity
+            && s.obs.len() == s.len * s.obs_dim
+            && s.actions.len() == s.len * s.act_dim
+            && s.rewards.len() == s.len
+            && s.flags.len() == s.len
+            && s.side_values.len() == s.side_index.len() * s.obs_dim
+            && s.newest_next.len() == s.obs_dim;
+        if !ok {
+            anyhow::bail!("replay buffer snapshot is inconsistent (corrupt checkpoint?)");
+        }
+        let mut b = ReplayBuffer::new(s.capacity, s.obs_dim, s.act_dim);
+        b.obs[..s.obs.len()].copy_from_slice(&s.obs);
+        b.actions[..s.actions.len()].copy_from_slice(&s.actions);
+        b.rewards[..s.len].copy_from_slice(&s.rewards);
+        b.flags[..s.len].copy_from_slice(&s.flags);
+        for (k, idx) in s.side_index.iter().enumerate() {
+            b.side_next.insert(
+                *idx as usize,
+                s.side_values[k * s.obs_dim..(k + 1) * s.obs_dim].to_vec(),
+            );
+        }
+        b.newest_next = s.newest_next;
+        b.write = s.write;
+        b.len = s.len;
+        Ok(b)
+    }
+}
+
+/// A replay buffer's contents as flat arrays (a full buffer's slots are `0..len`).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BufferSnapshot {
+    pub capacity: usize,
+    pub obs_dim: usize,
+    pub act_dim: usize,
+    pub write: usize,
+    pub len: usize,
+    pub obs: Vec<f32>,
+    pub actions: Vec<f32>,
+    pub rewards: Vec<f32>,
+    pub flags: Vec<u8>,
+    pub side_index: Vec<u32>,
+    pub side_values: Vec<f32>,
+    pub newest_next: Vec<f32>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    /// Feeds episodes of a counter "environment" whose observation is [t, episode].
+    fn fill(
+        buf: &mut ReplayBuffer,
+        episodes: &[(usize, bool)],
+    ) -> Vec<(Vec<f32>, Vec<f32>, bool, bool)> {
+        let mut all = Vec::new();
+        for (e, &(len, terminated)) in episodes.iter().enumerate() {
+            for t in 0..len {
+                let obs = vec![t as f32, e as f32];
+                let next = vec![t as f32 + 1.0, e as f32];
+                let last = t + 1 == len;
+                buf.add(
+                    &obs,
+                    &[t as f32 * 0.1],
+                    t as f32,
+                    &next,
+                    last && terminated,
+                    last && !terminated,
+                );
+                all.push((obs, next, last && terminated, last && !terminated));
+            }
+        }
+        all
+    }
+
+    #[test]
+    fn next_observations_are_exact_across_episode_ends_and_wraparound() {
+        let mut buf = ReplayBuffer::new(7, 2, 1);
+        let all = fill(&mut buf, &[(3, false), (2, true), (4, false), (1, true)]);
+        assert_eq!(buf.len(), 7);
+        // The buffer holds the last 7 transitions, oldest at the write position.
+        let kept = &all[all.len() - 7..];
+        for (k, (obs, next, term, trunc)) in kept.iter().enumerate() {
+            let i = (buf.write + k) % 7;
+            assert_eq!(buf.obs(i), &obs[..]);
+            assert_eq!(buf.terminated(i), *term);
+            assert_eq!(buf.truncated(i), *trunc);
+            if !term {
+                assert_eq!(buf.next_obs(i), &next[..], "transition {k}");
+            }
+        }
+        assert!(
+            buf.side_next.len() <= 2,
+            "only truncated ends need a stored next observation"
+        );
+    }
+
+    #[test]
+    fn inconsistent_next_observation_is_kept_in_the_side_table() {
+        let mut buf = ReplayBuffer::new(10, 1, 1);
+        buf.add(&[0.0], &[0.0], 0.0, &[1.0], false, false);
+        // The caller skipped a step (e.g. an unstable transition was dropped).
+        buf.add(&[5.0], &[0.0], 0.0, &[6.0], false, false);
+        assert_eq!(buf.next_obs(0), &[1.0]);
+        assert_eq!(buf.next_obs(1), &[6.0]);
+    }
+
+    #[test]
+    fn sampling_is_uniform_and_seeded_and_snapshots_round_trip() {
+        let mut buf = ReplayBuffer::new(50, 2, 1);
+        fill(&mut buf, &[(20, false), (15, true)]);
+        let mut b1 = Batch::new(64, 2, 1);
+        let mut b2 = Batch::new(64, 2, 1);
+        buf.sample_into(&mut b1, &mut rand_chacha::ChaCha8Rng::seed_from_u64(3));
+        let restored = ReplayBuffer::import(buf.export()).unwrap();
+        restored.sample_into(&mut b2, &mut rand_chacha::ChaCha8Rng::seed_from_u64(3));
+        assert_eq!(b1.obs, b2.obs);
+        assert_eq!(b1.next_obs, b2.next_obs);
+        assert_eq!(b1.terminated, b2.terminated);
+        assert_eq!(buf.bytes_per_transition(), 4 * 4 + 1);
+        let mut counts = vec![0usize; 35];
+        let mut big = Batch::new(35_000, 2, 1);
+        buf.sample_into(&mut big, &mut rand_chacha::ChaCha8Rng::seed_from_u64(4));
+        for k in 0..big.size {
+            let (t, e) = (big.obs[2 * k] as usize, big.obs[2 * k + 1] as usize);
+            counts[e * 20 + t] += 1;
+        }
+        assert!(
+            counts.iter().all(|&c| (800..1200).contains(&c)),
+            "{counts:?}"
+        );
+        let mut corrupt = buf.export();
+        corrupt.rewards.pop();
+        assert!(ReplayBuffer::import(corrupt).is_err());
+    }
+}

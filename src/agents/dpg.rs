@@ -1,0 +1,242 @@
+//! Deterministic policy gradient agents. TD3 (Fujimoto et al. 2018): twin critics with clipped
+//! double Q, target policy smoothing, delayed actor and target updates. DDPG is the same
+//! machinery with one critic, no smoothing and no delay (the TD3 paper's "our DDPG").
+use candle_core::{Device, Result, Tensor, Var};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, Normal};
+
+use super::buffer::Batch;
+use super::config::{Algo, TrainConfig};
+use super::nets::{batch_tensor, polyak_update, Mlp, Output};
+use super::noise::{Noise, NoiseKind};
+use super::optim::Adam;
+use super::{layer_sizes, Agent, Losses};
+
+pub struct DeterministicAgent {
+    algo: Algo,
+    act_dim: usize,
+    obs_dim: usize,
+    gamma: f64,
+    tau: f64,
+    policy_noise: f64,
+    noise_clip: f64,
+    policy_delay: u64,
+    actor: Mlp,
+    actor_target: Mlp,
+    critics: Vec<Mlp>,
+    critic_targets: Vec<Mlp>,
+    actor_opt: Adam,
+    critic_opt: Adam,
+    noise: Noise,
+    updates: u64,
+}
+
+impl DeterministicAgent {
+    pub fn new(
+        cfg: &TrainConfig,
+        obs_dim: usize,
+        act_dim: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Self> {
+        let actor = Mlp::new(
+            &layer_sizes(obs_dim, &cfg.hidden, act_dim),
+            Output::Tanh,
+            rng,
+        )?;
+        let n_critics = if cfg.twin_critics { 2 } else { 1 };
+        let critics = (0..n_critics)
+            .map(|_| {
+                Mlp::new(
+                    &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1),
+                    Output::Linear,
+                    rng,
+                )
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let actor_target = actor.deep_copy()?;
+        let critic_targets = critics
+            .iter()
+            .map(|c| c.deep_copy())
+            .collect::<Result<Vec<_>>>()?;
+        let actor_opt = Adam::new(actor.vars(), cfg.actor_lr);
+        let critic_opt = Adam::new(
+            critics.iter().flat_map(|c| c.vars()).collect(),
+            cfg.critic_lr,
+        );
+        let noise = match cfg.noise {
+            NoiseKind::Gaussian => Noise::Gaussian {
+                sigma: cfg.exploration_noise,
+            },
+            NoiseKind::OrnsteinUhlenbeck => Noise::ornstein_uhlenbeck(
+                act_dim,
+                cfg.ou_theta,
+                cfg.exploration_noise,
+                cfg.ou_sigma_min,
+                cfg.ou_decay_steps,
+                cfg.ou_dt,
+            ),
+        };
+        Ok(DeterministicAgent {
+            algo: cfg.algo,
+            act_dim,
+            obs_dim,
+            gamma: cfg.gamma,
+            tau: cfg.tau,
+            policy_noise: cfg.policy_noise,
+            noise_clip: cfg.noise_clip,
+            policy_delay: cfg.policy_delay as u64,
+            actor,
+            actor_target,
+            critics,
+            critic_targets,
+            actor_opt,
+            critic_opt,
+            noise,
+            updates: 0,
+        })
+    }
+
+    fn q(critic: &Mlp, obs: &Tensor, action: &Tensor) -> Result<Tensor> {
+        critic.forward(&Tensor::cat(&[obs, action], 1)?)
+    }
+
+    /// min_i Q'_i(s, a) over the target critics, one value per row (diagnostics and tests).
+    pub fn target_q_min(&self, obs: &[f32], actions: &[f32]) -> Result<Vec<f32>> {
+        let n = obs.len() / self.obs_dim;
+        let (o, a) = (
+            batch_tensor(obs, n, self.obs_dim)?,
+            batch_tensor(actions, n, self.act_dim)?,
+        );
+        let mut q = Self::q(&self.critic_targets[0], &o, &a)?;
+        for t in &self.critic_targets[1..] {
+            q = q.minimum(&Self::q(t, &o, &a)?)?;
+        }
+        q.flatten_all()?.to_vec1::<f32>()
+    }
+
+    /// The target actor's action for each row.
+    pub fn target_actions(&self, obs: &[f32]) -> Result<Vec<f32>> {
+        let n = obs.len() / self.obs_dim;
+        self.actor_target
+            .forward(&batch_tensor(obs, n, self.obs_dim)?)?
+            .flatten_all()?
+            .to_vec1::<f32>()
+    }
+
+    /// y = r + gamma * (1 - terminated) * min_i Q'_i(s', clip(pi'(s') + smoothing noise)).
+    /// Truncated rows bootstrap like any non-terminal row.
+    pub fn td_targets(&self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Tensor> {
+        let n = batch.size;
+        let next_obs = batch_tensor(&batch.next_obs, n, self.obs_dim)?;
+        let mut next_action = self.actor_target.forward(&next_obs)?;
+        if self.policy_noise > 0.0 {
+            let normal = Normal::new(0.0, self.policy_noise).expect("policy_noise >= 0");
+            let c = self.noise_clip;
+            let eps: Vec<f32> = (0..n * self.act_dim)
+                .map(|_| normal.sample(rng).clamp(-c, c) as f32)
+                .collect();
+            next_action = (next_action + Tensor::from_vec(eps, (n, self.act_dim), &Device::Cpu)?)?
+                .clamp(-1f32, 1f32)?;
+        }
+        let mut q_next = Self::q(&self.critic_targets[0], &next_obs, &next_action)?;
+        for t in &self.critic_targets[1..] {
+            q_next = q_next.minimum(&Self::q(t, &next_obs, &next_action)?)?;
+        }
+        let rewards = batch_tensor(&batch.rewards, n, 1)?;
+        let not_done = batch_tensor(&batch.terminated, n, 1)?.affine(-1.0, 1.0)?;
+        Ok((rewards + (not_done * q_next)?.affine(self.gamma, 0.0)?)?.detach())
+    }
+}
+
+impl Agent for DeterministicAgent {
+    fn algo(&self) -> Algo {
+        self.algo
+    }
+
+    fn act(&self, obs: &[f32]) -> Result<Vec<f32>> {
+        let x = batch_tensor(obs, 1, self.obs_dim)?;
+        self.actor.forward(&x)?.flatten_all()?.to_vec1::<f32>()
+    }
+
+    fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
+        let a = self.act(obs)?;
+        let noise = self.noise.sample(self.act_dim, rng);
+        Ok(a.iter()
+            .zip(noise)
+            .map(|(a, n)| (*a as f64 + n).clamp(-1.0, 1.0) as f32)
+            .collect())
+    }
+
+    fn begin_episode(&mut self) {
+        self.noise.reset();
+    }
+
+    fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
+        let n = batch.size;
+        let obs = batch_tensor(&batch.obs, n, self.obs_dim)?;
+        let actions = batch_tensor(&batch.actions, n, self.act_dim)?;
+        let y = self.td_targets(batch, rng)?;
+
+        let mut critic_loss = Self::q(&self.critics[0], &obs, &actions)?
+            .sub(&y)?
+            .sqr()?
+            .mean_all()?;
+        for c in &self.critics[1..] {
+            critic_loss =
+                (critic_loss + Self::q(c, &obs, &actions)?.sub(&y)?.sqr()?.mean_all()?)?;
+        }
+        let grads = critic_loss.backward()?;
+        self.critic_opt.step(&grads)?;
+        self.updates += 1;
+
+        let mut losses = Losses {
+            critic: critic_loss.to_scalar::<f32>()? as f64,
+            ..Default::default()
+        };
+        if self.updates % self.policy_delay == 0 {
+            let actor_loss = Self::q(&self.critics[0], &obs, &self.actor.forward(&obs)?)?
+                .mean_all()?
+                .neg()?;
+            let grads = actor_loss.backward()?;
+            self.actor_opt.step(&grads)?;
+            polyak_update(&self.actor, &self.actor_target, self.tau)?;
+            for (c, t) in self.critics.iter().zip(&self.critic_targets) {
+                polyak_update(c, t, self.tau)?;
+            }
+            losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
+        }
+        Ok(losses)
+    }
+
+    fn parameters(&self) -> Vec<(String, Var)> {
+        let mut out = self.actor.named_vars("actor");
+        out.extend(self.actor_target.named_vars("actor_target"));
+        for (i, (c, t)) in self.critics.iter().zip(&self.critic_targets).enumerate() {
+            out.extend(c.named_vars(&format!("critic{i}")));
+            out.extend(t.named_vars(&format!("critic{i}_target")));
+        }
+        out
+    }
+
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
+        vec![
+            ("actor_opt", &mut self.actor_opt),
+            ("critic_opt", &mut self.critic_opt),
+        ]
+    }
+
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![
+            ("updates", self.updates),
+            ("noise_steps", self.noise.steps()),
+        ]
+    }
+
+    fn set_counter(&mut self, name: &str, value: u64) {
+        match name {
+            "updates" => self.updates = value,
+            "noise_steps" => self.noise.set_steps(value),
+            _ => {}
+        }
+    }
+}

@@ -1,0 +1,70 @@
+//! Off-policy actor-critic agents on candle-nn: TD3, DDPG and SAC.
+//!
+//! Agents work in the normalised action space [-1, 1]^n; the trainer maps actions to the
+//! environment's bounds. All randomness (initialisation, exploration, target smoothing, SAC's
+//! sampling) comes from RNGs the caller seeds, never from a library's global RNG.
+pub mod buffer;
+pub mod config;
+mod dpg;
+pub mod nets;
+pub mod noise;
+pub mod optim;
+mod sac;
+
+use candle_core::{Result, Var};
+use rand_chacha::ChaCha8Rng;
+
+pub use buffer::{Batch, ReplayBuffer};
+pub use config::{Algo, SacVersion, TrainConfig};
+pub use dpg::DeterministicAgent;
+pub use sac::SacAgent;
+
+use optim::Adam;
+
+/// Losses and temperature of one gradient update (None where the update did not touch them).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Losses {
+    pub critic: f64,
+    pub actor: Option<f64>,
+    pub value: Option<f64>,
+    pub alpha: Option<f64>,
+    pub alpha_loss: Option<f64>,
+}
+
+pub trait Agent: Send {
+    fn algo(&self) -> Algo;
+    /// The deterministic action for one observation (evaluation).
+    fn act(&self, obs: &[f32]) -> Result<Vec<f32>>;
+    /// An exploratory action for one observation (training).
+    fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>>;
+    /// Called at the start of every training episode (resets OU noise).
+    fn begin_episode(&mut self) {}
+    fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses>;
+    /// Every network parameter, targets included, by checkpoint name.
+    fn parameters(&self) -> Vec<(String, Var)>;
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)>;
+    /// Counters that must survive a resume (updates done, noise steps).
+    fn counters(&self) -> Vec<(&'static str, u64)>;
+    fn set_counter(&mut self, name: &str, value: u64);
+}
+
+/// Builds the agent a config asks for, initialised from `rng`.
+pub fn make_agent(
+    cfg: &TrainConfig,
+    obs_dim: usize,
+    act_dim: usize,
+    rng: &mut ChaCha8Rng,
+) -> Result<Box<dyn Agent>> {
+    Ok(match cfg.algo {
+        Algo::Td3 | Algo::Ddpg => Box::new(DeterministicAgent::new(cfg, obs_dim, act_dim, rng)?),
+        Algo::Sac => Box::new(SacAgent::new(cfg, obs_dim, act_dim, rng)?),
+    })
+}
+
+/// Layer sizes `input, hidden..., output`.
+pub(crate) fn layer_sizes(input: usize, hidden: &[usize], output: usize) -> Vec<usize> {
+    std::iter::once(input)
+        .chain(hidden.iter().copied())
+        .chain(std::iter::once(output))
+        .collect()
+}

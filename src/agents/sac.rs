@@ -1,0 +1,302 @@
+//! Soft Actor-Critic. v2 (Haarnoja et al. 2018b, the default): tanh-squashed Gaussian policy,
+//! twin critics with target networks, automatic temperature towards entropy -dim(A). v1
+//! (2018a): a separate state-value network with its own target network and a fixed temperature.
+use candle_core::{Device, Result, Tensor, Var, D};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+use super::buffer::Batch;
+use super::config::{Algo, SacVersion, TrainConfig};
+use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
+use super::optim::Adam;
+use super::{layer_sizes, Agent, Losses};
+
+const LOG_STD_MIN: f64 = -20.0;
+const LOG_STD_MAX: f64 = 2.0;
+
+struct ValueNet {
+    net: Mlp,
+    target: Mlp,
+    opt: Adam,
+}
+
+pub struct SacAgent {
+    obs_dim: usize,
+    act_dim: usize,
+    gamma: f64,
+    tau: f64,
+    actor: Mlp,
+    critics: [Mlp; 2],
+    critic_targets: [Mlp; 2],
+    value: Option<ValueNet>,
+    log_alpha: Var,
+    target_entropy: f64,
+    actor_opt: Adam,
+    critic_opt: Adam,
+    alpha_opt: Option<Adam>,
+    updates: u64,
+}
+
+/// log(1 - tanh(u)^2), computed stably as 2 (log 2 - u - softplus(-2u)).
+pub fn log_one_minus_tanh_sq(u: &Tensor) -> Result<Tensor> {
+    let minus_2u = u.affine(-2.0, 0.0)?;
+    // softplus(x) = max(x, 0) + log(1 + exp(-|x|))
+    let softplus = (minus_2u.relu()? + minus_2u.abs()?.neg()?.exp()?.affine(1.0, 1.0)?.log()?)?;
+    ((u.neg()? - softplus)? + 2f64.ln())?.affine(2.0, 0.0)
+}
+
+/// Log-density of a = tanh(u), u = mean + std * eps, summed over action dimensions.
+pub fn squashed_gaussian_log_prob(u: &Tensor, eps: &Tensor, log_std: &Tensor) -> Result<Tensor> {
+    let half_log_2pi = 0.5 * (2.0 * std::f64::consts::PI).ln();
+    let gaussian = ((eps.sqr()?.affine(-0.5, -half_log_2pi))? - log_std)?;
+    (gaussian - log_one_minus_tanh_sq(u)?)?.sum_keepdim(D::Minus1)
+}
+
+impl SacAgent {
+    pub fn new(
+        cfg: &TrainConfig,
+        obs_dim: usize,
+        act_dim: usize,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Self> {
+        let actor = Mlp::new(
+            &layer_sizes(obs_dim, &cfg.hidden, 2 * act_dim),
+            Output::Linear,
+            rng,
+        )?;
+        let critic = |rng: &mut ChaCha8Rng| {
+            Mlp::new(
+                &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1),
+                Output::Linear,
+                rng,
+            )
+        };
+        let critics = [critic(rng)?, critic(rng)?];
+        let critic_targets = [critics[0].deep_copy()?, critics[1].deep_copy()?];
+        let value = match cfg.sac_version {
+            SacVersion::V2 => None,
+            SacVersion::V1 => {
+                let net = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 1), Output::Linear, rng)?;
+                let target = net.deep_copy()?;
+                let opt = Adam::new(net.vars(), cfg.value_lr);
+                Some(ValueNet { net, target, opt })
+            }
+        };
+        let log_alpha = scalar_var(cfg.initial_alpha.ln() as f32)?;
+        let autotune = cfg.autotune_alpha && cfg.sac_version == SacVersion::V2;
+        Ok(SacAgent {
+            obs_dim,
+            act_dim,
+            gamma: cfg.gamma,
+            tau: cfg.tau,
+            actor_opt: Adam::new(actor.vars(), cfg.actor_lr),
+            critic_opt: Adam::new(
+                critics.iter().flat_map(|c| c.vars()).collect(),
+                cfg.critic_lr,
+            ),
+            alpha_opt: autotune.then(|| Adam::new(vec![log_alpha.clone()], cfg.alpha_lr)),
+            actor,
+            critics,
+            critic_targets,
+            value,
+            log_alpha,
+            target_entropy: cfg.target_entropy.unwrap_or(-(act_dim as f64)),
+            updates: 0,
+        })
+    }
+
+    pub fn alpha(&self) -> Result<f64> {
+        Ok(self
+            .log_alpha
+            .as_tensor()
+            .exp()?
+            .flatten_all()?
+            .to_vec1::<f32>()?[0] as f64)
+    }
+
+    fn mean_log_std(&self, obs: &Tensor) -> Result<(Tensor, Tensor)> {
+        let out = self.actor.forward(obs)?;
+        let mean = out.narrow(1, 0, self.act_dim)?;
+        let log_std = out
+            .narrow(1, self.act_dim, self.act_dim)?
+            .clamp(LOG_STD_MIN as f32, LOG_STD_MAX as f32)?;
+        Ok((mean, log_std))
+    }
+
+    /// A reparameterised sample: (tanh(u), log pi(a|s)) with eps drawn from `rng`.
+    fn sample(&self, obs: &Tensor, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
+        let n = obs.dims()[0];
+        let (mean, log_std) = self.mean_log_std(obs)?;
+        let eps: Vec<f32> = (0..n * self.act_dim)
+            .map(|_| StandardNormal.sample(rng))
+            .collect();
+        let eps = Tensor::from_vec(eps, (n, self.act_dim), &Device::Cpu)?;
+        let u = (mean + (log_std.exp()? * &eps)?)?;
+        let log_prob = squashed_gaussian_log_prob(&u, &eps, &log_std)?;
+        Ok((u.tanh()?, log_prob))
+    }
+
+    fn min_q(critics: &[Mlp; 2], obs: &Tensor, action: &Tensor) -> Result<Tensor> {
+        let x = Tensor::cat(&[obs, action], 1)?;
+        critics[0].forward(&x)?.minimum(&critics[1].forward(&x)?)
+    }
+}
+
+impl Agent for SacAgent {
+    fn algo(&self) -> Algo {
+        Algo::Sac
+    }
+
+    fn act(&self, obs: &[f32]) -> Result<Vec<f32>> {
+        let (mean, _) = self.mean_log_std(&batch_tensor(obs, 1, self.obs_dim)?)?;
+        mean.tanh()?.flatten_all()?.to_vec1::<f32>()
+    }
+
+    fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
+        let (a, _) = self.sample(&batch_tensor(obs, 1, self.obs_dim)?, rng)?;
+        a.flatten_all()?.to_vec1::<f32>()
+    }
+
+    fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
+        let n = batch.size;
+        let obs = batch_tensor(&batch.obs, n, self.obs_dim)?;
+        let actions = batch_tensor(&batch.actions, n, self.act_dim)?;
+        let next_obs = batch_tensor(&batch.next_obs, n, self.obs_dim)?;
+        let rewards = batch_tensor(&batch.rewards, n, 1)?;
+        let not_done = batch_tensor(&batch.terminated, n, 1)?.affine(-1.0, 1.0)?;
+        let alpha = self.alpha()?;
+        let mut losses = Losses::default();
+
+        // Critic target: soft value of the next state, from the target critics (v2) or the
+        // target value network (v1).
+        let next_value = match &self.value {
+            None => {
+                let (next_a, next_logp) = self.sample(&next_obs, rng)?;
+                (Self::min_q(&self.critic_targets, &next_obs, &next_a)?
+                    - next_logp.affine(alpha, 0.0)?)?
+            }
+            Some(v) => v.target.forward(&next_obs)?,
+        };
+        let y = (rewards + (not_done * next_value)?.affine(self.gamma, 0.0)?)?.detach();
+        let x = Tensor::cat(&[&obs, &actions], 1)?;
+        let critic_loss = (self.critics[0].forward(&x)?.sub(&y)?.sqr()?.mean_all()?
+            + self.critics[1].forward(&x)?.sub(&y)?.sqr()?.mean_all()?)?;
+        self.critic_opt.step(&critic_loss.backward()?)?;
+        losses.critic = critic_loss.to_scalar::<f32>()? as f64;
+
+        let (pi_a, logp) = self.sample(&obs, rng)?;
+        let q_pi = Self::min_q(&self.critics, &obs, &pi_a)?;
+        if let Some(v) = &mut self.value {
+            let v_target = (&q_pi - logp.affine(alpha, 0.0)?)?.detach();
+            let value_loss = v.net.forward(&obs)?.sub(&v_target)?.sqr()?.mean_all()?;
+            v.opt.step(&value_loss.backward()?)?;
+            losses.value = Some(value_loss.to_scalar::<f32>()? as f64);
+        }
+        let actor_loss = (logp.affine(alpha, 0.0)? - q_pi)?.mean_all()?;
+        self.actor_opt.step(&actor_loss.backward()?)?;
+        losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
+
+        if let Some(opt) = &mut self.alpha_opt {
+            let gap = logp.detach().affine(1.0, self.target_entropy)?;
+            let alpha_loss = self
+                .log_alpha
+                .as_tensor()
+                .broadcast_mul(&gap)?
+                .mean_all()?
+                .neg()?;
+            opt.step(&alpha_loss.backward()?)?;
+            losses.alpha_loss = Some(alpha_loss.to_scalar::<f32>()? as f64);
+        }
+        losses.alpha = Some(self.alpha()?);
+
+        match &self.value {
+            None => {
+                for (c, t) in self.critics.iter().zip(&self.critic_targets) {
+                    polyak_update(c, t, self.tau)?;
+                }
+            }
+            Some(v) => polyak_update(&v.net, &v.target, self.tau)?,
+        }
+        self.updates += 1;
+        Ok(losses)
+    }
+
+    fn parameters(&self) -> Vec<(String, Var)> {
+        let mut out = self.actor.named_vars("actor");
+        for i in 0..2 {
+            out.extend(self.critics[i].named_vars(&format!("critic{i}")));
+            out.extend(self.critic_targets[i].named_vars(&format!("critic{i}_target")));
+        }
+        if let Some(v) = &self.value {
+            out.extend(v.net.named_vars("value"));
+            out.extend(v.target.named_vars("value_target"));
+        }
+        out.push(("log_alpha".into(), self.log_alpha.clone()));
+        out
+    }
+
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
+        let mut out = vec![
+            ("actor_opt", &mut self.actor_opt),
+            ("critic_opt", &mut self.critic_opt),
+        ];
+        if let Some(o) = &mut self.alpha_opt {
+            out.push(("alpha_opt", o));
+        }
+        if let Some(v) = &mut self.value {
+            out.push(("value_opt", &mut v.opt));
+        }
+        out
+    }
+
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![("updates", self.updates)]
+    }
+
+    fn set_counter(&mut self, name: &str, value: u64) {
+        if name == "updates" {
+            self.updates = value;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn squashed_log_prob_matches_the_closed_form() {
+        // Closed form per dimension: log N(u; m, s) - log(1 - tanh(u)^2).
+        let (m, s) = ([0.3f64, -1.2, 2.5], [0.5f64, 1.3, 0.05]);
+        let eps = [0.7f64, -1.9, 2.2];
+        let u: Vec<f64> = (0..3).map(|i| m[i] + s[i] * eps[i]).collect();
+        let expected: f64 = (0..3)
+            .map(|i| {
+                let z = (u[i] - m[i]) / s[i];
+                let log_n = -0.5 * z * z - s[i].ln() - 0.5 * (2.0 * std::f64::consts::PI).ln();
+                log_n - (1.0 - u[i].tanh().powi(2)).ln()
+            })
+            .sum();
+        let t = |v: &[f64]| {
+            Tensor::from_vec(
+                v.iter().map(|x| *x as f32).collect::<Vec<_>>(),
+                (1, 3),
+                &Device::Cpu,
+            )
+            .unwrap()
+        };
+        let log_std: Vec<f64> = s.iter().map(|x| x.ln()).collect();
+        let got = squashed_gaussian_log_prob(&t(&u), &t(&eps), &t(&log_std))
+            .unwrap()
+            .to_vec2::<f32>()
+            .unwrap()[0][0];
+        assert!((got as f64 - expected).abs() < 1e-4, "{got} vs {expected}");
+        // Far in the tails the naive formula overflows; the stable one does not.
+        let big = log_one_minus_tanh_sq(&t(&[30.0, -30.0, 0.0]))
+            .unwrap()
+            .to_vec2::<f32>()
+            .unwrap();
+        assert!(big[0].iter().all(|v| v.is_finite()));
+        assert!((big[0][0] as f64 - (4f64.ln() - 60.0)).abs() < 1e-3);
+    }
+}

@@ -1,0 +1,59 @@
+use std::path::PathBuf;
+
+use anyhow::Result;
+use locobench::envs::make;
+use locobench::train::{evaluate::evaluate, load_policy};
+
+use super::train::env_config;
+
+#[derive(clap::Args, Debug)]
+pub struct EvalArgs {
+    /// A checkpoint directory, or a run directory (its newest checkpoint).
+    #[arg(long)]
+    pub checkpoint: PathBuf,
+    #[arg(long, default_value_t = 10)]
+    pub episodes: usize,
+    /// Seed for the evaluation episodes (default: the run's seed, as during training).
+    #[arg(long)]
+    pub seed: Option<u64>,
+    /// Evaluate under other reward weights, e.g. `--reward drift=1,shake=1,energy=0.005`.
+    #[arg(long)]
+    pub reward: Option<String>,
+    /// Environment option overrides.
+    #[arg(long = "option", value_name = "KEY=VALUE,...")]
+    pub options: Vec<String>,
+}
+
+pub fn run(args: EvalArgs) -> Result<()> {
+    let (run, agent) = load_policy(&args.checkpoint)?;
+    let mut env_cfg = run.env.clone();
+    let extra = env_config(&run.env.name, &args.options, args.reward.as_deref())?;
+    env_cfg.options.extend(extra.options);
+    let mut env = make(&env_cfg)?;
+    let e = evaluate(
+        agent.as_ref(),
+        env.as_mut(),
+        args.episodes,
+        args.seed.unwrap_or(run.seed),
+    )?;
+    println!(
+        "{} {} on {}: return {:.2} ± {:.2} over {} episodes (mean length {:.1})",
+        args.checkpoint.display(),
+        run.train.algo.name(),
+        run.env.name,
+        e.mean(),
+        e.std(),
+        e.returns.len(),
+        e.lengths.iter().sum::<usize>() as f64 / e.lengths.len() as f64
+    );
+    for (term, v) in &e.term_means {
+        println!("  {term:<14} {v:>12.3}");
+    }
+    if e.unstable_episodes > 0 {
+        println!(
+            "  {} episode(s) ended by a physics blow-up",
+            e.unstable_episodes
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,131 @@
+use std::path::PathBuf;
+
+use anyhow::{bail, Result};
+use locobench::agents::Algo;
+use locobench::envs::{parse_overrides, reward_weight_option, EnvConfig};
+use locobench::train::{self, config::build_config, config::split_pairs, Outcome, RunControl};
+
+#[derive(clap::Args, Debug)]
+pub struct TrainArgs {
+    /// Environment name (see `locobench envs`).
+    #[arg(long, required_unless_present = "resume")]
+    pub env: Option<String>,
+    /// td3, sac or ddpg.
+    #[arg(long, required_unless_present = "resume")]
+    pub algo: Option<String>,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Total environment steps (same as --set total_steps=N).
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Hyperparameter overrides, e.g. `--set batch_size=256,hidden=[64,64]`.
+    #[arg(long = "set", value_name = "KEY=VALUE,...")]
+    pub set: Vec<String>,
+    /// Environment option overrides, e.g. `--option max_episode_steps=500`.
+    #[arg(long = "option", value_name = "KEY=VALUE,...")]
+    pub options: Vec<String>,
+    /// Reward weights by term name, e.g. `--reward drift=0.25,shake=0.1`.
+    #[arg(long)]
+    pub reward: Option<String>,
+    /// Run directory (default runs/<env>-<algo>-seed<seed>).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Start from a checkpoint's weights (fine-tuning); warm-up defaults to 0 steps then.
+    #[arg(long, value_name = "CHECKPOINT")]
+    pub init_from: Option<PathBuf>,
+    /// Continue a stopped run from its newest checkpoint.
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["env", "algo", "set", "options", "reward", "init_from", "out"])]
+    pub resume: Option<PathBuf>,
+    /// Replace an existing run directory.
+    #[arg(long)]
+    pub force: bool,
+    /// Hide the progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+/// Env config from `--option` and `--reward`.
+pub fn env_config(env: &str, options: &[String], reward: Option<&str>) -> Result<EnvConfig> {
+    let mut cfg = EnvConfig::new(env);
+    for o in options {
+        cfg = cfg.with_overrides(&parse_overrides(o)?)?;
+    }
+    if let Some(r) = reward {
+        for (term, value) in parse_overrides(r)? {
+            let key = reward_weight_option(env, &term)?;
+            cfg = cfg.with_overrides(&[(key.to_string(), value)])?;
+        }
+    }
+    Ok(cfg)
+}
+
+pub fn run(args: TrainArgs) -> Result<()> {
+    let control = RunControl {
+        show_progress: !args.quiet,
+        ..Default::default()
+    };
+    let summary = if let Some(dir) = &args.resume {
+        println!("resuming {}", dir.display());
+        train::resume(dir, &control)?
+    } else {
+        let env = args.env.as_deref().expect("clap requires --env");
+        let algo = Algo::parse(args.algo.as_deref().expect("clap requires --algo"))?;
+        let mut overrides = Vec::new();
+        for s in &args.set {
+            overrides.extend(split_pairs(s)?);
+        }
+        if let Some(n) = args.steps {
+            overrides.push(("total_steps".into(), n.to_string()));
+        }
+        if args.init_from.is_some() && !overrides.iter().any(|(k, _)| k == "warmup_steps") {
+            overrides.push(("warmup_steps".into(), "0".into()));
+        }
+        let cfg = build_config(env, algo, &overrides)?;
+        let env_cfg = env_config(env, &args.options, args.reward.as_deref())?;
+        let out = args.out.clone().unwrap_or_else(|| {
+            PathBuf::from(format!("runs/{env}-{}-seed{}", algo.name(), args.seed))
+        });
+        if args.init_from.as_ref().is_some_and(|p| !p.exists()) {
+            bail!(
+                "checkpoint {} does not exist",
+                args.init_from.as_ref().unwrap().display()
+            );
+        }
+        println!(
+            "training {} on {env}, seed {}, {} steps -> {}",
+            algo.name(),
+            args.seed,
+            cfg.total_steps,
+            out.display()
+        );
+        train::train(
+            env_cfg,
+            cfg,
+            args.seed,
+            &out,
+            args.init_from.as_deref(),
+            args.force,
+            &control,
+        )?
+    };
+    if let Some(e) = &summary.last_eval {
+        println!(
+            "last evaluation at step {}: {:.2} ± {:.2} over {} episodes",
+            summary.steps,
+            e.mean(),
+            e.std(),
+            e.returns.len()
+        );
+    }
+    match summary.outcome {
+        Outcome::Finished => println!("finished; checkpoint {}", summary.checkpoint.display()),
+        Outcome::Stopped => println!(
+            "stopped at step {}; checkpoint {} (continue with `locobench train --resume {}`)",
+            summary.steps,
+            summary.checkpoint.display(),
+            summary.run_dir.display()
+        ),
+    }
+    println!("run directory: {}", summary.run_dir.display());
+    Ok(())
+}

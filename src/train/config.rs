@@ -1,0 +1,108 @@
+//! Building a run's configuration: algorithm defaults, then the shipped presets for the
+//! environment, then command-line overrides.
+use anyhow::{Context, Result};
+
+use crate::agents::{Algo, TrainConfig};
+
+const PRESETS: &str = include_str!("presets.toml");
+
+/// The preset table for an env (and algorithm), merged over the algorithm's defaults, then
+/// `overrides` (`key=value`, values parsed as TOML) on top.
+pub fn build_config(env: &str, algo: Algo, overrides: &[(String, String)]) -> Result<TrainConfig> {
+    let mut table = toml::Table::try_from(TrainConfig::defaults(algo)).expect("config serialises");
+    let presets: toml::Table = PRESETS.parse().expect("shipped presets parse");
+    if let Some(toml::Value::Table(env_table)) = presets.get(env) {
+        for (k, v) in env_table {
+            if !matches!(k.as_str(), "td3" | "sac" | "ddpg") {
+                table.insert(k.clone(), v.clone());
+            }
+        }
+        if let Some(toml::Value::Table(algo_table)) = env_table.get(algo.name()) {
+            table.extend(algo_table.clone());
+        }
+    }
+    apply_overrides(&mut table, overrides)?;
+    let cfg: TrainConfig = toml::Value::Table(table)
+        .try_into()
+        .map_err(|e: toml::de::Error| anyhow::anyhow!("{}", e.message()))?;
+    cfg.validate()?;
+    Ok(cfg)
+}
+
+pub fn apply_overrides(table: &mut toml::Table, overrides: &[(String, String)]) -> Result<()> {
+    for (key, value) in overrides {
+        anyhow::ensure!(
+            key != "algo",
+            "choose the algorithm with --algo, not --set algo="
+        );
+        anyhow::ensure!(
+            table.contains_key(key) || key == "target_entropy",
+            "unknown hyperparameter '{key}'"
+        );
+        let parsed: toml::Value = format!("v = {value}")
+            .parse::<toml::Table>()
+            .ok()
+            .and_then(|mut t| t.remove("v"))
+            .unwrap_or_else(|| toml::Value::String(value.clone()));
+        table.insert(key.clone(), parsed);
+    }
+    Ok(())
+}
+
+/// Splits `a=1,b=2` (commas inside [...] are kept).
+pub fn split_pairs(text: &str) -> Result<Vec<(String, String)>> {
+    let mut items = Vec::new();
+    let (mut depth, mut start) = (0i32, 0usize);
+    for (i, c) in text.char_indices() {
+        match c {
+            '[' => depth += 1,
+            ']' => depth -= 1,
+            ',' if depth == 0 => {
+                items.push(&text[start..i]);
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    items.push(&text[start..]);
+    items
+        .into_iter()
+        .filter(|s| !s.trim().is_empty())
+        .map(|item| {
+            let (k, v) = item
+                .split_once('=')
+                .with_context(|| format!("'{item}' is not key=value"))?;
+            Ok((k.trim().to_string(), v.trim().to_string()))
+        })
+        .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn presets_then_overrides() {
+        let c = build_config("inverted-pendulum", Algo::Td3, &[]).unwrap();
+        assert_eq!(c.hidden, vec![64, 64]);
+        assert_eq!(c.batch_size, 256);
+        assert_eq!(c.policy_delay, 2);
+        let c = build_config(
+            "half-cheetah",
+            Algo::Ddpg,
+            &split_pairs("hidden=[32,32],tau=0.01").unwrap(),
+        )
+        .unwrap();
+        assert_eq!(c.hidden, vec![32, 32]);
+        assert_eq!(c.tau, 0.01);
+        assert!(!c.twin_critics);
+        assert!(build_config("ant", Algo::Sac, &split_pairs("nonsense=1").unwrap()).is_err());
+        assert!(build_config("ant", Algo::Sac, &split_pairs("tau=2").unwrap()).is_err());
+        assert!(build_config(
+            "ant",
+            Algo::Sac,
+            &split_pairs("batch_size=\"big\"").unwrap()
+        )
+        .is_err());
+    }
+}

@@ -1,0 +1,414 @@
+//! Training runs: the collection loop (one place, top to bottom), the run directory, evaluation
+//! and checkpoints.
+//!
+//! Run directory: `config.toml` (every hyperparameter, env options, seed, crate version, git
+//! commit), `metrics.csv`, `checkpoints/`. Everything is written atomically.
+pub mod checkpoint;
+pub mod config;
+pub mod evaluate;
+pub mod metrics;
+pub mod seeds;
+
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, OnceLock};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use serde::{Deserialize, Serialize};
+
+use crate::agents::{make_agent, Agent, Batch, Losses, ReplayBuffer, TrainConfig};
+use crate::envs::{make, Env, EnvConfig};
+use crate::io::write_bytes_atomic;
+use checkpoint::TrainState;
+use evaluate::{evaluate, to_env_action, Evaluation};
+use metrics::MetricsRow;
+use seeds::{init_rng, train_episode_seed, training_rng, RngState};
+
+/// `config.toml` of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunConfig {
+    pub seed: u64,
+    pub crate_version: String,
+    pub git_commit: Option<String>,
+    /// Checkpoint the weights were initialised from (fine-tuning), if any.
+    pub init_from: Option<String>,
+    pub env: EnvConfig,
+    pub train: TrainConfig,
+}
+
+/// How a call to `train`/`resume` ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Outcome {
+    Finished,
+    /// Stopped early (Ctrl-C or `stop_after`); `resume` continues it.
+    Stopped,
+}
+
+#[derive(Debug)]
+pub struct RunSummary {
+    pub run_dir: PathBuf,
+    pub outcome: Outcome,
+    pub steps: u64,
+    pub last_eval: Option<Evaluation>,
+    pub best_eval_mean: Option<f64>,
+    pub checkpoint: PathBuf,
+}
+
+/// Knobs that do not change what is computed, only when to stop and what to show.
+#[derive(Debug, Clone, Default)]
+pub struct RunControl {
+    pub show_progress: bool,
+    /// Stop (with a checkpoint) at the first episode boundary at or after this step.
+    pub stop_after: Option<u64>,
+    /// Finish early once an evaluation's mean return reaches this ("solved").
+    pub target_return: Option<f64>,
+}
+
+/// The process-wide Ctrl-C flag (the handler is installed once, on first use).
+pub fn interrupt_flag() -> Arc<AtomicBool> {
+    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
+    FLAG.get_or_init(|| {
+        let flag = Arc::new(AtomicBool::new(false));
+        let f = Arc::clone(&flag);
+        let _ = ctrlc::set_handler(move || f.store(true, Ordering::SeqCst));
+        flag
+    })
+    .clone()
+}
+
+fn git_commit() -> Option<String> {
+    let out = std::process::Command::new("git")
+        .args(["rev-parse", "HEAD"])
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .ok()?;
+    out.status
+        .success()
+        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+}
+
+/// Starts a new run in `run_dir`. An existing non-empty directory is an error unless `force`.
+pub fn train(
+    env: EnvConfig,
+    train: TrainConfig,
+    seed: u64,
+    run_dir: &Path,
+    init_from: Option<&Path>,
+    force: bool,
+    control: &RunControl,
+) -> Result<RunSummary> {
+    train.validate()?;
+    let mut env = env;
+    env.options = env.resolved_options()?;
+    if run_dir.exists() && std::fs::read_dir(run_dir)?.next().is_some() {
+        if !force {
+            bail!("run directory {} already exists; use --force to overwrite it or --resume to continue it", run_dir.display());
+        }
+        std::fs::remove_dir_all(run_dir)
+            .with_context(|| format!("removing {}", run_dir.display()))?;
+    }
+    let init_checkpoint = init_from.map(resolve_checkpoint).transpose()?;
+    let run = RunConfig {
+        seed,
+        crate_version: env!("CARGO_PKG_VERSION").to_string(),
+        git_commit: git_commit(),
+        init_from: init_checkpoint.as_ref().map(|p| p.display().to_string()),
+        env,
+        train,
+    };
+    let mut trainer = Trainer::new(run_dir, &run)?;
+    if let Some(ckpt) = &init_checkpoint {
+        checkpoint::load_weights(ckpt, trainer.agent.as_ref())?;
+    }
+    std::fs::create_dir_all(run_dir)?;
+    write_bytes_atomic(
+        &run_dir.join("config.toml"),
+        toml::to_string(&run)?.as_bytes(),
+    )?;
+    trainer.run(control)
+}
+
+/// Continues a run from its newest checkpoint.
+pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
+    let run = read_run_config(run_dir)?;
+    let mut trainer = Trainer::new(run_dir, &run)?;
+    let ckpt = checkpoint::latest(run_dir)?;
+    let (state, buffer) = checkpoint::load_all(&ckpt, trainer.agent.as_mut())?;
+    trainer.buffer = buffer;
+    trainer.rng = state.rng.restore()?;
+    trainer.step = state.step;
+    trainer.episodes = state.episodes;
+    trainer.wall_offset = state.wall_time;
+    let metrics_path = run_dir.join("metrics.csv");
+    if metrics_path.exists() {
+        trainer.metrics = metrics::read(&metrics_path)?
+            .into_iter()
+            .filter(|r| r.step <= state.step)
+            .collect();
+    }
+    trainer.run(control)
+}
+
+pub fn read_run_config(run_dir: &Path) -> Result<RunConfig> {
+    let path = run_dir.join("config.toml");
+    let text = std::fs::read_to_string(&path).with_context(|| {
+        format!(
+            "{} is not a run directory (no config.toml)",
+            run_dir.display()
+        )
+    })?;
+    toml::from_str(&text).with_context(|| format!("{} is corrupt", path.display()))
+}
+
+/// Accepts a checkpoint directory or a run directory (meaning its newest checkpoint).
+pub fn resolve_checkpoint(path: &Path) -> Result<PathBuf> {
+    if path.join("model.safetensors").exists() {
+        Ok(path.to_path_buf())
+    } else if path.join("checkpoints").exists() {
+        checkpoint::latest(path)
+    } else if path.file_name().is_some_and(|n| n == "model.safetensors") && path.exists() {
+        Ok(path.parent().unwrap().to_path_buf())
+    } else {
+        bail!("no checkpoint at {} (expected a checkpoint directory with model.safetensors, or a run directory)", path.display())
+    }
+}
+
+/// Builds the agent of a run and loads a checkpoint's weights into it.
+pub fn load_policy(checkpoint: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
+    let ckpt = resolve_checkpoint(checkpoint)?;
+    let run_dir = ckpt
+        .parent()
+        .and_then(Path::parent)
+        .context("checkpoint is not inside a run directory")?;
+    let run = read_run_config(run_dir)?;
+    let env = make(&run.env)?;
+    let (obs_dim, act_dim) = (
+        env.spec().observation_space.dim(),
+        env.spec().action_space.dim(),
+    );
+    let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
+    checkpoint::load_weights(&ckpt, agent.as_ref())?;
+    Ok((run, agent))
+}
+
+struct Trainer {
+    run_dir: PathBuf,
+    cfg: TrainConfig,
+    seed: u64,
+    env: Box<dyn Env>,
+    eval_env: Box<dyn Env>,
+    agent: Box<dyn Agent>,
+    buffer: ReplayBuffer,
+    batch: Batch,
+    rng: ChaCha8Rng,
+    step: u64,
+    episodes: u64,
+    wall_offset: f64,
+    metrics: Vec<MetricsRow>,
+}
+
+impl Trainer {
+    fn new(run_dir: &Path, run: &RunConfig) -> Result<Trainer> {
+        let env = make(&run.env)?;
+        let eval_env = make(&run.env)?;
+        let (obs_dim, act_dim) = (
+            env.spec().observation_space.dim(),
+            env.spec().action_space.dim(),
+        );
+        let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
+        Ok(Trainer {
+            run_dir: run_dir.to_path_buf(),
+            cfg: run.train.clone(),
+            seed: run.seed,
+            buffer: ReplayBuffer::new(run.train.buffer_capacity, obs_dim, act_dim),
+            batch: Batch::new(run.train.batch_size, obs_dim, act_dim),
+            env,
+            eval_env,
+            agent,
+            rng: training_rng(run.seed),
+            step: 0,
+            episodes: 0,
+            wall_offset: 0.0,
+            metrics: Vec::new(),
+        })
+    }
+
+    fn run(&mut self, control: &RunControl) -> Result<RunSummary> {
+        let cfg = self.cfg.clone();
+        let interrupted = interrupt_flag();
+        let bar = if control.show_progress {
+            ProgressBar::new(cfg.total_steps)
+        } else {
+            ProgressBar::hidden()
+        };
+        bar.set_style(
+            ProgressStyle::with_template(
+                "{elapsed_precise} [{bar:30}] {pos}/{len} steps, {per_sec} {msg}",
+            )
+            .expect("valid template")
+            .progress_chars("=> "),
+        );
+        bar.set_position(self.step);
+        let started = Instant::now();
+        let start_step = self.step;
+        let act_dim = self.env.spec().action_space.dim();
+        let mut losses = Losses::default();
+        let mut last_eval: Option<Evaluation> = None;
+        let mut best_eval: Option<f64> = None;
+        let mut next_checkpoint = (self.step / cfg.checkpoint_every + 1) * cfg.checkpoint_every;
+        let mut obs: Vec<f64> = Vec::new();
+        let mut need_reset = true;
+        let (mut ep_return, mut ep_len) = (0.0, 0u64);
+        let wall = |offset: f64| offset + started.elapsed().as_secs_f64();
+        let rate =
+            |step: u64| (step - start_step) as f64 / started.elapsed().as_secs_f64().max(1e-9);
+
+        let outcome = loop {
+            let solved = control
+                .target_return
+                .is_some_and(|t| last_eval.as_ref().is_some_and(|e| e.mean() >= t));
+            if self.step >= cfg.total_steps || solved {
+                break Outcome::Finished;
+            }
+            if interrupted.load(Ordering::SeqCst)
+                || (need_reset && control.stop_after.is_some_and(|s| self.step >= s))
+            {
+                break Outcome::Stopped;
+            }
+            if need_reset {
+                (obs, _) = self
+                    .env
+                    .reset(Some(train_episode_seed(self.seed, self.episodes)))?;
+                self.episodes += 1;
+                self.agent.begin_episode();
+                (ep_return, ep_len, need_reset) = (0.0, 0, false);
+            }
+
+            // Act: random during warm-up, then the agent's exploratory action.
+            let obs32: Vec<f32> = obs.iter().map(|&v| v as f32).collect();
+            let action: Vec<f32> = if self.step < cfg.warmup_steps {
+                (0..act_dim)
+                    .map(|_| self.rng.random_range(-1.0f32..=1.0))
+                    .collect()
+            } else {
+                self.agent.explore(&obs32, &mut self.rng)?
+            };
+            let s = self.env.step(&to_env_action(self.env.as_ref(), &action))?;
+            self.step += 1;
+
+            if s.info.unstable {
+                // Not a real transition: drop it and start over.
+                bar.println(format!(
+                    "warning: physics unstable at step {}; episode dropped ({:?})",
+                    self.step, s.info.warnings
+                ));
+                need_reset = true;
+            } else {
+                let next32: Vec<f32> = s.observation.iter().map(|&v| v as f32).collect();
+                self.buffer.add(
+                    &obs32,
+                    &action,
+                    s.reward as f32,
+                    &next32,
+                    s.terminated,
+                    s.truncated,
+                );
+                ep_return += s.reward;
+                ep_len += 1;
+                if s.done() {
+                    self.metrics.push(MetricsRow {
+                        kind: "episode",
+                        step: self.step,
+                        episode_return: Some(ep_return),
+                        episode_length: Some(ep_len),
+                        critic_loss: (losses.critic != 0.0).then_some(losses.critic),
+                        actor_loss: losses.actor,
+                        alpha: losses.alpha,
+                        steps_per_s: rate(self.step),
+                        wall_time: wall(self.wall_offset),
+                        ..Default::default()
+                    });
+                    need_reset = true;
+                } else {
+                    obs = s.observation;
+                }
+            }
+
+            // Learn.
+            if self.step >= cfg.learning_starts
+                && self.buffer.len() >= cfg.batch_size.min(self.buffer.capacity())
+            {
+                for _ in 0..cfg.updates_per_step {
+                    self.buffer.sample_into(&mut self.batch, &mut self.rng);
+                    let l = self.agent.update(&self.batch, &mut self.rng)?;
+                    losses = Losses {
+                        actor: l.actor.or(losses.actor),
+                        alpha: l.alpha.or(losses.alpha),
+                        ..l
+                    };
+                }
+            }
+
+            // Evaluate.
+            if self.step % cfg.eval_every == 0 || self.step == cfg.total_steps {
+                let e = evaluate(
+                    self.agent.as_ref(),
+                    self.eval_env.as_mut(),
+                    cfg.eval_episodes,
+                    self.seed,
+                )?;
+                best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
+                bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
+                self.metrics.push(MetricsRow {
+                    kind: "eval",
+                    step: self.step,
+                    eval_mean: Some(e.mean()),
+                    eval_std: Some(e.std()),
+                    critic_loss: (losses.critic != 0.0).then_some(losses.critic),
+                    actor_loss: losses.actor,
+                    alpha: losses.alpha,
+                    steps_per_s: rate(self.step),
+                    wall_time: wall(self.wall_offset),
+                    ..Default::default()
+                });
+                metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
+                last_eval = Some(e);
+            }
+            bar.set_position(self.step);
+
+            // Checkpoint at the first episode boundary past each multiple of checkpoint_every.
+            if need_reset && self.step >= next_checkpoint {
+                self.save(true, wall(self.wall_offset))?;
+                next_checkpoint = (self.step / cfg.checkpoint_every + 1) * cfg.checkpoint_every;
+            }
+        };
+        bar.finish_and_clear();
+        let checkpoint = self.save(need_reset, wall(self.wall_offset))?;
+        metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
+        Ok(RunSummary {
+            run_dir: self.run_dir.clone(),
+            outcome,
+            steps: self.step,
+            last_eval,
+            best_eval_mean: best_eval,
+            checkpoint,
+        })
+    }
+
+    fn save(&mut self, at_episode_boundary: bool, wall_time: f64) -> Result<PathBuf> {
+        let state = TrainState {
+            step: self.step,
+            episodes: self.episodes,
+            at_episode_boundary,
+            wall_time,
+            rng: RngState::of(&self.rng),
+            optimizer_steps: Default::default(),
+            counters: Default::default(),
+        };
+        checkpoint::save(&self.run_dir, self.agent.as_mut(), &self.buffer, &state)
+    }
+}

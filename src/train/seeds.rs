@@ -1,0 +1,60 @@
+//! Every random stream of a run, derived from its one seed.
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+/// SplitMix64 finaliser: turns structured inputs into well-mixed seeds.
+fn mix(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+    z ^ (z >> 31)
+}
+
+/// Network initialisation.
+pub fn init_rng(run_seed: u64) -> ChaCha8Rng {
+    let mut r = ChaCha8Rng::seed_from_u64(run_seed);
+    r.set_stream(1);
+    r
+}
+
+/// Exploration, warm-up actions, minibatch sampling and the agents' sampling noise.
+pub fn training_rng(run_seed: u64) -> ChaCha8Rng {
+    let mut r = ChaCha8Rng::seed_from_u64(run_seed);
+    r.set_stream(2);
+    r
+}
+
+/// Reset seed of training episode `episode`.
+pub fn train_episode_seed(run_seed: u64, episode: u64) -> u64 {
+    mix(mix(run_seed) ^ episode)
+}
+
+/// Reset seed of evaluation episode `i` (the same for every evaluation of a run).
+pub fn eval_episode_seed(run_seed: u64, i: u64) -> u64 {
+    mix(mix(run_seed ^ 0xE7A1_0000_0000_0000) ^ i)
+}
+
+/// A ChaCha8 stream's position, to save and restore it exactly.
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct RngState {
+    pub seed: [u8; 32],
+    pub stream: u64,
+    /// Word position as a decimal string (u128 does not fit TOML integers).
+    pub word_pos: String,
+}
+
+impl RngState {
+    pub fn of(rng: &ChaCha8Rng) -> RngState {
+        RngState {
+            seed: rng.get_seed(),
+            stream: rng.get_stream(),
+            word_pos: rng.get_word_pos().to_string(),
+        }
+    }
+    pub fn restore(&self) -> anyhow::Result<ChaCha8Rng> {
+        let mut r = ChaCha8Rng::from_seed(self.seed);
+        r.set_stream(self.stream);
+        r.set_word_pos(self.word_pos.parse::<u128>()?);
+        Ok(r)
+    }
+}

@@ -1,0 +1,343 @@
+//! Agents: they learn InvertedPendulum, their targets are right, a resumed run continues
+//! exactly, and bad checkpoints or arguments fail clearly.
+use std::path::Path;
+
+use locobench::agents::{Algo, Batch, DeterministicAgent, TrainConfig};
+use locobench::envs::EnvConfig;
+use locobench::train::config::{build_config, split_pairs};
+use locobench::train::{self, Outcome, RunControl};
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+/// Step budget for the learning tests (the issue allows up to 25k).
+const BUDGET: u64 = 25_000;
+
+fn learns(algo: Algo) {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = build_config("inverted-pendulum", algo, &[]).unwrap();
+    assert_eq!(cfg.total_steps, BUDGET);
+    let control = RunControl {
+        target_return: Some(950.0),
+        ..Default::default()
+    };
+    let s = train::train(
+        EnvConfig::new("inverted-pendulum"),
+        cfg,
+        0,
+        &dir.path().join("run"),
+        None,
+        false,
+        &control,
+    )
+    .unwrap();
+    let best = s.best_eval_mean.unwrap();
+    assert!(
+        best >= 950.0,
+        "{algo:?} reached only {best} in {} steps",
+        s.steps
+    );
+    assert!(s.steps <= BUDGET);
+    eprintln!("{algo:?}: evaluation {best} at step {}", s.steps);
+}
+
+#[test]
+fn td3_learns_inverted_pendulum() {
+    learns(Algo::Td3);
+}
+
+#[test]
+fn sac_learns_inverted_pendulum() {
+    learns(Algo::Sac);
+}
+
+#[test]
+fn ddpg_learns_inverted_pendulum() {
+    learns(Algo::Ddpg);
+}
+
+#[test]
+fn td3_critic_target_on_a_hand_built_batch() {
+    let mut cfg = TrainConfig::defaults(Algo::Td3);
+    cfg.hidden = vec![8, 8];
+    cfg.policy_noise = 0.0; // smoothing noise off so the target is a plain function
+    let agent = DeterministicAgent::new(&cfg, 3, 2, &mut ChaCha8Rng::seed_from_u64(0)).unwrap();
+    let mut b = Batch::new(3, 3, 2);
+    b.obs = vec![0.1, 0.2, 0.3, -0.5, 0.0, 0.4, 1.0, -1.0, 0.5];
+    b.actions = vec![0.5, -0.5, 0.1, 0.2, -0.9, 0.9];
+    b.rewards = vec![1.0, 2.0, 0.5];
+    b.next_obs = vec![0.2, 0.2, 0.2, 9.0, 9.0, 9.0, -0.3, 0.7, 0.1];
+    // row 0: ordinary; row 1: terminated (no bootstrap); row 2: truncated (bootstraps).
+    b.terminated = vec![0.0, 1.0, 0.0];
+    let y = agent
+        .td_targets(&b, &mut ChaCha8Rng::seed_from_u64(1))
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap();
+    let next_a = agent.target_actions(&b.next_obs).unwrap();
+    let q = agent.target_q_min(&b.next_obs, &next_a).unwrap();
+    let gamma = 0.99f32;
+    assert!((y[0] - (1.0 + gamma * q[0])).abs() < 1e-5);
+    assert!(
+        (y[1] - 2.0).abs() < 1e-6,
+        "terminated rows must not bootstrap"
+    );
+    assert!(
+        (y[2] - (0.5 + gamma * q[2])).abs() < 1e-5,
+        "truncated rows bootstrap"
+    );
+    assert!(
+        q[2].abs() > 1e-4,
+        "the test needs a non-zero bootstrap value"
+    );
+
+    // With smoothing on, the target stays within what clipped noise allows.
+    cfg.policy_noise = 0.2;
+    let agent = DeterministicAgent::new(&cfg, 3, 2, &mut ChaCha8Rng::seed_from_u64(0)).unwrap();
+    let y2 = agent
+        .td_targets(&b, &mut ChaCha8Rng::seed_from_u64(1))
+        .unwrap()
+        .flatten_all()
+        .unwrap()
+        .to_vec1::<f32>()
+        .unwrap();
+    assert_eq!(y2[1], 2.0);
+    assert_ne!(y2[0], y[0]);
+}
+
+fn small_config(overrides: &str) -> TrainConfig {
+    let base = "total_steps=3000,warmup_steps=300,learning_starts=300,eval_every=1000,checkpoint_every=700,eval_episodes=2,hidden=[32,32],batch_size=64";
+    let all = if overrides.is_empty() {
+        base.to_string()
+    } else {
+        format!("{base},{overrides}")
+    };
+    build_config("inverted-pendulum", Algo::Td3, &split_pairs(&all).unwrap()).unwrap()
+}
+
+fn tensors(ckpt: &Path) -> Vec<(String, Vec<f32>)> {
+    let map =
+        candle_core::safetensors::load(ckpt.join("model.safetensors"), &candle_core::Device::Cpu)
+            .unwrap();
+    let mut v: Vec<_> = map
+        .into_iter()
+        .map(|(k, t)| (k, t.flatten_all().unwrap().to_vec1::<f32>().unwrap()))
+        .collect();
+    v.sort_by(|a, b| a.0.cmp(&b.0));
+    v
+}
+
+fn eval_rows(run: &Path) -> Vec<String> {
+    std::fs::read_to_string(run.join("metrics.csv"))
+        .unwrap()
+        .lines()
+        .map(|l| l.split(',').take(9).collect::<Vec<_>>().join(","))
+        .collect()
+}
+
+#[test]
+fn resume_continues_exactly_like_an_uninterrupted_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = EnvConfig::new("inverted-pendulum");
+    let whole = dir.path().join("whole");
+    let a = train::train(
+        env.clone(),
+        small_config(""),
+        5,
+        &whole,
+        None,
+        false,
+        &RunControl::default(),
+    )
+    .unwrap();
+    assert_eq!(a.outcome, Outcome::Finished);
+
+    let split = dir.path().join("split");
+    let control = RunControl {
+        stop_after: Some(1200),
+        ..Default::default()
+    };
+    let b = train::train(env, small_config(""), 5, &split, None, false, &control).unwrap();
+    assert_eq!(b.outcome, Outcome::Stopped);
+    assert!(b.steps >= 1200 && b.steps < 3000);
+    let state = train::checkpoint::load_state(&b.checkpoint).unwrap();
+    assert!(state.at_episode_boundary);
+    let c = train::resume(&split, &RunControl::default()).unwrap();
+    assert_eq!(c.outcome, Outcome::Finished);
+    assert_eq!(c.steps, 3000);
+    assert_eq!(
+        tensors(&a.checkpoint),
+        tensors(&c.checkpoint),
+        "weights after resume differ from the uninterrupted run"
+    );
+    assert_eq!(eval_rows(&whole), eval_rows(&split));
+}
+
+#[test]
+fn same_seed_same_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let cfg = small_config("total_steps=1200");
+    let a = train::train(
+        EnvConfig::new("inverted-pendulum"),
+        cfg.clone(),
+        9,
+        &dir.path().join("a"),
+        None,
+        false,
+        &RunControl::default(),
+    )
+    .unwrap();
+    let b = train::train(
+        EnvConfig::new("inverted-pendulum"),
+        cfg.clone(),
+        9,
+        &dir.path().join("b"),
+        None,
+        false,
+        &RunControl::default(),
+    )
+    .unwrap();
+    let c = train::train(
+        EnvConfig::new("inverted-pendulum"),
+        cfg,
+        10,
+        &dir.path().join("c"),
+        None,
+        false,
+        &RunControl::default(),
+    )
+    .unwrap();
+    assert_eq!(tensors(&a.checkpoint), tensors(&b.checkpoint));
+    assert_ne!(tensors(&a.checkpoint), tensors(&c.checkpoint));
+}
+
+#[test]
+fn run_directory_contents_and_protection() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let cfg = small_config("total_steps=800");
+    train::train(
+        EnvConfig::new("inverted-pendulum"),
+        cfg.clone(),
+        1,
+        &run,
+        None,
+        false,
+        &RunControl::default(),
+    )
+    .unwrap();
+    let config = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    for key in [
+        "seed = 1",
+        "crate_version",
+        "policy_noise",
+        "max_pole_angle",
+        "name = \"inverted-pendulum\"",
+    ] {
+        assert!(config.contains(key), "config.toml lacks {key}:\n{config}");
+    }
+    let metrics = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
+    assert!(metrics.starts_with("kind,step,episode_return,episode_length,eval_mean,eval_std,critic_loss,actor_loss,alpha,steps_per_s,wall_time"));
+    assert!(metrics.lines().any(|l| l.starts_with("eval,800,")));
+    let ckpt = train::checkpoint::latest(&run).unwrap();
+    for f in [
+        "model.safetensors",
+        "optim.safetensors",
+        "buffer.safetensors",
+        "state.toml",
+    ] {
+        assert!(ckpt.join(f).exists(), "{f}");
+    }
+    // Never overwritten without force.
+    let err = train::train(
+        EnvConfig::new("inverted-pendulum"),
+        cfg.clone(),
+        1,
+        &run,
+        None,
+        false,
+        &RunControl::default(),
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("--force"), "{err}");
+    assert!(run.join("config.toml").exists());
+    train::train(
+        EnvConfig::new("inverted-pendulum"),
+        cfg,
+        2,
+        &run,
+        None,
+        true,
+        &RunControl::default(),
+    )
+    .unwrap();
+}
+
+#[test]
+fn bad_checkpoints_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let cfg = small_config("total_steps=700");
+    let s = train::train(
+        EnvConfig::new("inverted-pendulum"),
+        cfg,
+        1,
+        &run,
+        None,
+        false,
+        &RunControl::default(),
+    )
+    .unwrap();
+
+    // Fine-tuning on an env with other observation/action sizes.
+    let hc = build_config(
+        "half-cheetah",
+        Algo::Td3,
+        &split_pairs("hidden=[32,32],total_steps=10").unwrap(),
+    )
+    .unwrap();
+    let err = train::train(
+        EnvConfig::new("half-cheetah"),
+        hc,
+        0,
+        &dir.path().join("ft"),
+        Some(&s.checkpoint),
+        false,
+        &RunControl::default(),
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("shape"), "{err:#}");
+
+    // Another algorithm's checkpoint.
+    let sac = build_config(
+        "inverted-pendulum",
+        Algo::Sac,
+        &split_pairs("hidden=[32,32],total_steps=10").unwrap(),
+    )
+    .unwrap();
+    let err = train::train(
+        EnvConfig::new("inverted-pendulum"),
+        sac,
+        0,
+        &dir.path().join("ft2"),
+        Some(&s.checkpoint),
+        false,
+        &RunControl::default(),
+    )
+    .unwrap_err();
+    assert!(err.to_string().contains("no tensor"), "{err:#}");
+
+    // Missing and corrupt.
+    assert!(train::load_policy(&dir.path().join("nowhere")).is_err());
+    let bytes = std::fs::read(s.checkpoint.join("model.safetensors")).unwrap();
+    std::fs::write(
+        s.checkpoint.join("model.safetensors"),
+        &bytes[..bytes.len() / 2],
+    )
+    .unwrap();
+    let err = train::load_policy(&s.checkpoint).err().unwrap();
+    assert!(format!("{err:#}").contains("corrupt"), "{err:#}");
+    let err = train::resume(&run, &RunControl::default()).unwrap_err();
+    assert!(format!("{err:#}").contains("corrupt"), "{err:#}");
+}
