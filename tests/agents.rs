@@ -341,3 +341,39 @@ fn bad_checkpoints_are_clear_errors() {
     let err = train::resume(&run, &RunControl::default()).unwrap_err();
     assert!(format!("{err:#}").contains("corrupt"), "{err:#}");
 }
+
+#[test]
+fn fine_tuning_starts_from_the_checkpoint_weights() {
+    let dir = tempfile::tempdir().unwrap();
+    let src = train::train(
+        EnvConfig::new("inverted-pendulum"),
+        small_config("total_steps=700"),
+        1,
+        &dir.path().join("src"),
+        None,
+        false,
+        &RunControl::default(),
+    )
+    .unwrap();
+    // New reward/option settings, no updates: the weights must be exactly the source's.
+    let cfg = small_config("total_steps=5,warmup_steps=0,learning_starts=1000000");
+    let env = EnvConfig::new("inverted-pendulum")
+        .with_overrides(&[("max_pole_angle".into(), "0.3".into())])
+        .unwrap();
+    let ft = train::train(
+        env,
+        cfg,
+        2,
+        &dir.path().join("ft"),
+        Some(&src.checkpoint),
+        false,
+        &RunControl::default(),
+    )
+    .unwrap();
+    assert_eq!(tensors(&src.checkpoint), tensors(&ft.checkpoint));
+    let config = std::fs::read_to_string(dir.path().join("ft/config.toml")).unwrap();
+    assert!(
+        config.contains("init_from") && config.contains("max_pole_angle = 0.3"),
+        "{config}"
+    );
+}

@@ -200,3 +200,160 @@ fn bad_input_fails_with_a_clear_message_and_writes_nothing() {
         "a failed rollout must not leave a partial file"
     );
 }
+
+#[test]
+fn train_eval_resume_and_fine_tune_from_the_command_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let r = run.to_str().unwrap();
+    let set = "warmup_steps=200,learning_starts=200,eval_every=500,eval_episodes=2,hidden=[16,16],batch_size=32,checkpoint_every=400";
+    let (ok, out, err) = locobench(&[
+        "train",
+        "--env",
+        "inverted-pendulum",
+        "--algo",
+        "sac",
+        "--seed",
+        "3",
+        "--steps",
+        "600",
+        "--set",
+        set,
+        "--out",
+        r,
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    assert!(out.contains("finished"), "{out}");
+    assert!(run.join("metrics.csv").exists() && run.join("config.toml").exists());
+
+    let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "3"]);
+    assert!(ok, "{err}");
+    assert!(
+        out.contains("over 3 episodes") && out.contains("healthy"),
+        "{out}"
+    );
+
+    // Same directory again: refused without --force.
+    let (ok, _, err) = locobench(&[
+        "train",
+        "--env",
+        "inverted-pendulum",
+        "--algo",
+        "sac",
+        "--steps",
+        "600",
+        "--out",
+        r,
+        "--quiet",
+    ]);
+    assert!(!ok && err.contains("--force"), "{err}");
+
+    // Resuming a finished run is a no-op that still succeeds.
+    let (ok, out, err) = locobench(&["train", "--resume", r, "--quiet"]);
+    assert!(ok, "{err}");
+    assert!(out.contains("finished"), "{out}");
+
+    // Fine-tune under new reward weights (Minitaur terms) is refused for a pendulum checkpoint.
+    let ft = dir.path().join("ft");
+    let (ok, _, err) = locobench(&[
+        "train",
+        "--env",
+        "minitaur",
+        "--algo",
+        "sac",
+        "--init-from",
+        r,
+        "--reward",
+        "drift=0.25,shake=0.1",
+        "--set",
+        "hidden=[16,16]",
+        "--steps",
+        "10",
+        "--out",
+        ft.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(!ok && err.contains("shape"), "{err}");
+}
+
+#[test]
+fn train_rejects_bad_arguments() {
+    let dir = tempfile::tempdir().unwrap();
+    let o = dir.path().join("x");
+    let o = o.to_str().unwrap();
+    let cases: [(&[&str], &str); 5] = [
+        (
+            &["train", "--env", "ant", "--algo", "ppo", "--out", o],
+            "unknown algorithm 'ppo'",
+        ),
+        (
+            &["train", "--env", "hopper", "--algo", "td3", "--out", o],
+            "unknown environment 'hopper'",
+        ),
+        (
+            &[
+                "train", "--env", "ant", "--algo", "td3", "--set", "tau=7", "--out", o,
+            ],
+            "tau",
+        ),
+        (
+            &[
+                "train", "--env", "ant", "--algo", "td3", "--reward", "wobble=1", "--out", o,
+            ],
+            "wobble",
+        ),
+        (&["eval", "--checkpoint", "/no/such/run"], "no checkpoint"),
+    ];
+    for (args, expect) in cases {
+        let (ok, _, err) = locobench(args);
+        assert!(!ok, "{args:?} should fail");
+        assert!(err.contains(expect), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn ctrl_c_stops_training_with_a_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let r = run.to_str().unwrap();
+    let child = Command::new(env!("CARGO_BIN_EXE_locobench"))
+        .args([
+            "train",
+            "--env",
+            "inverted-pendulum",
+            "--algo",
+            "td3",
+            "--steps",
+            "200000",
+            "--set",
+            "hidden=[16,16],batch_size=32,warmup_steps=100,learning_starts=100",
+            "--out",
+            r,
+            "--quiet",
+        ])
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(2500));
+    let status = Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(status.success());
+    let out = child.wait_with_output().unwrap();
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        out.status.success(),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+    assert!(stdout.contains("stopped at step"), "{stdout}");
+    let latest = std::fs::read_to_string(run.join("checkpoints/latest")).unwrap();
+    assert!(run
+        .join("checkpoints")
+        .join(latest.trim())
+        .join("model.safetensors")
+        .exists());
+}

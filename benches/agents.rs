@@ -1,0 +1,78 @@
+//! One gradient update at HalfCheetah sizes (17-dim observation, 6-dim action, batch 256) for
+//! each algorithm, single-observation policy inference, and replay-buffer sampling.
+//!
+//! Run: `cargo bench --bench agents`. Networks as in the throughput comparison: TD3 and DDPG
+//! 400-300, SAC 256-256. candle runs on one thread (see .cargo/config.toml).
+use std::hint::black_box;
+use std::time::Duration;
+
+use criterion::{criterion_group, criterion_main, Criterion, Throughput};
+use locobench::agents::{make_agent, Algo, Batch, ReplayBuffer, TrainConfig};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+const OBS: usize = 17;
+const ACT: usize = 6;
+const BATCH: usize = 256;
+
+fn filled_buffer(rng: &mut ChaCha8Rng) -> ReplayBuffer {
+    let mut buf = ReplayBuffer::new(100_000, OBS, ACT);
+    let mut obs: Vec<f32> = (0..OBS).map(|_| rng.random_range(-1.0..1.0)).collect();
+    for t in 0..20_000 {
+        let next: Vec<f32> = (0..OBS).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let act: Vec<f32> = (0..ACT).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let end = t % 1000 == 999;
+        buf.add(&obs, &act, rng.random_range(-1.0..1.0), &next, false, end);
+        obs = next;
+    }
+    buf
+}
+
+fn bench(c: &mut Criterion) {
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let buf = filled_buffer(&mut rng);
+    let mut group = c.benchmark_group("agents");
+    group
+        .measurement_time(Duration::from_secs(8))
+        .warm_up_time(Duration::from_secs(2))
+        .sample_size(20);
+    for (algo, hidden) in [
+        (Algo::Td3, vec![400, 300]),
+        (Algo::Sac, vec![256, 256]),
+        (Algo::Ddpg, vec![400, 300]),
+    ] {
+        let mut cfg = TrainConfig::defaults(algo);
+        cfg.hidden = hidden.clone();
+        cfg.batch_size = BATCH;
+        let mut agent = make_agent(&cfg, OBS, ACT, &mut rng).unwrap();
+        let mut batch = Batch::new(BATCH, OBS, ACT);
+        let label = format!("{}-{}", hidden[0], hidden[1]);
+        group.throughput(Throughput::Elements(1));
+        group.bench_function(
+            format!("{}/update {label} batch {BATCH}", algo.name()),
+            |b| {
+                b.iter(|| {
+                    buf.sample_into(&mut batch, &mut rng);
+                    black_box(agent.update(&batch, &mut rng).unwrap());
+                })
+            },
+        );
+        let obs: Vec<f32> = (0..OBS).map(|i| (i as f32 * 0.1).sin()).collect();
+        group.bench_function(
+            format!("{}/act one observation {label}", algo.name()),
+            |b| b.iter(|| black_box(agent.act(black_box(&obs)).unwrap())),
+        );
+    }
+    let mut batch = Batch::new(BATCH, OBS, ACT);
+    group.bench_function(format!("buffer/sample batch {BATCH}"), |b| {
+        b.iter(|| buf.sample_into(&mut batch, &mut rng))
+    });
+    group.finish();
+    println!(
+        "replay buffer at HalfCheetah sizes: {} bytes per transition (+ one observation per truncated episode)",
+        buf.bytes_per_transition()
+    );
+}
+
+criterion_group!(benches, bench);
+criterion_main!(benches);
