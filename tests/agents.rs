@@ -377,3 +377,55 @@ fn fine_tuning_starts_from_the_checkpoint_weights() {
         "{config}"
     );
 }
+
+#[test]
+fn sac_v1_and_ddpg_with_ou_noise_train_and_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let v1 = build_config(
+        "inverted-pendulum",
+        Algo::Sac,
+        &split_pairs("sac_version=\"v1\",total_steps=600,warmup_steps=200,learning_starts=200,eval_every=600,eval_episodes=1,hidden=[16,16],batch_size=32").unwrap(),
+    )
+    .unwrap();
+    let s = train::train(
+        EnvConfig::new("inverted-pendulum"),
+        v1,
+        0,
+        &dir.path().join("v1"),
+        None,
+        false,
+        &RunControl::default(),
+    )
+    .unwrap();
+    let names: Vec<String> = tensors(&s.checkpoint).into_iter().map(|(n, _)| n).collect();
+    assert!(
+        names.iter().any(|n| n.starts_with("value."))
+            && names.iter().any(|n| n.starts_with("value_target."))
+    );
+    let metrics = std::fs::read_to_string(dir.path().join("v1/metrics.csv")).unwrap();
+    let last = metrics.lines().last().unwrap();
+    assert!(last.starts_with("eval,600"), "{last}");
+
+    let ou = build_config(
+        "inverted-pendulum",
+        Algo::Ddpg,
+        &split_pairs("noise=\"ornstein_uhlenbeck\",ou_decay_steps=1000,total_steps=600,warmup_steps=200,learning_starts=200,eval_every=600,eval_episodes=1,hidden=[16,16],batch_size=32").unwrap(),
+    )
+    .unwrap();
+    let s = train::train(
+        EnvConfig::new("inverted-pendulum"),
+        ou,
+        0,
+        &dir.path().join("ou"),
+        None,
+        false,
+        &RunControl::default(),
+    )
+    .unwrap();
+    let state = train::checkpoint::load_state(&s.checkpoint).unwrap();
+    assert_eq!(
+        state.counters["noise_steps"], 400,
+        "OU noise advanced once per exploratory step"
+    );
+    assert!(!names.is_empty());
+}

@@ -3,8 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::options::Check;
-use super::simulation::{unstable_step, EnvRng, Simulation};
-use super::{clip_action, BoxSpace, Env, EnvError, EnvSpec, EpisodeClock, Info, Step};
+use super::simulation::{locomotion_metrics, reset_info, EnvCore, Simulation, VelocityNoise};
+use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
 pub const MODEL_XML: &str = include_str!("../../models/ant.xml");
@@ -61,11 +61,7 @@ impl AntOptions {
 
 pub struct Ant {
     opts: AntOptions,
-    sim: Simulation,
-    spec: EnvSpec,
-    rng: EnvRng,
-    clock: EpisodeClock,
-    last_obs: Vec<f64>,
+    core: EnvCore,
     torso: usize,
 }
 
@@ -85,18 +81,15 @@ impl Ant {
         let torso = m.body_id("torso")?;
         Ok(Ant {
             opts,
-            sim,
-            spec,
-            rng: EnvRng::new(),
-            clock: EpisodeClock::default(),
-            last_obs: vec![],
+            core: EnvCore::new(sim, spec),
             torso,
         })
     }
 
     fn clipped_contact_forces(&self) -> impl Iterator<Item = f64> + '_ {
         let [lo, hi] = self.opts.contact_force_range;
-        self.sim
+        self.core
+            .sim
             .data
             .cfrc_ext()
             .iter()
@@ -104,114 +97,83 @@ impl Ant {
     }
 
     fn observation(&self) -> Vec<f64> {
-        let d = &self.sim.data;
+        let d = &self.core.sim.data;
         let mut obs: Vec<f64> = d.qpos()[2..].iter().chain(d.qvel()).copied().collect();
         obs.extend(self.clipped_contact_forces().skip(6));
         obs
     }
 
     fn is_healthy(&self) -> bool {
-        let d = &self.sim.data;
+        let d = &self.core.sim.data;
         let [lo, hi] = self.opts.healthy_z_range;
         let finite = d.qpos().iter().chain(d.qvel()).all(|v| v.is_finite());
         finite && d.qpos()[2] >= lo && d.qpos()[2] <= hi
     }
 
     fn torso_xy(&self) -> [f64; 2] {
-        let p = &self.sim.data.xpos()[3 * self.torso..];
+        let p = &self.core.sim.data.xpos()[3 * self.torso..];
         [p[0], p[1]]
     }
 }
 
 impl Env for Ant {
     fn spec(&self) -> &EnvSpec {
-        &self.spec
+        &self.core.spec
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.rng.reseed(seed);
-        let s = self.opts.reset_noise_scale;
-        let qpos_noise = self.rng.uniform(self.sim.model.nq(), s);
-        let qvel_noise = self.rng.normal(self.sim.model.nv(), s);
-        self.sim.reset_to(&qpos_noise, &qvel_noise)?;
-        self.clock.start();
-        self.last_obs = self.observation();
-        let q = self.sim.data.qpos();
-        let info = Info {
-            metrics: vec![("x_position", q[0]), ("y_position", q[1])],
-            ..Info::default()
-        };
-        Ok((self.last_obs.clone(), info))
+        self.core
+            .reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Normal)?;
+        self.core.last_obs = self.observation();
+        Ok((self.core.last_obs.clone(), reset_info(&self.core)))
     }
 
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        self.clock.check_can_step()?;
-        let (action, clipped) = clip_action(&self.spec.action_space, action)?;
+        let start = self.core.begin_step(action)?;
         let before = self.torso_xy();
-        let adv = self.sim.advance(&action, self.opts.frame_skip)?;
-        if adv.unstable {
-            self.clock.finish_if(true);
-            return Ok(unstable_step(
-                &self.last_obs,
-                &self.spec,
-                clipped,
-                adv.warnings,
-            ));
-        }
-        self.sim.data.rne_post_constraint()?;
+        let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
+            Ok(w) => w,
+            Err(unstable) => return Ok(unstable),
+        };
+        self.core.sim.data.rne_post_constraint()?;
         let after = self.torso_xy();
-        let x_velocity = (after[0] - before[0]) / self.spec.dt;
-        let y_velocity = (after[1] - before[1]) / self.spec.dt;
+        let velocity = [
+            (after[0] - before[0]) / self.core.spec.dt,
+            (after[1] - before[1]) / self.core.spec.dt,
+        ];
 
         let healthy = self.is_healthy();
-        let forward = self.opts.forward_reward_weight * x_velocity;
+        let forward = self.opts.forward_reward_weight * velocity[0];
         let healthy_reward = if healthy {
             self.opts.healthy_reward
         } else {
             0.0
         };
-        let ctrl_cost = self.opts.ctrl_cost_weight * action.iter().map(|a| a * a).sum::<f64>();
+        let ctrl_cost =
+            self.opts.ctrl_cost_weight * start.action.iter().map(|a| a * a).sum::<f64>();
         let contact_cost = self.opts.contact_cost_weight
             * self.clipped_contact_forces().map(|f| f * f).sum::<f64>();
-        let reward = forward + healthy_reward - ctrl_cost - contact_cost;
-
-        let observation = self.observation();
+        let info = Info {
+            reward_terms: vec![
+                ("forward", forward),
+                ("healthy", healthy_reward),
+                ("ctrl_cost", -ctrl_cost),
+                ("contact_cost", -contact_cost),
+            ],
+            metrics: locomotion_metrics(&self.core, velocity),
+            clipped_actions: start.clipped,
+            unstable: false,
+            warnings,
+        };
         let terminated = !healthy && self.opts.terminate_when_unhealthy;
-        let truncated = self.clock.tick(self.opts.max_episode_steps);
-        self.clock.finish_if(terminated || truncated);
-        self.last_obs.clone_from(&observation);
-        let q = self.sim.data.qpos();
-        Ok(Step {
-            observation,
-            reward,
-            terminated,
-            truncated,
-            info: Info {
-                reward_terms: vec![
-                    ("forward", forward),
-                    ("healthy", healthy_reward),
-                    ("ctrl_cost", -ctrl_cost),
-                    ("contact_cost", -contact_cost),
-                ],
-                metrics: vec![
-                    ("x_position", q[0]),
-                    ("y_position", q[1]),
-                    ("x_velocity", x_velocity),
-                    ("y_velocity", y_velocity),
-                    ("torso_height", q[2]),
-                ],
-                clipped_actions: clipped,
-                unstable: false,
-                warnings: adv.warnings,
-            },
-        })
+        Ok(self.core.finish_step(self.observation(), terminated, info))
     }
 
     fn data(&self) -> &Data {
-        &self.sim.data
+        &self.core.sim.data
     }
 
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        Ok(self.sim.data.set_state(qpos, qvel)?)
+        Ok(self.core.sim.data.set_state(qpos, qvel)?)
     }
 }

@@ -3,8 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::options::Check;
-use super::simulation::{unstable_step, EnvRng, Simulation};
-use super::{clip_action, BoxSpace, Env, EnvError, EnvSpec, EpisodeClock, Info, Step};
+use super::simulation::{EnvCore, Simulation, VelocityNoise};
+use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
 pub const MODEL_XML: &str = include_str!("../../models/half_cheetah.xml");
@@ -47,11 +47,7 @@ impl HalfCheetahOptions {
 
 pub struct HalfCheetah {
     opts: HalfCheetahOptions,
-    sim: Simulation,
-    spec: EnvSpec,
-    rng: EnvRng,
-    clock: EpisodeClock,
-    last_obs: Vec<f64>,
+    core: EnvCore,
 }
 
 impl HalfCheetah {
@@ -68,82 +64,59 @@ impl HalfCheetah {
         };
         Ok(HalfCheetah {
             opts,
-            sim,
-            spec,
-            rng: EnvRng::new(),
-            clock: EpisodeClock::default(),
-            last_obs: vec![],
+            core: EnvCore::new(sim, spec),
         })
     }
 
     fn observation(&self) -> Vec<f64> {
-        let d = &self.sim.data;
+        let d = &self.core.sim.data;
         d.qpos()[1..].iter().chain(d.qvel()).copied().collect()
     }
 }
 
 impl Env for HalfCheetah {
     fn spec(&self) -> &EnvSpec {
-        &self.spec
+        &self.core.spec
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.rng.reseed(seed);
-        let s = self.opts.reset_noise_scale;
-        let qpos_noise = self.rng.uniform(self.sim.model.nq(), s);
-        let qvel_noise = self.rng.normal(self.sim.model.nv(), s);
-        self.sim.reset_to(&qpos_noise, &qvel_noise)?;
-        self.clock.start();
-        self.last_obs = self.observation();
+        self.core
+            .reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Normal)?;
+        self.core.last_obs = self.observation();
         let info = Info {
-            metrics: vec![("x_position", self.sim.data.qpos()[0])],
+            metrics: vec![("x_position", self.core.sim.data.qpos()[0])],
             ..Info::default()
         };
-        Ok((self.last_obs.clone(), info))
+        Ok((self.core.last_obs.clone(), info))
     }
 
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        self.clock.check_can_step()?;
-        let (action, clipped) = clip_action(&self.spec.action_space, action)?;
-        let x_before = self.sim.data.qpos()[0];
-        let adv = self.sim.advance(&action, self.opts.frame_skip)?;
-        if adv.unstable {
-            self.clock.finish_if(true);
-            return Ok(unstable_step(
-                &self.last_obs,
-                &self.spec,
-                clipped,
-                adv.warnings,
-            ));
-        }
-        let x_after = self.sim.data.qpos()[0];
-        let x_velocity = (x_after - x_before) / self.spec.dt;
+        let start = self.core.begin_step(action)?;
+        let x_before = self.core.sim.data.qpos()[0];
+        let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
+            Ok(w) => w,
+            Err(unstable) => return Ok(unstable),
+        };
+        let x_after = self.core.sim.data.qpos()[0];
+        let x_velocity = (x_after - x_before) / self.core.spec.dt;
         let forward = self.opts.forward_reward_weight * x_velocity;
-        let ctrl_cost = self.opts.ctrl_cost_weight * action.iter().map(|a| a * a).sum::<f64>();
-        let observation = self.observation();
-        let truncated = self.clock.tick(self.opts.max_episode_steps);
-        self.clock.finish_if(truncated);
-        self.last_obs.clone_from(&observation);
-        Ok(Step {
-            observation,
-            reward: forward - ctrl_cost,
-            terminated: false,
-            truncated,
-            info: Info {
-                reward_terms: vec![("forward", forward), ("ctrl_cost", -ctrl_cost)],
-                metrics: vec![("x_position", x_after), ("x_velocity", x_velocity)],
-                clipped_actions: clipped,
-                unstable: false,
-                warnings: adv.warnings,
-            },
-        })
+        let ctrl_cost =
+            self.opts.ctrl_cost_weight * start.action.iter().map(|a| a * a).sum::<f64>();
+        let info = Info {
+            reward_terms: vec![("forward", forward), ("ctrl_cost", -ctrl_cost)],
+            metrics: vec![("x_position", x_after), ("x_velocity", x_velocity)],
+            clipped_actions: start.clipped,
+            unstable: false,
+            warnings,
+        };
+        Ok(self.core.finish_step(self.observation(), false, info))
     }
 
     fn data(&self) -> &Data {
-        &self.sim.data
+        &self.core.sim.data
     }
 
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        Ok(self.sim.data.set_state(qpos, qvel)?)
+        Ok(self.core.sim.data.set_state(qpos, qvel)?)
     }
 }

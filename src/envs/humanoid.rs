@@ -4,8 +4,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::options::Check;
-use super::simulation::{unstable_step, EnvRng, Simulation};
-use super::{clip_action, BoxSpace, Env, EnvError, EnvSpec, EpisodeClock, Info, Step};
+use super::simulation::{locomotion_metrics, reset_info, EnvCore, Simulation, VelocityNoise};
+use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
 pub const MODEL_XML: &str = include_str!("../../models/humanoid.xml");
@@ -62,11 +62,7 @@ impl HumanoidOptions {
 
 pub struct Humanoid {
     opts: HumanoidOptions,
-    sim: Simulation,
-    spec: EnvSpec,
-    rng: EnvRng,
-    clock: EpisodeClock,
-    last_obs: Vec<f64>,
+    core: EnvCore,
 }
 
 impl Humanoid {
@@ -90,17 +86,13 @@ impl Humanoid {
         };
         Ok(Humanoid {
             opts,
-            sim,
-            spec,
-            rng: EnvRng::new(),
-            clock: EpisodeClock::default(),
-            last_obs: vec![],
+            core: EnvCore::new(sim, spec),
         })
     }
 
     fn observation(&self) -> Vec<f64> {
-        let d = &self.sim.data;
-        let mut obs = Vec::with_capacity(self.spec.observation_space.dim());
+        let d = &self.core.sim.data;
+        let mut obs = Vec::with_capacity(self.core.spec.observation_space.dim());
         obs.extend_from_slice(&d.qpos()[2..]);
         obs.extend_from_slice(d.qvel());
         obs.extend_from_slice(&d.cinert()[10..]);
@@ -112,8 +104,8 @@ impl Humanoid {
 
     /// Mass-weighted centre of mass, x and y.
     fn mass_center(&self) -> [f64; 2] {
-        let mass = self.sim.model.body_mass();
-        let xipos = self.sim.data.xipos();
+        let mass = self.core.sim.model.body_mass();
+        let xipos = self.core.sim.data.xipos();
         let total: f64 = mass.iter().sum();
         let mut c = [0.0; 2];
         for (b, m) in mass.iter().enumerate() {
@@ -124,7 +116,7 @@ impl Humanoid {
     }
 
     fn is_healthy(&self) -> bool {
-        let z = self.sim.data.qpos()[2];
+        let z = self.core.sim.data.qpos()[2];
         let [lo, hi] = self.opts.healthy_z_range;
         lo < z && z < hi
     }
@@ -132,47 +124,33 @@ impl Humanoid {
 
 impl Env for Humanoid {
     fn spec(&self) -> &EnvSpec {
-        &self.spec
+        &self.core.spec
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.rng.reseed(seed);
-        let s = self.opts.reset_noise_scale;
-        let qpos_noise = self.rng.uniform(self.sim.model.nq(), s);
-        let qvel_noise = self.rng.uniform(self.sim.model.nv(), s);
-        self.sim.reset_to(&qpos_noise, &qvel_noise)?;
-        self.clock.start();
-        self.last_obs = self.observation();
-        let q = self.sim.data.qpos();
-        let info = Info {
-            metrics: vec![("x_position", q[0]), ("y_position", q[1])],
-            ..Info::default()
-        };
-        Ok((self.last_obs.clone(), info))
+        self.core
+            .reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Uniform)?;
+        self.core.last_obs = self.observation();
+        Ok((self.core.last_obs.clone(), reset_info(&self.core)))
     }
 
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        self.clock.check_can_step()?;
-        let (action, clipped) = clip_action(&self.spec.action_space, action)?;
+        let start = self.core.begin_step(action)?;
         let before = self.mass_center();
-        let adv = self.sim.advance(&action, self.opts.frame_skip)?;
-        if adv.unstable {
-            self.clock.finish_if(true);
-            return Ok(unstable_step(
-                &self.last_obs,
-                &self.spec,
-                clipped,
-                adv.warnings,
-            ));
-        }
-        self.sim.data.rne_post_constraint()?;
+        let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
+            Ok(w) => w,
+            Err(unstable) => return Ok(unstable),
+        };
+        self.core.sim.data.rne_post_constraint()?;
         let after = self.mass_center();
-        let x_velocity = (after[0] - before[0]) / self.spec.dt;
-        let y_velocity = (after[1] - before[1]) / self.spec.dt;
+        let velocity = [
+            (after[0] - before[0]) / self.core.spec.dt,
+            (after[1] - before[1]) / self.core.spec.dt,
+        ];
 
-        let d = &self.sim.data;
+        let d = &self.core.sim.data;
         let healthy = self.is_healthy();
-        let forward = self.opts.forward_reward_weight * x_velocity;
+        let forward = self.opts.forward_reward_weight * velocity[0];
         let healthy_reward = if healthy {
             self.opts.healthy_reward
         } else {
@@ -182,45 +160,27 @@ impl Env for Humanoid {
         let contact_cost = (self.opts.contact_cost_weight
             * d.cfrc_ext().iter().map(|f| f * f).sum::<f64>())
         .min(self.opts.contact_cost_max);
-        let reward = forward + healthy_reward - ctrl_cost - contact_cost;
-
-        let observation = self.observation();
+        let info = Info {
+            reward_terms: vec![
+                ("forward", forward),
+                ("healthy", healthy_reward),
+                ("ctrl_cost", -ctrl_cost),
+                ("contact_cost", -contact_cost),
+            ],
+            metrics: locomotion_metrics(&self.core, velocity),
+            clipped_actions: start.clipped,
+            unstable: false,
+            warnings,
+        };
         let terminated = !healthy && self.opts.terminate_when_unhealthy;
-        let truncated = self.clock.tick(self.opts.max_episode_steps);
-        self.clock.finish_if(terminated || truncated);
-        self.last_obs.clone_from(&observation);
-        let q = self.sim.data.qpos();
-        Ok(Step {
-            observation,
-            reward,
-            terminated,
-            truncated,
-            info: Info {
-                reward_terms: vec![
-                    ("forward", forward),
-                    ("healthy", healthy_reward),
-                    ("ctrl_cost", -ctrl_cost),
-                    ("contact_cost", -contact_cost),
-                ],
-                metrics: vec![
-                    ("x_position", q[0]),
-                    ("y_position", q[1]),
-                    ("x_velocity", x_velocity),
-                    ("y_velocity", y_velocity),
-                    ("torso_height", q[2]),
-                ],
-                clipped_actions: clipped,
-                unstable: false,
-                warnings: adv.warnings,
-            },
-        })
+        Ok(self.core.finish_step(self.observation(), terminated, info))
     }
 
     fn data(&self) -> &Data {
-        &self.sim.data
+        &self.core.sim.data
     }
 
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        Ok(self.sim.data.set_state(qpos, qvel)?)
+        Ok(self.core.sim.data.set_state(qpos, qvel)?)
     }
 }

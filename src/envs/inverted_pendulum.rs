@@ -3,8 +3,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::options::Check;
-use super::simulation::{unstable_step, EnvRng, Simulation};
-use super::{clip_action, BoxSpace, Env, EnvError, EnvSpec, EpisodeClock, Info, Step};
+use super::simulation::{EnvCore, Simulation, VelocityNoise};
+use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
 pub const MODEL_XML: &str = include_str!("../../models/inverted_pendulum.xml");
@@ -50,11 +50,7 @@ impl InvertedPendulumOptions {
 
 pub struct InvertedPendulum {
     opts: InvertedPendulumOptions,
-    sim: Simulation,
-    spec: EnvSpec,
-    rng: EnvRng,
-    clock: EpisodeClock,
-    last_obs: Vec<f64>,
+    core: EnvCore,
 }
 
 impl InvertedPendulum {
@@ -72,79 +68,53 @@ impl InvertedPendulum {
         };
         Ok(InvertedPendulum {
             opts,
-            sim,
-            spec,
-            rng: EnvRng::new(),
-            clock: EpisodeClock::default(),
-            last_obs: vec![],
+            core: EnvCore::new(sim, spec),
         })
     }
 
     fn observation(&self) -> Vec<f64> {
-        let d = &self.sim.data;
+        let d = &self.core.sim.data;
         d.qpos().iter().chain(d.qvel()).copied().collect()
     }
 }
 
 impl Env for InvertedPendulum {
     fn spec(&self) -> &EnvSpec {
-        &self.spec
+        &self.core.spec
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.rng.reseed(seed);
-        let s = self.opts.reset_noise_scale;
-        let qpos_noise = self.rng.uniform(self.sim.model.nq(), s);
-        let qvel_noise = self.rng.uniform(self.sim.model.nv(), s);
-        self.sim.reset_to(&qpos_noise, &qvel_noise)?;
-        self.clock.start();
-        self.last_obs = self.observation();
-        Ok((self.last_obs.clone(), Info::default()))
+        self.core
+            .reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Uniform)?;
+        self.core.last_obs = self.observation();
+        Ok((self.core.last_obs.clone(), Info::default()))
     }
 
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        self.clock.check_can_step()?;
-        let (action, clipped) = clip_action(&self.spec.action_space, action)?;
-        let adv = self.sim.advance(&action, self.opts.frame_skip)?;
-        if adv.unstable {
-            self.clock.finish_if(true);
-            return Ok(unstable_step(
-                &self.last_obs,
-                &self.spec,
-                clipped,
-                adv.warnings,
-            ));
-        }
+        let start = self.core.begin_step(action)?;
+        let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
+            Ok(w) => w,
+            Err(unstable) => return Ok(unstable),
+        };
         let observation = self.observation();
         let terminated = !observation.iter().all(|v| v.is_finite())
             || observation[1].abs() > self.opts.max_pole_angle;
-        let reward = if terminated { 0.0 } else { 1.0 };
-        let truncated = self.clock.tick(self.opts.max_episode_steps);
-        self.clock.finish_if(terminated || truncated);
-        self.last_obs.clone_from(&observation);
-        Ok(Step {
-            observation,
-            reward,
-            terminated,
-            truncated,
-            info: Info {
-                reward_terms: vec![("healthy", reward)],
-                metrics: vec![
-                    ("cart_position", self.sim.data.qpos()[0]),
-                    ("pole_angle", self.sim.data.qpos()[1]),
-                ],
-                clipped_actions: clipped,
-                unstable: false,
-                warnings: adv.warnings,
-            },
-        })
+        let q = self.core.sim.data.qpos();
+        let info = Info {
+            reward_terms: vec![("healthy", if terminated { 0.0 } else { 1.0 })],
+            metrics: vec![("cart_position", q[0]), ("pole_angle", q[1])],
+            clipped_actions: start.clipped,
+            unstable: false,
+            warnings,
+        };
+        Ok(self.core.finish_step(observation, terminated, info))
     }
 
     fn data(&self) -> &Data {
-        &self.sim.data
+        &self.core.sim.data
     }
 
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        Ok(self.sim.data.set_state(qpos, qvel)?)
+        Ok(self.core.sim.data.set_state(qpos, qvel)?)
     }
 }

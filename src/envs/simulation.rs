@@ -6,7 +6,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal, Uniform};
 
-use super::{EnvError, EnvSpec, Info, Step};
+use super::{clip_action, EnvError, EnvSpec, EpisodeClock, Info, Step};
 use crate::mujoco::{take_warnings, Data, Model};
 
 /// The random stream of an environment: reseeded by `reset(Some(seed))`, continued otherwise.
@@ -133,4 +133,122 @@ pub(crate) fn unstable_step(
             warnings,
         },
     }
+}
+
+/// How reset noise is drawn for velocities (positions always get U(-s, s)).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) enum VelocityNoise {
+    /// s * N(0, 1) (HalfCheetah, Ant).
+    Normal,
+    /// U(-s, s) (Humanoid, InvertedPendulum).
+    Uniform,
+}
+
+/// The state every MuJoCo environment keeps, and the parts of reset/step they all share.
+pub(crate) struct EnvCore {
+    pub sim: Simulation,
+    pub spec: EnvSpec,
+    pub rng: EnvRng,
+    pub clock: EpisodeClock,
+    pub last_obs: Vec<f64>,
+}
+
+/// What `EnvCore::begin_step` hands back: the clipped action and how many entries were clipped.
+pub(crate) struct StepStart {
+    pub action: Vec<f64>,
+    pub clipped: usize,
+}
+
+impl EnvCore {
+    pub fn new(sim: Simulation, spec: EnvSpec) -> EnvCore {
+        EnvCore {
+            sim,
+            spec,
+            rng: EnvRng::new(),
+            clock: EpisodeClock::default(),
+            last_obs: vec![],
+        }
+    }
+
+    /// Reseeds (if asked), resets to qpos0 plus noise of scale `scale`, starts the clock.
+    pub fn reset_with_noise(
+        &mut self,
+        seed: Option<u64>,
+        scale: f64,
+        velocity: VelocityNoise,
+    ) -> Result<(), EnvError> {
+        self.rng.reseed(seed);
+        let qpos_noise = self.rng.uniform(self.sim.model.nq(), scale);
+        let nv = self.sim.model.nv();
+        let qvel_noise = match velocity {
+            VelocityNoise::Normal => self.rng.normal(nv, scale),
+            VelocityNoise::Uniform => self.rng.uniform(nv, scale),
+        };
+        self.sim.reset_to(&qpos_noise, &qvel_noise)?;
+        self.clock.start();
+        Ok(())
+    }
+
+    /// Refuses a step outside an episode and validates/clips the action.
+    pub fn begin_step(&self, action: &[f64]) -> Result<StepStart, EnvError> {
+        self.clock.check_can_step()?;
+        let (action, clipped) = clip_action(&self.spec.action_space, action)?;
+        Ok(StepStart { action, clipped })
+    }
+
+    /// Runs the physics for one control step. `Err(step)` carries the step to return when the
+    /// physics blew up (the episode is then over).
+    pub fn advance(
+        &mut self,
+        start: &StepStart,
+        frames: usize,
+    ) -> Result<Result<Vec<String>, Step>, EnvError> {
+        let adv = self.sim.advance(&start.action, frames)?;
+        if adv.unstable {
+            self.clock.finish_if(true);
+            return Ok(Err(unstable_step(
+                &self.last_obs,
+                &self.spec,
+                start.clipped,
+                adv.warnings,
+            )));
+        }
+        Ok(Ok(adv.warnings))
+    }
+
+    /// Counts the step, applies the time limit and assembles the result.
+    pub fn finish_step(&mut self, observation: Vec<f64>, terminated: bool, info: Info) -> Step {
+        let truncated = self.clock.tick(self.spec.max_episode_steps);
+        self.clock.finish_if(terminated || truncated);
+        self.last_obs.clone_from(&observation);
+        let reward = info.reward_terms.iter().map(|(_, v)| v).sum();
+        Step {
+            observation,
+            reward,
+            terminated,
+            truncated,
+            info,
+        }
+    }
+}
+
+/// Positions of a free-floating robot at reset (x, y of qpos).
+pub(crate) fn reset_info(core: &EnvCore) -> Info {
+    let q = core.sim.data.qpos();
+    Info {
+        metrics: vec![("x_position", q[0]), ("y_position", q[1])],
+        ..Info::default()
+    }
+}
+
+/// Positions, planar velocity and torso height of a free-floating robot after a step.
+pub(crate) fn locomotion_metrics(core: &EnvCore, velocity: [f64; 2]) -> Vec<(&'static str, f64)> {
+    let q = core.sim.data.qpos();
+    vec![
+        ("x_position", q[0]),
+        ("y_position", q[1]),
+        ("x_velocity", velocity[0]),
+        ("y_velocity", velocity[1]),
+        ("torso_height", q[2]),
+    ]
 }

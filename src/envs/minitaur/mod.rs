@@ -16,8 +16,8 @@ use self::motor::{
     MotorParams, MAX_TORQUE, OBSERVED_TORQUE_LIMIT, OVERHEAT_SECONDS, OVERHEAT_TORQUE,
 };
 use super::options::Check;
-use super::simulation::{unstable_step, EnvRng, Simulation};
-use super::{clip_action, BoxSpace, Env, EnvError, EnvSpec, EpisodeClock, Info, Step};
+use super::simulation::{unstable_step, EnvCore, Simulation};
+use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::{Data, Model};
 
 pub const MODEL_XML: &str = include_str!("../../../models/minitaur.xml");
@@ -113,11 +113,7 @@ struct MotorJoint {
 pub struct Minitaur {
     opts: MinitaurOptions,
     base_model: Arc<Model>,
-    sim: Simulation,
-    spec: EnvSpec,
-    rng: EnvRng,
-    clock: EpisodeClock,
-    last_obs: Vec<f64>,
+    core: EnvCore,
     motors: [MotorJoint; NUM_MOTORS],
     base_body: usize,
     foot_geoms: Vec<usize>,
@@ -179,11 +175,7 @@ impl Minitaur {
             params: [params; NUM_MOTORS],
             opts,
             base_model,
-            sim,
-            spec,
-            rng: EnvRng::new(),
-            clock: EpisodeClock::default(),
-            last_obs: vec![],
+            core: EnvCore::new(sim, spec),
             motors,
             base_body,
             foot_geoms,
@@ -200,11 +192,11 @@ impl Minitaur {
 
     /// Motor angles in the observation's convention (radians from straight up).
     pub fn motor_angles(&self) -> [f64; NUM_MOTORS] {
-        std::array::from_fn(|i| self.sim.data.qpos()[self.motors[i].qpos])
+        std::array::from_fn(|i| self.core.sim.data.qpos()[self.motors[i].qpos])
     }
 
     pub fn motor_velocities(&self) -> [f64; NUM_MOTORS] {
-        std::array::from_fn(|i| self.sim.data.qvel()[self.motors[i].dof])
+        std::array::from_fn(|i| self.core.sim.data.qvel()[self.motors[i].dof])
     }
 
     /// Torques applied to the joints during the last physics step.
@@ -213,13 +205,13 @@ impl Minitaur {
     }
 
     pub fn base_position(&self) -> [f64; 3] {
-        let p = &self.sim.data.xpos()[3 * self.base_body..];
+        let p = &self.core.sim.data.xpos()[3 * self.base_body..];
         [p[0], p[1], p[2]]
     }
 
     /// World-z component of the base's up axis.
     pub fn base_up_z(&self) -> f64 {
-        self.sim.data.xmat()[9 * self.base_body + 8]
+        self.core.sim.data.xmat()[9 * self.base_body + 8]
     }
 
     pub fn is_fallen(&self) -> bool {
@@ -232,7 +224,7 @@ impl Minitaur {
         obs.extend(self.motor_angles());
         obs.extend(self.motor_velocities());
         obs.extend(self.observed_torque);
-        let q = &self.sim.data.xquat()[4 * self.base_body..4 * self.base_body + 4];
+        let q = &self.core.sim.data.xquat()[4 * self.base_body..4 * self.base_body + 4];
         obs.extend([q[1], q[2], q[3], q[0]]);
         obs
     }
@@ -266,14 +258,14 @@ impl Minitaur {
             ctrl[i] = applied;
             power += (applied * velocities[i]).abs();
         }
-        self.sim.data.set_ctrl(&ctrl)?;
-        let unstable = self.sim.step_once()?;
+        self.core.sim.data.set_ctrl(&ctrl)?;
+        let unstable = self.core.sim.step_once()?;
         Ok((unstable, power * SIM_DT))
     }
 
     fn randomized_simulation(&mut self) -> Result<Simulation, EnvError> {
         let mut model = self.base_model.try_clone()?;
-        let rng = self.rng.rng();
+        let rng = self.core.rng.rng();
         for m in model.body_mass_mut().iter_mut().skip(1) {
             *m *= rng.random_range(0.8..1.2);
         }
@@ -297,11 +289,11 @@ enum Command {
 
 impl Env for Minitaur {
     fn spec(&self) -> &EnvSpec {
-        &self.spec
+        &self.core.spec
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.rng.reseed(seed);
+        self.core.rng.reseed(seed);
         let nominal = MotorParams {
             kp: self.opts.motor_kp,
             kd: self.opts.motor_kd,
@@ -309,22 +301,25 @@ impl Env for Minitaur {
         };
         self.params = [nominal; NUM_MOTORS];
         if self.opts.randomize_dynamics {
-            self.sim = self.randomized_simulation()?;
-        } else if !Arc::ptr_eq(&self.sim.model, &self.base_model) {
-            self.sim = Simulation::from_model(Arc::clone(&self.base_model))?;
+            self.core.sim = self.randomized_simulation()?;
+        } else if !Arc::ptr_eq(&self.core.sim.model, &self.base_model) {
+            self.core.sim = Simulation::from_model(Arc::clone(&self.base_model))?;
         }
         self.enabled = [true; NUM_MOTORS];
         self.overheat_time = [0.0; NUM_MOTORS];
         self.observed_torque = [0.0; NUM_MOTORS];
         self.applied_torque = [0.0; NUM_MOTORS];
 
-        let noise = self.rng.uniform(NUM_MOTORS, self.opts.reset_noise_scale);
-        let mut qpos_noise = vec![0.0; self.sim.model.nq()];
+        let noise = self
+            .core
+            .rng
+            .uniform(NUM_MOTORS, self.opts.reset_noise_scale);
+        let mut qpos_noise = vec![0.0; self.core.sim.model.nq()];
         for (i, n) in noise.iter().enumerate() {
             qpos_noise[self.motors[i].qpos] = *n;
         }
-        let nv = self.sim.model.nv();
-        self.sim.reset_to(&qpos_noise, &vec![0.0; nv])?;
+        let nv = self.core.sim.model.nv();
+        self.core.sim.reset_to(&qpos_noise, &vec![0.0; nv])?;
         let hold = Command::Angles(std::array::from_fn(|i| FRAC_PI_2 + noise[i]));
         let hold_steps = (self.opts.reset_hold_time / SIM_DT).round() as usize;
         for _ in 0..hold_steps {
@@ -335,8 +330,8 @@ impl Env for Minitaur {
             }
         }
         crate::mujoco::take_warnings();
-        self.clock.start();
-        self.last_obs = self.observation();
+        self.core.clock.start();
+        self.core.last_obs = self.observation();
         let p = self.base_position();
         let info = Info {
             metrics: vec![
@@ -346,14 +341,14 @@ impl Env for Minitaur {
             ],
             ..Info::default()
         };
-        Ok((self.last_obs.clone(), info))
+        Ok((self.core.last_obs.clone(), info))
     }
 
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        self.clock.check_can_step()?;
-        let (action, clipped) = clip_action(&self.spec.action_space, action)?;
+        let start = self.core.begin_step(action)?;
+        let (action, clipped) = (&start.action, start.clipped);
         let command = match self.opts.action_mode {
-            ActionMode::Leg => Command::Angles(motor_angles_from_leg_model(&action)),
+            ActionMode::Leg => Command::Angles(motor_angles_from_leg_model(action)),
             ActionMode::MotorAngle => Command::Angles(std::array::from_fn(|i| action[i])),
             ActionMode::Torque => Command::Torques(std::array::from_fn(|i| action[i])),
         };
@@ -370,8 +365,13 @@ impl Env for Minitaur {
         }
         let warnings = crate::mujoco::take_warnings();
         if unstable {
-            self.clock.finish_if(true);
-            return Ok(unstable_step(&self.last_obs, &self.spec, clipped, warnings));
+            self.core.clock.finish_if(true);
+            return Ok(unstable_step(
+                &self.core.last_obs,
+                &self.core.spec,
+                clipped,
+                warnings,
+            ));
         }
         let after = self.base_position();
         let (dx, dy, dz) = (
@@ -392,52 +392,41 @@ impl Env for Minitaur {
         let energy = -o.energy_weight * power.abs() * SIM_DT;
         let drift = -o.drift_weight * dy.abs();
         let shake = -o.shake_weight * dz.abs();
-        let reward = distance + energy + drift + shake;
-
-        let observation = self.observation();
+        let info = Info {
+            reward_terms: vec![
+                ("distance", distance),
+                ("energy", energy),
+                ("drift", drift),
+                ("shake", shake),
+            ],
+            metrics: vec![
+                ("x_position", after[0]),
+                ("y_position", after[1]),
+                ("base_height", after[2]),
+                ("x_velocity", dx / self.core.spec.dt),
+                ("dx", dx),
+                ("dy", dy),
+                ("dz", dz),
+                ("up_z", self.base_up_z()),
+                ("mechanical_energy", mechanical_energy),
+                (
+                    "motors_disabled",
+                    self.enabled.iter().filter(|e| !**e).count() as f64,
+                ),
+            ],
+            clipped_actions: clipped,
+            unstable: false,
+            warnings,
+        };
         let terminated = self.is_fallen();
-        let truncated = self.clock.tick(self.opts.max_episode_steps);
-        self.clock.finish_if(terminated || truncated);
-        self.last_obs.clone_from(&observation);
-        Ok(Step {
-            observation,
-            reward,
-            terminated,
-            truncated,
-            info: Info {
-                reward_terms: vec![
-                    ("distance", distance),
-                    ("energy", energy),
-                    ("drift", drift),
-                    ("shake", shake),
-                ],
-                metrics: vec![
-                    ("x_position", after[0]),
-                    ("y_position", after[1]),
-                    ("base_height", after[2]),
-                    ("x_velocity", dx / self.spec.dt),
-                    ("dx", dx),
-                    ("dy", dy),
-                    ("dz", dz),
-                    ("up_z", self.base_up_z()),
-                    ("mechanical_energy", mechanical_energy),
-                    (
-                        "motors_disabled",
-                        self.enabled.iter().filter(|e| !**e).count() as f64,
-                    ),
-                ],
-                clipped_actions: clipped,
-                unstable: false,
-                warnings,
-            },
-        })
+        Ok(self.core.finish_step(self.observation(), terminated, info))
     }
 
     fn data(&self) -> &Data {
-        &self.sim.data
+        &self.core.sim.data
     }
 
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        Ok(self.sim.data.set_state(qpos, qvel)?)
+        Ok(self.core.sim.data.set_state(qpos, qvel)?)
     }
 }
