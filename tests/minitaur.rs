@@ -168,3 +168,42 @@ fn torque_mode_drives_motors_within_limits() {
     let s = e.step(&[9.0, 0.0, 0.0, 0.0, 0.0, 0.0, 0.0, -9.0]).unwrap();
     assert_eq!(s.info.clipped_actions, 2);
 }
+
+#[test]
+fn four_bar_kinematics_match_the_simulated_legs() {
+    use locobench::controller::fourbar;
+    let mut e = env(MinitaurOptions {
+        randomize_dynamics: false,
+        ..Default::default()
+    });
+    e.reset(Some(0)).unwrap();
+    for _ in 0..50 {
+        e.step(&[0.3, -0.2, 0.1, 0.0, 0.2, 0.1, 0.0, -0.1]).unwrap();
+    }
+    let d = e.data();
+    let m = d.model();
+    let base = m.body_id("base").unwrap();
+    let r = &d.xmat()[9 * base..9 * base + 9];
+    let angles = e.motor_angles();
+    for (leg, name) in ["fl", "bl", "fr", "br"].iter().enumerate() {
+        let (outer, inner) = if leg < 2 {
+            (angles[2 * leg], angles[2 * leg + 1])
+        } else {
+            (angles[2 * leg + 1], angles[2 * leg])
+        };
+        let foot = m.site_id(&format!("foot_{name}")).unwrap();
+        let hip = m.site_id(&format!("hip_{name}")).unwrap();
+        let w: Vec<f64> = (0..3)
+            .map(|k| d.site_xpos()[3 * foot + k] - d.site_xpos()[3 * hip + k])
+            .collect();
+        // World offset into the base frame (R^T w); keep x and z.
+        let local: Vec<f64> = (0..3)
+            .map(|c| (0..3).map(|k| r[3 * k + c] * w[k]).sum())
+            .collect();
+        let predicted = fourbar::forward(outer, inner).unwrap();
+        assert!(
+            (local[0] - predicted[0]).abs() < 2e-3 && (local[2] - predicted[1]).abs() < 2e-3,
+            "leg {name}: simulated {local:?}, kinematics {predicted:?}"
+        );
+    }
+}

@@ -1,0 +1,253 @@
+//! Stance-force distribution (REFERENCE §4): find ground reaction forces f at the stance feet
+//! that best produce a desired body wrench b,
+//!     minimise (A f - b)' S (A f - b) + alpha |f|^2
+//!     subject to |f_x|, |f_y| <= mu f_z and f_min <= f_z <= f_max,
+//! with A = [I ... I; [r_1]x ... [r_n]x] (r_i: foot position relative to the centre of mass).
+//! Solved by clarabel. `Planar` drops y, roll and yaw (Minitaur has no abduction).
+use anyhow::{bail, Result};
+use clarabel::algebra::CscMatrix;
+use clarabel::solver::{
+    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
+};
+use nalgebra::{DMatrix, DVector, Vector3};
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Dimension {
+    /// Forces (f_x, f_y, f_z) per foot; wrench (F_x, F_y, F_z, M_x, M_y, M_z).
+    Spatial,
+    /// Forces (f_x, f_z) per foot; wrench (F_x, F_z, M_y).
+    Planar,
+}
+
+#[derive(Debug, Clone)]
+pub struct ForceQp {
+    pub dimension: Dimension,
+    pub friction: f64,
+    pub f_min: f64,
+    pub f_max: f64,
+    /// Weight of each wrench row (S diagonal).
+    pub wrench_weights: Vec<f64>,
+    /// Regularisation alpha on |f|^2.
+    pub regularisation: f64,
+}
+
+impl ForceQp {
+    fn force_dim(&self) -> usize {
+        match self.dimension {
+            Dimension::Spatial => 3,
+            Dimension::Planar => 2,
+        }
+    }
+
+    /// Rows of A for one foot at `r` (relative to the centre of mass).
+    fn wrench_map(&self, r: Vector3<f64>) -> DMatrix<f64> {
+        let cross = r.cross_matrix();
+        match self.dimension {
+            Dimension::Spatial => {
+                let mut m = DMatrix::zeros(6, 3);
+                m.view_mut((0, 0), (3, 3))
+                    .copy_from(&nalgebra::Matrix3::identity());
+                m.view_mut((3, 0), (3, 3)).copy_from(&cross);
+                m
+            }
+            // Keep F_x, F_z, M_y and forces f_x, f_z.
+            Dimension::Planar => {
+                DMatrix::from_row_slice(3, 2, &[1.0, 0.0, 0.0, 1.0, cross[(1, 0)], cross[(1, 2)]])
+            }
+        }
+    }
+
+    /// The wrench a set of foot forces produces.
+    pub fn wrench(&self, feet: &[Vector3<f64>], forces: &[f64]) -> DVector<f64> {
+        let a = self.stacked_map(feet);
+        &a * DVector::from_column_slice(forces)
+    }
+
+    fn stacked_map(&self, feet: &[Vector3<f64>]) -> DMatrix<f64> {
+        let k = self.force_dim();
+        let rows = if k == 3 { 6 } else { 3 };
+        let mut a = DMatrix::zeros(rows, k * feet.len());
+        for (i, r) in feet.iter().enumerate() {
+            a.view_mut((0, k * i), (rows, k))
+                .copy_from(&self.wrench_map(*r));
+        }
+        a
+    }
+
+    /// Forces for the stance feet at `feet` (flattened per foot), or an error when the solver
+    /// fails; callers fall back to a safe default and count it.
+    pub fn solve(&self, feet: &[Vector3<f64>], wrench: &[f64]) -> Result<Vec<f64>> {
+        let k = self.force_dim();
+        let n = k * feet.len();
+        if feet.is_empty() {
+            bail!("no stance feet");
+        }
+        let a = self.stacked_map(feet);
+        if wrench.len() != a.nrows() || self.wrench_weights.len() != a.nrows() {
+            bail!("wrench and weights must have {} entries", a.nrows());
+        }
+        let s = DMatrix::from_diagonal(&DVector::from_column_slice(&self.wrench_weights));
+        let b = DVector::from_column_slice(wrench);
+        let p = (a.transpose() * &s * &a + DMatrix::identity(n, n) * self.regularisation) * 2.0;
+        let q = -(a.transpose() * &s * &b) * 2.0;
+
+        // Inequalities G f <= h, per foot: friction pyramid faces and normal-force bounds.
+        let mut g_rows: Vec<Vec<(usize, f64)>> = Vec::new();
+        let mut h = Vec::new();
+        for foot in 0..feet.len() {
+            let base = k * foot;
+            let z = base + k - 1;
+            for t in 0..k - 1 {
+                g_rows.push(vec![(base + t, 1.0), (z, -self.friction)]);
+                g_rows.push(vec![(base + t, -1.0), (z, -self.friction)]);
+                h.extend([0.0, 0.0]);
+            }
+            g_rows.push(vec![(z, 1.0)]);
+            h.push(self.f_max);
+            g_rows.push(vec![(z, -1.0)]);
+            h.push(-self.f_min);
+        }
+        let p_upper = dense_to_csc_upper(&p);
+        let g = rows_to_csc(&g_rows, n);
+        let cones = [SupportedConeT::NonnegativeConeT(h.len())];
+        let settings = DefaultSettingsBuilder::default()
+            .verbose(false)
+            .max_iter(50)
+            .build()
+            .expect("valid settings");
+        let mut solver = DefaultSolver::new(&p_upper, q.as_slice(), &g, &h, &cones, settings)
+            .map_err(|e| anyhow::anyhow!("QP setup failed: {e:?}"))?;
+        solver.solve();
+        match solver.solution.status {
+            SolverStatus::Solved | SolverStatus::AlmostSolved => Ok(solver.solution.x.clone()),
+            status => bail!("QP not solved: {status:?}"),
+        }
+    }
+}
+
+fn dense_to_csc_upper(m: &DMatrix<f64>) -> CscMatrix<f64> {
+    let n = m.ncols();
+    let (mut colptr, mut rowval, mut nzval) = (vec![0], Vec::new(), Vec::new());
+    for c in 0..n {
+        for r in 0..=c {
+            if m[(r, c)] != 0.0 {
+                rowval.push(r);
+                nzval.push(m[(r, c)]);
+            }
+        }
+        colptr.push(rowval.len());
+    }
+    CscMatrix::new(n, n, colptr, rowval, nzval)
+}
+
+fn rows_to_csc(rows: &[Vec<(usize, f64)>], ncols: usize) -> CscMatrix<f64> {
+    let mut cols: Vec<Vec<(usize, f64)>> = vec![Vec::new(); ncols];
+    for (r, row) in rows.iter().enumerate() {
+        for &(c, v) in row {
+            cols[c].push((r, v));
+        }
+    }
+    let (mut colptr, mut rowval, mut nzval) = (vec![0], Vec::new(), Vec::new());
+    for col in cols {
+        for (r, v) in col {
+            rowval.push(r);
+            nzval.push(v);
+        }
+        colptr.push(rowval.len());
+    }
+    CscMatrix::new(rows.len(), ncols, colptr, rowval, nzval)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn feet() -> Vec<Vector3<f64>> {
+        vec![
+            Vector3::new(0.2, 0.1, -0.2),
+            Vector3::new(-0.2, 0.1, -0.2),
+            Vector3::new(0.2, -0.1, -0.2),
+            Vector3::new(-0.2, -0.1, -0.2),
+        ]
+    }
+
+    fn qp() -> ForceQp {
+        ForceQp {
+            dimension: Dimension::Spatial,
+            friction: 0.6,
+            f_min: 1.0,
+            f_max: 100.0,
+            wrench_weights: vec![1.0; 6],
+            regularisation: 1e-6,
+        }
+    }
+
+    fn check_constraints(qp: &ForceQp, f: &[f64]) {
+        let k = qp.force_dim();
+        for foot in f.chunks(k) {
+            let fz = foot[k - 1];
+            assert!(fz >= qp.f_min - 1e-6 && fz <= qp.f_max + 1e-6, "{foot:?}");
+            for t in &foot[..k - 1] {
+                assert!(
+                    t.abs() <= qp.friction * fz + 1e-6,
+                    "friction cone violated: {foot:?}"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn reproduces_a_feasible_wrench_inside_the_cones() {
+        let qp = qp();
+        // A wrench made from forces that satisfy the constraints is feasible.
+        let truth = [
+            2.0, 1.0, 20.0, -1.0, 0.5, 15.0, 3.0, -2.0, 18.0, 0.0, 1.0, 12.0,
+        ];
+        let wrench = qp.wrench(&feet(), &truth);
+        let f = qp.solve(&feet(), wrench.as_slice()).unwrap();
+        check_constraints(&qp, &f);
+        let got = qp.wrench(&feet(), &f);
+        assert!(
+            (got - &wrench).norm() < 1e-3 * wrench.norm(),
+            "wrench not reproduced"
+        );
+    }
+
+    #[test]
+    fn infeasible_wrench_is_approximated_within_the_constraints() {
+        let qp = qp();
+        // Pulling the robot down and sideways harder than friction allows.
+        let f = qp
+            .solve(&feet(), &[50.0, 0.0, -10.0, 0.0, 0.0, 0.0])
+            .unwrap();
+        check_constraints(&qp, &f);
+        let f = qp
+            .solve(&feet()[..2], &[0.0, 0.0, 500.0, 0.0, 0.0, 0.0])
+            .unwrap();
+        check_constraints(&qp, &f);
+        assert!(f.chunks(3).all(|c| (c[2] - qp.f_max).abs() < 1e-3));
+    }
+
+    #[test]
+    fn planar_version_for_minitaur() {
+        let qp = ForceQp {
+            dimension: Dimension::Planar,
+            wrench_weights: vec![1.0; 3],
+            ..qp()
+        };
+        let feet = [
+            Vector3::new(0.21, 0.0, -0.2),
+            Vector3::new(-0.21, 0.0, -0.2),
+        ];
+        // Weight 60 N, a small pitching moment.
+        let f = qp.solve(&feet, &[0.0, 60.0, 1.0]).unwrap();
+        check_constraints(&qp, &f);
+        let w = qp.wrench(&feet, &f);
+        assert!(
+            (w[1] - 60.0).abs() < 1e-3 && (w[2] - 1.0).abs() < 1e-3,
+            "{w}"
+        );
+        assert!(qp.solve(&[], &[0.0, 60.0, 0.0]).is_err());
+        assert!(qp.solve(&feet, &[0.0, 60.0]).is_err());
+    }
+}
