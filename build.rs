@@ -17,24 +17,16 @@ fn main() {
     println!("cargo:rerun-if-env-changed=MUJOCO_INCLUDE_DIR");
     println!("cargo:rerun-if-env-changed=MUJOCO_LIB_DIR");
 
-    let include_dir = PathBuf::from(
-        std::env::var("MUJOCO_INCLUDE_DIR").unwrap_or_else(|_| "/usr/include".into()),
-    );
+    let include_dir = PathBuf::from(std::env::var("MUJOCO_INCLUDE_DIR").unwrap_or_else(|_| "/usr/include".into()));
     let header = include_dir.join("mujoco/mujoco.h");
     if !header.exists() {
-        fail(&format!(
-            "MuJoCo header {} not found: {INSTALL_HINT}",
-            header.display()
-        ));
+        fail(&format!("MuJoCo header {} not found: {INSTALL_HINT}", header.display()));
     }
     let lib_dir = std::env::var("MUJOCO_LIB_DIR")
         .map(PathBuf::from)
         .unwrap_or_else(|_| PathBuf::from("/usr/lib/x86_64-linux-gnu"));
     if !has_mujoco_library(&lib_dir) {
-        fail(&format!(
-            "MuJoCo library libmujoco.so not found in {}: {INSTALL_HINT}",
-            lib_dir.display()
-        ));
+        fail(&format!("MuJoCo library libmujoco.so not found in {}: {INSTALL_HINT}", lib_dir.display()));
     }
     println!("cargo:rustc-link-search=native={}", lib_dir.display());
     println!("cargo:rustc-link-lib=dylib=mujoco");
@@ -51,15 +43,10 @@ fn main() {
         .layout_tests(false)
         .generate()
         .unwrap_or_else(|e| {
-            fail(&format!(
-                "bindgen could not read {} ({e}); libclang missing? {INSTALL_HINT}",
-                header.display()
-            ))
+            fail(&format!("bindgen could not read {} ({e}); libclang missing? {INSTALL_HINT}", header.display()))
         });
     let out = PathBuf::from(std::env::var("OUT_DIR").unwrap());
-    bindings
-        .write_to_file(out.join("mujoco_bindings.rs"))
-        .expect("write bindings");
+    bindings.write_to_file(out.join("mujoco_bindings.rs")).expect("write bindings");
 
     cc::Build::new()
         .file("src/mujoco/shim.c")
@@ -71,10 +58,6 @@ fn main() {
 
 fn has_mujoco_library(dir: &Path) -> bool {
     std::fs::read_dir(dir)
-        .map(|entries| {
-            entries
-                .flatten()
-                .any(|e| e.file_name().to_string_lossy().starts_with("libmujoco.so"))
-        })
+        .map(|entries| entries.flatten().any(|e| e.file_name().to_string_lossy().starts_with("libmujoco.so")))
         .unwrap_or(false)
 }

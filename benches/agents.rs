@@ -32,15 +32,8 @@ fn bench(c: &mut Criterion) {
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let buf = filled_buffer(&mut rng);
     let mut group = c.benchmark_group("agents");
-    group
-        .measurement_time(Duration::from_secs(8))
-        .warm_up_time(Duration::from_secs(2))
-        .sample_size(20);
-    for (algo, hidden) in [
-        (Algo::Td3, vec![400, 300]),
-        (Algo::Sac, vec![256, 256]),
-        (Algo::Ddpg, vec![400, 300]),
-    ] {
+    group.measurement_time(Duration::from_secs(8)).warm_up_time(Duration::from_secs(2)).sample_size(20);
+    for (algo, hidden) in [(Algo::Td3, vec![400, 300]), (Algo::Sac, vec![256, 256]), (Algo::Ddpg, vec![400, 300])] {
         let mut cfg = TrainConfig::defaults(algo);
         cfg.hidden = hidden.clone();
         cfg.batch_size = BATCH;
@@ -48,25 +41,19 @@ fn bench(c: &mut Criterion) {
         let mut batch = Batch::new(BATCH, OBS, ACT);
         let label = format!("{}-{}", hidden[0], hidden[1]);
         group.throughput(Throughput::Elements(1));
-        group.bench_function(
-            format!("{}/update {label} batch {BATCH}", algo.name()),
-            |b| {
-                b.iter(|| {
-                    buf.sample_into(&mut batch, &mut rng);
-                    black_box(agent.update(&batch, &mut rng).unwrap());
-                })
-            },
-        );
+        group.bench_function(format!("{}/update {label} batch {BATCH}", algo.name()), |b| {
+            b.iter(|| {
+                buf.sample_into(&mut batch, &mut rng);
+                black_box(agent.update(&batch, &mut rng).unwrap());
+            })
+        });
         let obs: Vec<f32> = (0..OBS).map(|i| (i as f32 * 0.1).sin()).collect();
-        group.bench_function(
-            format!("{}/act one observation {label}", algo.name()),
-            |b| b.iter(|| black_box(agent.act(black_box(&obs)).unwrap())),
-        );
+        group.bench_function(format!("{}/act one observation {label}", algo.name()), |b| {
+            b.iter(|| black_box(agent.act(black_box(&obs)).unwrap()))
+        });
     }
     let mut batch = Batch::new(BATCH, OBS, ACT);
-    group.bench_function(format!("buffer/sample batch {BATCH}"), |b| {
-        b.iter(|| buf.sample_into(&mut batch, &mut rng))
-    });
+    group.bench_function(format!("buffer/sample batch {BATCH}"), |b| b.iter(|| buf.sample_into(&mut batch, &mut rng)));
     group.finish();
     println!(
         "replay buffer at HalfCheetah sizes: {} bytes per transition (+ one observation per truncated episode)",

@@ -23,62 +23,30 @@ struct Case {
 }
 
 const CASES: [Case; 5] = [
-    Case {
-        name: "half-cheetah",
-        frame_skip: 5,
-        contact_forces: false,
-        options: &[],
-    },
-    Case {
-        name: "ant",
-        frame_skip: 5,
-        contact_forces: true,
-        options: &[("terminate_when_unhealthy", "false")],
-    },
-    Case {
-        name: "humanoid",
-        frame_skip: 5,
-        contact_forces: true,
-        options: &[("terminate_when_unhealthy", "false")],
-    },
-    Case {
-        name: "inverted-pendulum",
-        frame_skip: 2,
-        contact_forces: false,
-        options: &[("max_pole_angle", "1.5707")],
-    },
+    Case { name: "half-cheetah", frame_skip: 5, contact_forces: false, options: &[] },
+    Case { name: "ant", frame_skip: 5, contact_forces: true, options: &[("terminate_when_unhealthy", "false")] },
+    Case { name: "humanoid", frame_skip: 5, contact_forces: true, options: &[("terminate_when_unhealthy", "false")] },
+    Case { name: "inverted-pendulum", frame_skip: 2, contact_forces: false, options: &[("max_pole_angle", "1.5707")] },
     Case {
         name: "minitaur",
         frame_skip: 5,
         contact_forces: false,
-        options: &[
-            ("fall_height", "0"),
-            ("fall_up_threshold", "-1"),
-            ("randomize_dynamics", "false"),
-        ],
+        options: &[("fall_height", "0"), ("fall_up_threshold", "-1"), ("randomize_dynamics", "false")],
     },
 ];
 
 fn actions(dim: usize, low: f64, high: f64) -> Vec<Vec<f64>> {
     let mut rng = ChaCha8Rng::seed_from_u64(0);
-    (0..256)
-        .map(|_| (0..dim).map(|_| rng.random_range(low..high)).collect())
-        .collect()
+    (0..256).map(|_| (0..dim).map(|_| rng.random_range(low..high)).collect()).collect()
 }
 
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("env_step");
     group.throughput(Throughput::Elements(1));
-    group
-        .measurement_time(Duration::from_secs(4))
-        .warm_up_time(Duration::from_secs(1))
-        .sample_size(30);
+    group.measurement_time(Duration::from_secs(4)).warm_up_time(Duration::from_secs(1)).sample_size(30);
     for case in &CASES {
-        let mut pairs: Vec<(String, String)> = case
-            .options
-            .iter()
-            .map(|(k, v)| (k.to_string(), v.to_string()))
-            .collect();
+        let mut pairs: Vec<(String, String)> =
+            case.options.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
         pairs.push(("max_episode_steps".into(), "100000000".into()));
         let cfg = EnvConfig::new(case.name).with_overrides(&pairs).unwrap();
         let mut env = make(&cfg).unwrap();
@@ -102,43 +70,30 @@ fn bench(c: &mut Criterion) {
         let mut data = Data::new(&model).unwrap();
         let (m, d) = (model.as_raw(), data.as_raw_mut());
         let nu = model.nu();
-        let ctrl_acts = if case.name == "minitaur" {
-            actions(nu, -3.5, 3.5)
-        } else {
-            acts.clone()
-        };
+        let ctrl_acts = if case.name == "minitaur" { actions(nu, -3.5, 3.5) } else { acts.clone() };
         let mut j = 0;
-        group.bench_function(
-            format!("{}/raw mj_step x{}", case.name, case.frame_skip),
-            |b| {
+        group.bench_function(format!("{}/raw mj_step x{}", case.name, case.frame_skip), |b| {
+            b.iter(|| unsafe {
+                j = (j + 1) % ctrl_acts.len();
+                std::ptr::copy_nonoverlapping(ctrl_acts[j].as_ptr(), (*d).ctrl, nu);
+                for _ in 0..case.frame_skip {
+                    sys::mj_step(m, d);
+                }
+                black_box((*d).time);
+            })
+        });
+        if case.contact_forces {
+            group.bench_function(format!("{}/raw mj_step x{} + rnePostConstraint", case.name, case.frame_skip), |b| {
                 b.iter(|| unsafe {
                     j = (j + 1) % ctrl_acts.len();
                     std::ptr::copy_nonoverlapping(ctrl_acts[j].as_ptr(), (*d).ctrl, nu);
                     for _ in 0..case.frame_skip {
                         sys::mj_step(m, d);
                     }
+                    sys::mj_rnePostConstraint(m, d);
                     black_box((*d).time);
                 })
-            },
-        );
-        if case.contact_forces {
-            group.bench_function(
-                format!(
-                    "{}/raw mj_step x{} + rnePostConstraint",
-                    case.name, case.frame_skip
-                ),
-                |b| {
-                    b.iter(|| unsafe {
-                        j = (j + 1) % ctrl_acts.len();
-                        std::ptr::copy_nonoverlapping(ctrl_acts[j].as_ptr(), (*d).ctrl, nu);
-                        for _ in 0..case.frame_skip {
-                            sys::mj_step(m, d);
-                        }
-                        sys::mj_rnePostConstraint(m, d);
-                        black_box((*d).time);
-                    })
-                },
-            );
+            });
         }
     }
     group.finish();

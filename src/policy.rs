@@ -37,17 +37,10 @@ pub struct RandomPolicy {
 
 impl RandomPolicy {
     pub fn new(seed: u64) -> RandomPolicy {
-        RandomPolicy {
-            rng: ChaCha8Rng::seed_from_u64(seed),
-        }
+        RandomPolicy { rng: ChaCha8Rng::seed_from_u64(seed) }
     }
     pub fn sample(&mut self, space: &BoxSpace) -> Vec<f64> {
-        space
-            .low
-            .iter()
-            .zip(&space.high)
-            .map(|(&l, &h)| self.rng.random_range(l..=h))
-            .collect()
+        space.low.iter().zip(&space.high).map(|(&l, &h)| self.rng.random_range(l..=h)).collect()
     }
 }
 
@@ -72,8 +65,7 @@ pub struct ReplayPolicy {
 
 impl ReplayPolicy {
     pub fn from_csv(path: &str) -> Result<ReplayPolicy> {
-        let text =
-            std::fs::read_to_string(path).with_context(|| format!("reading action file {path}"))?;
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading action file {path}"))?;
         let mut lines = text.lines().filter(|l| !l.trim().is_empty()).peekable();
         let first = lines.peek().copied().unwrap_or("");
         let header: Vec<&str> = first.split(',').map(str::trim).collect();
@@ -81,12 +73,8 @@ impl ReplayPolicy {
         let mut episodes: Vec<Vec<Vec<f64>>> = Vec::new();
         if is_header {
             lines.next();
-            let action_cols: Vec<usize> = header
-                .iter()
-                .enumerate()
-                .filter(|(_, c)| c.starts_with("action_"))
-                .map(|(i, _)| i)
-                .collect();
+            let action_cols: Vec<usize> =
+                header.iter().enumerate().filter(|(_, c)| c.starts_with("action_")).map(|(i, _)| i).collect();
             if action_cols.is_empty() {
                 bail!("{path}: header has no action_0, action_1, ... columns");
             }
@@ -112,23 +100,14 @@ impl ReplayPolicy {
         } else {
             let rows = lines
                 .enumerate()
-                .map(|(n, line)| {
-                    line.split(',')
-                        .map(|v| parse_number(Some(v.trim()), path, n + 1))
-                        .collect()
-                })
+                .map(|(n, line)| line.split(',').map(|v| parse_number(Some(v.trim()), path, n + 1)).collect())
                 .collect::<Result<Vec<Vec<f64>>>>()?;
             episodes.push(rows);
         }
         if episodes.iter().all(|e| e.is_empty()) {
             bail!("{path}: no actions found");
         }
-        Ok(ReplayPolicy {
-            episodes,
-            current: 0,
-            cursor: 0,
-            path: path.to_string(),
-        })
+        Ok(ReplayPolicy { episodes, current: 0, cursor: 0, path: path.to_string() })
     }
 
     fn episode_actions(&self) -> &Vec<Vec<f64>> {
@@ -139,8 +118,7 @@ impl ReplayPolicy {
 
 fn parse_number(field: Option<&str>, path: &str, line: usize) -> Result<f64> {
     let text = field.with_context(|| format!("{path}: line {line}: missing value"))?;
-    text.parse::<f64>()
-        .with_context(|| format!("{path}: line {line}: '{text}' is not a number"))
+    text.parse::<f64>().with_context(|| format!("{path}: line {line}: '{text}' is not a number"))
 }
 
 impl Policy for ReplayPolicy {
@@ -157,21 +135,11 @@ impl Policy for ReplayPolicy {
     fn act(&mut self, env: &dyn Env, _: &[f64]) -> Result<Vec<f64>> {
         let actions = self.episode_actions();
         let Some(a) = actions.get(self.cursor) else {
-            bail!(
-                "{}: no recorded action for step {} of episode {}",
-                self.path,
-                self.cursor,
-                self.current
-            );
+            bail!("{}: no recorded action for step {} of episode {}", self.path, self.cursor, self.current);
         };
         let expected = env.spec().action_space.dim();
         if a.len() != expected {
-            bail!(
-                "{}: actions have {} entries, {} expects {expected}",
-                self.path,
-                a.len(),
-                env.spec().name
-            );
+            bail!("{}: actions have {} entries, {} expects {expected}", self.path, a.len(), env.spec().name);
         }
         let a = a.clone();
         self.cursor += 1;

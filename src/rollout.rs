@@ -48,8 +48,7 @@ pub fn run_episodes(
             on_step(episode, summary.length, &action, &step)?;
             summary.length += 1;
             summary.episode_return += step.reward;
-            for ((_, total), (_, v)) in summary.term_totals.iter_mut().zip(&step.info.reward_terms)
-            {
+            for ((_, total), (_, v)) in summary.term_totals.iter_mut().zip(&step.info.reward_terms) {
                 *total += v;
             }
             summary.terminated = step.terminated;

@@ -16,26 +16,11 @@ fn learns(algo: Algo) {
     let dir = tempfile::tempdir().unwrap();
     let cfg = build_config("inverted-pendulum", algo, &[]).unwrap();
     assert_eq!(cfg.total_steps, BUDGET);
-    let control = RunControl {
-        target_return: Some(950.0),
-        ..Default::default()
-    };
-    let s = train::train(
-        EnvConfig::new("inverted-pendulum"),
-        cfg,
-        0,
-        &dir.path().join("run"),
-        None,
-        false,
-        &control,
-    )
-    .unwrap();
+    let control = RunControl { target_return: Some(950.0), ..Default::default() };
+    let s = train::train(EnvConfig::new("inverted-pendulum"), cfg, 0, &dir.path().join("run"), None, false, &control)
+        .unwrap();
     let best = s.best_eval_mean.unwrap();
-    assert!(
-        best >= 950.0,
-        "{algo:?} reached only {best} in {} steps",
-        s.steps
-    );
+    assert!(best >= 950.0, "{algo:?} reached only {best} in {} steps", s.steps);
     assert!(s.steps <= BUDGET);
     eprintln!("{algo:?}: evaluation {best} at step {}", s.steps);
 }
@@ -79,18 +64,9 @@ fn td3_critic_target_on_a_hand_built_batch() {
     let q = agent.target_q_min(&b.next_obs, &next_a).unwrap();
     let gamma = 0.99f32;
     assert!((y[0] - (1.0 + gamma * q[0])).abs() < 1e-5);
-    assert!(
-        (y[1] - 2.0).abs() < 1e-6,
-        "terminated rows must not bootstrap"
-    );
-    assert!(
-        (y[2] - (0.5 + gamma * q[2])).abs() < 1e-5,
-        "truncated rows bootstrap"
-    );
-    assert!(
-        q[2].abs() > 1e-4,
-        "the test needs a non-zero bootstrap value"
-    );
+    assert!((y[1] - 2.0).abs() < 1e-6, "terminated rows must not bootstrap");
+    assert!((y[2] - (0.5 + gamma * q[2])).abs() < 1e-5, "truncated rows bootstrap");
+    assert!(q[2].abs() > 1e-4, "the test needs a non-zero bootstrap value");
 
     // With smoothing on, the target stays within what clipped noise allows.
     cfg.policy_noise = 0.2;
@@ -108,22 +84,13 @@ fn td3_critic_target_on_a_hand_built_batch() {
 
 fn small_config(overrides: &str) -> TrainConfig {
     let base = "total_steps=3000,warmup_steps=300,learning_starts=300,eval_every=1000,checkpoint_every=700,eval_episodes=2,hidden=[32,32],batch_size=64";
-    let all = if overrides.is_empty() {
-        base.to_string()
-    } else {
-        format!("{base},{overrides}")
-    };
+    let all = if overrides.is_empty() { base.to_string() } else { format!("{base},{overrides}") };
     build_config("inverted-pendulum", Algo::Td3, &split_pairs(&all).unwrap()).unwrap()
 }
 
 fn tensors(ckpt: &Path) -> Vec<(String, Vec<f32>)> {
-    let map =
-        candle_core::safetensors::load(ckpt.join("model.safetensors"), &candle_core::Device::Cpu)
-            .unwrap();
-    let mut v: Vec<_> = map
-        .into_iter()
-        .map(|(k, t)| (k, t.flatten_all().unwrap().to_vec1::<f32>().unwrap()))
-        .collect();
+    let map = candle_core::safetensors::load(ckpt.join("model.safetensors"), &candle_core::Device::Cpu).unwrap();
+    let mut v: Vec<_> = map.into_iter().map(|(k, t)| (k, t.flatten_all().unwrap().to_vec1::<f32>().unwrap())).collect();
     v.sort_by(|a, b| a.0.cmp(&b.0));
     v
 }
@@ -141,23 +108,11 @@ fn resume_continues_exactly_like_an_uninterrupted_run() {
     let dir = tempfile::tempdir().unwrap();
     let env = EnvConfig::new("inverted-pendulum");
     let whole = dir.path().join("whole");
-    let a = train::train(
-        env.clone(),
-        small_config(""),
-        5,
-        &whole,
-        None,
-        false,
-        &RunControl::default(),
-    )
-    .unwrap();
+    let a = train::train(env.clone(), small_config(""), 5, &whole, None, false, &RunControl::default()).unwrap();
     assert_eq!(a.outcome, Outcome::Finished);
 
     let split = dir.path().join("split");
-    let control = RunControl {
-        stop_after: Some(1200),
-        ..Default::default()
-    };
+    let control = RunControl { stop_after: Some(1200), ..Default::default() };
     let b = train::train(env, small_config(""), 5, &split, None, false, &control).unwrap();
     assert_eq!(b.outcome, Outcome::Stopped);
     assert!(b.steps >= 1200 && b.steps < 3000);
@@ -217,61 +172,28 @@ fn run_directory_contents_and_protection() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     let cfg = small_config("total_steps=800");
-    train::train(
-        EnvConfig::new("inverted-pendulum"),
-        cfg.clone(),
-        1,
-        &run,
-        None,
-        false,
-        &RunControl::default(),
-    )
-    .unwrap();
+    train::train(EnvConfig::new("inverted-pendulum"), cfg.clone(), 1, &run, None, false, &RunControl::default())
+        .unwrap();
     let config = std::fs::read_to_string(run.join("config.toml")).unwrap();
-    for key in [
-        "seed = 1",
-        "crate_version",
-        "policy_noise",
-        "max_pole_angle",
-        "name = \"inverted-pendulum\"",
-    ] {
+    for key in ["seed = 1", "crate_version", "policy_noise", "max_pole_angle", "name = \"inverted-pendulum\""] {
         assert!(config.contains(key), "config.toml lacks {key}:\n{config}");
     }
     let metrics = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
-    assert!(metrics.starts_with("kind,step,episode_return,episode_length,eval_mean,eval_std,critic_loss,actor_loss,alpha,steps_per_s,wall_time"));
+    assert!(metrics.starts_with(
+        "kind,step,episode_return,episode_length,eval_mean,eval_std,critic_loss,actor_loss,alpha,steps_per_s,wall_time"
+    ));
     assert!(metrics.lines().any(|l| l.starts_with("eval,800,")));
     let ckpt = train::checkpoint::latest(&run).unwrap();
-    for f in [
-        "model.safetensors",
-        "optim.safetensors",
-        "buffer.safetensors",
-        "state.toml",
-    ] {
+    for f in ["model.safetensors", "optim.safetensors", "buffer.safetensors", "state.toml"] {
         assert!(ckpt.join(f).exists(), "{f}");
     }
     // Never overwritten without force.
-    let err = train::train(
-        EnvConfig::new("inverted-pendulum"),
-        cfg.clone(),
-        1,
-        &run,
-        None,
-        false,
-        &RunControl::default(),
-    )
-    .unwrap_err();
+    let err =
+        train::train(EnvConfig::new("inverted-pendulum"), cfg.clone(), 1, &run, None, false, &RunControl::default())
+            .unwrap_err();
     assert!(err.to_string().contains("--force"), "{err}");
     assert!(run.join("config.toml").exists());
-    train::train(
-        EnvConfig::new("inverted-pendulum"),
-        cfg,
-        2,
-        &run,
-        None,
-        true,
-        &RunControl::default(),
-    )
-    .unwrap();
+    train::train(EnvConfig::new("inverted-pendulum"), cfg, 2, &run, None, true, &RunControl::default()).unwrap();
 }
 
 #[test]
@@ -279,24 +201,11 @@ fn bad_checkpoints_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     let cfg = small_config("total_steps=700");
-    let s = train::train(
-        EnvConfig::new("inverted-pendulum"),
-        cfg,
-        1,
-        &run,
-        None,
-        false,
-        &RunControl::default(),
-    )
-    .unwrap();
+    let s =
+        train::train(EnvConfig::new("inverted-pendulum"), cfg, 1, &run, None, false, &RunControl::default()).unwrap();
 
     // Fine-tuning on an env with other observation/action sizes.
-    let hc = build_config(
-        "half-cheetah",
-        Algo::Td3,
-        &split_pairs("hidden=[32,32],total_steps=10").unwrap(),
-    )
-    .unwrap();
+    let hc = build_config("half-cheetah", Algo::Td3, &split_pairs("hidden=[32,32],total_steps=10").unwrap()).unwrap();
     let err = train::train(
         EnvConfig::new("half-cheetah"),
         hc,
@@ -310,12 +219,8 @@ fn bad_checkpoints_are_clear_errors() {
     assert!(err.to_string().contains("shape"), "{err:#}");
 
     // Another algorithm's checkpoint.
-    let sac = build_config(
-        "inverted-pendulum",
-        Algo::Sac,
-        &split_pairs("hidden=[32,32],total_steps=10").unwrap(),
-    )
-    .unwrap();
+    let sac =
+        build_config("inverted-pendulum", Algo::Sac, &split_pairs("hidden=[32,32],total_steps=10").unwrap()).unwrap();
     let err = train::train(
         EnvConfig::new("inverted-pendulum"),
         sac,
@@ -331,11 +236,7 @@ fn bad_checkpoints_are_clear_errors() {
     // Missing and corrupt.
     assert!(train::load_policy(&dir.path().join("nowhere")).is_err());
     let bytes = std::fs::read(s.checkpoint.join("model.safetensors")).unwrap();
-    std::fs::write(
-        s.checkpoint.join("model.safetensors"),
-        &bytes[..bytes.len() / 2],
-    )
-    .unwrap();
+    std::fs::write(s.checkpoint.join("model.safetensors"), &bytes[..bytes.len() / 2]).unwrap();
     let err = train::load_policy(&s.checkpoint).err().unwrap();
     assert!(format!("{err:#}").contains("corrupt"), "{err:#}");
     let err = train::resume(&run, &RunControl::default()).unwrap_err();
@@ -357,25 +258,12 @@ fn fine_tuning_starts_from_the_checkpoint_weights() {
     .unwrap();
     // New reward/option settings, no updates: the weights must be exactly the source's.
     let cfg = small_config("total_steps=5,warmup_steps=0,learning_starts=1000000");
-    let env = EnvConfig::new("inverted-pendulum")
-        .with_overrides(&[("max_pole_angle".into(), "0.3".into())])
+    let env = EnvConfig::new("inverted-pendulum").with_overrides(&[("max_pole_angle".into(), "0.3".into())]).unwrap();
+    let ft = train::train(env, cfg, 2, &dir.path().join("ft"), Some(&src.checkpoint), false, &RunControl::default())
         .unwrap();
-    let ft = train::train(
-        env,
-        cfg,
-        2,
-        &dir.path().join("ft"),
-        Some(&src.checkpoint),
-        false,
-        &RunControl::default(),
-    )
-    .unwrap();
     assert_eq!(tensors(&src.checkpoint), tensors(&ft.checkpoint));
     let config = std::fs::read_to_string(dir.path().join("ft/config.toml")).unwrap();
-    assert!(
-        config.contains("init_from") && config.contains("max_pole_angle = 0.3"),
-        "{config}"
-    );
+    assert!(config.contains("init_from") && config.contains("max_pole_angle = 0.3"), "{config}");
 }
 
 #[test]
@@ -398,10 +286,7 @@ fn sac_v1_and_ddpg_with_ou_noise_train_and_checkpoint() {
     )
     .unwrap();
     let names: Vec<String> = tensors(&s.checkpoint).into_iter().map(|(n, _)| n).collect();
-    assert!(
-        names.iter().any(|n| n.starts_with("value."))
-            && names.iter().any(|n| n.starts_with("value_target."))
-    );
+    assert!(names.iter().any(|n| n.starts_with("value.")) && names.iter().any(|n| n.starts_with("value_target.")));
     let metrics = std::fs::read_to_string(dir.path().join("v1/metrics.csv")).unwrap();
     let last = metrics.lines().last().unwrap();
     assert!(last.starts_with("eval,600"), "{last}");
@@ -423,9 +308,6 @@ fn sac_v1_and_ddpg_with_ou_noise_train_and_checkpoint() {
     )
     .unwrap();
     let state = train::checkpoint::load_state(&s.checkpoint).unwrap();
-    assert_eq!(
-        state.counters["noise_steps"], 400,
-        "OU noise advanced once per exploratory step"
-    );
+    assert_eq!(state.counters["noise_steps"], 400, "OU noise advanced once per exploratory step");
     assert!(!names.is_empty());
 }

@@ -2,15 +2,8 @@
 use std::process::Command;
 
 fn locobench(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_locobench"))
-        .args(args)
-        .output()
-        .unwrap();
-    (
-        out.status.success(),
-        String::from_utf8_lossy(&out.stdout).into(),
-        String::from_utf8_lossy(&out.stderr).into(),
-    )
+    let out = Command::new(env!("CARGO_BIN_EXE_locobench")).args(args).output().unwrap();
+    (out.status.success(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
 }
 
 #[test]
@@ -24,10 +17,7 @@ fn envs_lists_every_environment_with_sizes() {
         ("inverted-pendulum", 4, 1),
         ("minitaur", 28, 8),
     ] {
-        let line = out
-            .lines()
-            .find(|l| l.starts_with(name))
-            .unwrap_or_else(|| panic!("{name} missing:\n{out}"));
+        let line = out.lines().find(|l| l.starts_with(name)).unwrap_or_else(|| panic!("{name} missing:\n{out}"));
         let cols: Vec<&str> = line.split_whitespace().collect();
         assert_eq!(cols[1], obs.to_string(), "{line}");
         assert_eq!(cols[2], act.to_string(), "{line}");
@@ -59,14 +49,7 @@ fn rollout_writes_one_row_per_step_and_replays_exactly() {
     let mut lines = text.lines();
     let header: Vec<&str> = lines.next().unwrap().split(',').collect();
     assert_eq!(&header[..3], &["episode", "step", "action_0"]);
-    for col in [
-        "reward",
-        "forward",
-        "ctrl_cost",
-        "terminated",
-        "truncated",
-        "obs_16",
-    ] {
+    for col in ["reward", "forward", "ctrl_cost", "terminated", "truncated", "obs_16"] {
         assert!(header.contains(&col), "missing {col}");
     }
     let rows: Vec<Vec<&str>> = lines.map(|l| l.split(',').collect()).collect();
@@ -103,11 +86,7 @@ fn rollout_writes_one_row_per_step_and_replays_exactly() {
         replay.to_str().unwrap(),
     ]);
     assert!(ok, "{err}");
-    assert_eq!(
-        std::fs::read_to_string(&replay).unwrap(),
-        text,
-        "a replay must reproduce the trajectory exactly"
-    );
+    assert_eq!(std::fs::read_to_string(&replay).unwrap(), text, "a replay must reproduce the trajectory exactly");
 }
 
 #[test]
@@ -140,42 +119,11 @@ fn bad_input_fails_with_a_clear_message_and_writes_nothing() {
     let out = dir.path().join("never.csv");
     let o = out.to_str().unwrap();
     let cases: [(&[&str], &str); 5] = [
-        (
-            &["rollout", "--env", "hopper", "--out", o],
-            "unknown environment 'hopper'",
-        ),
-        (
-            &["rollout", "--env", "ant", "--policy", "smart", "--out", o],
-            "unknown policy 'smart'",
-        ),
-        (
-            &[
-                "rollout",
-                "--env",
-                "ant",
-                "--policy",
-                "actions:/no/such.csv",
-                "--out",
-                o,
-            ],
-            "/no/such.csv",
-        ),
-        (
-            &[
-                "rollout",
-                "--env",
-                "ant",
-                "--option",
-                "ctrl_cost_weight=-2",
-                "--out",
-                o,
-            ],
-            "ctrl_cost_weight",
-        ),
-        (
-            &["rollout", "--env", "ant", "--option", "bogus", "--out", o],
-            "not key=value",
-        ),
+        (&["rollout", "--env", "hopper", "--out", o], "unknown environment 'hopper'"),
+        (&["rollout", "--env", "ant", "--policy", "smart", "--out", o], "unknown policy 'smart'"),
+        (&["rollout", "--env", "ant", "--policy", "actions:/no/such.csv", "--out", o], "/no/such.csv"),
+        (&["rollout", "--env", "ant", "--option", "ctrl_cost_weight=-2", "--out", o], "ctrl_cost_weight"),
+        (&["rollout", "--env", "ant", "--option", "bogus", "--out", o], "not key=value"),
     ];
     for (args, expect) in cases {
         let (ok, _, err) = locobench(args);
@@ -185,20 +133,10 @@ fn bad_input_fails_with_a_clear_message_and_writes_nothing() {
     // An action file for another env: wrong action length.
     let wrong = dir.path().join("wrong.csv");
     std::fs::write(&wrong, "0.1,0.2\n").unwrap();
-    let (ok, _, err) = locobench(&[
-        "rollout",
-        "--env",
-        "ant",
-        "--policy",
-        &format!("actions:{}", wrong.display()),
-        "--out",
-        o,
-    ]);
+    let (ok, _, err) =
+        locobench(&["rollout", "--env", "ant", "--policy", &format!("actions:{}", wrong.display()), "--out", o]);
     assert!(!ok && err.contains("expects 8"), "{err}");
-    assert!(
-        !out.exists(),
-        "a failed rollout must not leave a partial file"
-    );
+    assert!(!out.exists(), "a failed rollout must not leave a partial file");
 }
 
 #[test]
@@ -229,24 +167,11 @@ fn train_eval_resume_and_fine_tune_from_the_command_line() {
 
     let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "3"]);
     assert!(ok, "{err}");
-    assert!(
-        out.contains("over 3 episodes") && out.contains("healthy"),
-        "{out}"
-    );
+    assert!(out.contains("over 3 episodes") && out.contains("healthy"), "{out}");
 
     // Same directory again: refused without --force.
-    let (ok, _, err) = locobench(&[
-        "train",
-        "--env",
-        "inverted-pendulum",
-        "--algo",
-        "sac",
-        "--steps",
-        "600",
-        "--out",
-        r,
-        "--quiet",
-    ]);
+    let (ok, _, err) =
+        locobench(&["train", "--env", "inverted-pendulum", "--algo", "sac", "--steps", "600", "--out", r, "--quiet"]);
     assert!(!ok && err.contains("--force"), "{err}");
 
     // Resuming a finished run is a no-op that still succeeds.
@@ -283,26 +208,10 @@ fn train_rejects_bad_arguments() {
     let o = dir.path().join("x");
     let o = o.to_str().unwrap();
     let cases: [(&[&str], &str); 5] = [
-        (
-            &["train", "--env", "ant", "--algo", "ppo", "--out", o],
-            "unknown algorithm 'ppo'",
-        ),
-        (
-            &["train", "--env", "hopper", "--algo", "td3", "--out", o],
-            "unknown environment 'hopper'",
-        ),
-        (
-            &[
-                "train", "--env", "ant", "--algo", "td3", "--set", "tau=7", "--out", o,
-            ],
-            "tau",
-        ),
-        (
-            &[
-                "train", "--env", "ant", "--algo", "td3", "--reward", "wobble=1", "--out", o,
-            ],
-            "wobble",
-        ),
+        (&["train", "--env", "ant", "--algo", "ppo", "--out", o], "unknown algorithm 'ppo'"),
+        (&["train", "--env", "hopper", "--algo", "td3", "--out", o], "unknown environment 'hopper'"),
+        (&["train", "--env", "ant", "--algo", "td3", "--set", "tau=7", "--out", o], "tau"),
+        (&["train", "--env", "ant", "--algo", "td3", "--reward", "wobble=1", "--out", o], "wobble"),
         (&["eval", "--checkpoint", "/no/such/run"], "no checkpoint"),
     ];
     for (args, expect) in cases {
@@ -337,23 +246,12 @@ fn ctrl_c_stops_training_with_a_checkpoint() {
         .spawn()
         .unwrap();
     std::thread::sleep(std::time::Duration::from_millis(2500));
-    let status = Command::new("kill")
-        .args(["-INT", &child.id().to_string()])
-        .status()
-        .unwrap();
+    let status = Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
     assert!(status.success());
     let out = child.wait_with_output().unwrap();
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(stdout.contains("stopped at step"), "{stdout}");
     let latest = std::fs::read_to_string(run.join("checkpoints/latest")).unwrap();
-    assert!(run
-        .join("checkpoints")
-        .join(latest.trim())
-        .join("model.safetensors")
-        .exists());
+    assert!(run.join("checkpoints").join(latest.trim()).join("model.safetensors").exists());
 }

@@ -2,15 +2,13 @@
 //! health and termination, reset noise, determinism, bad input.
 use locobench::envs::Ant;
 use locobench::envs::{
-    make, AntOptions, Env, EnvConfig, EnvError, HalfCheetah, HalfCheetahOptions, Humanoid,
-    HumanoidOptions, InvertedPendulum, InvertedPendulumOptions,
+    make, AntOptions, Env, EnvConfig, EnvError, HalfCheetah, HalfCheetahOptions, Humanoid, HumanoidOptions,
+    InvertedPendulum, InvertedPendulumOptions,
 };
 use locobench::mujoco::{Data, Model};
 
 fn wiggle(t: usize, n: usize, scale: f64) -> Vec<f64> {
-    (0..n)
-        .map(|i| scale * ((t * 7 + i * 3) as f64 * 0.37).sin())
-        .collect()
+    (0..n).map(|i| scale * ((t * 7 + i * 3) as f64 * 0.37).sin()).collect()
 }
 
 #[test]
@@ -74,11 +72,7 @@ fn ant_reward_by_hand_and_contact_observation() {
         let z = d.qpos()[2];
         let healthy = if (0.2..=1.0).contains(&z) { 1.0 } else { 0.0 };
         let ctrl = 0.5 * a.iter().map(|v| v * v).sum::<f64>();
-        let contact = 5e-4
-            * d.cfrc_ext()
-                .iter()
-                .map(|f| f.clamp(-1.0, 1.0).powi(2))
-                .sum::<f64>();
+        let contact = 5e-4 * d.cfrc_ext().iter().map(|f| f.clamp(-1.0, 1.0).powi(2)).sum::<f64>();
         saw_contact |= contact > 0.0;
         assert!((s.info.term("forward").unwrap() - forward).abs() < 1e-12);
         assert_eq!(s.info.term("healthy").unwrap(), healthy);
@@ -101,12 +95,7 @@ fn humanoid_reward_by_hand() {
     let com_x = |d: &Data| {
         let m = d.model();
         let total: f64 = m.body_mass().iter().sum();
-        m.body_mass()
-            .iter()
-            .enumerate()
-            .map(|(b, mass)| mass * d.xipos()[3 * b])
-            .sum::<f64>()
-            / total
+        m.body_mass().iter().enumerate().map(|(b, mass)| mass * d.xipos()[3 * b]).sum::<f64>() / total
     };
     for t in 0..30 {
         let x0 = com_x(env.data());
@@ -149,11 +138,7 @@ fn humanoid_falls_and_terminates_under_zero_action() {
         assert!(steps < 1000, "a limp humanoid must fall");
     }
     // Without termination the same fall keeps going, unrewarded.
-    let mut env = Humanoid::new(HumanoidOptions {
-        terminate_when_unhealthy: false,
-        ..Default::default()
-    })
-    .unwrap();
+    let mut env = Humanoid::new(HumanoidOptions { terminate_when_unhealthy: false, ..Default::default() }).unwrap();
     env.reset(Some(0)).unwrap();
     for _ in 0..steps + 5 {
         let s = env.step(&[0.0; 17]).unwrap();
@@ -164,21 +149,14 @@ fn humanoid_falls_and_terminates_under_zero_action() {
 #[test]
 fn ant_healthy_range_controls_termination() {
     // The ant rests around 0.55-0.75 m: a healthy range above that terminates on the first step.
-    let mut env = Ant::new(AntOptions {
-        healthy_z_range: [0.9, 2.0],
-        ..Default::default()
-    })
-    .unwrap();
+    let mut env = Ant::new(AntOptions { healthy_z_range: [0.9, 2.0], ..Default::default() }).unwrap();
     env.reset(Some(0)).unwrap();
     let s = env.step(&[0.0; 8]).unwrap();
     assert!(s.terminated && !s.truncated);
     assert_eq!(s.info.term("healthy").unwrap(), 0.0);
-    let mut env = Ant::new(AntOptions {
-        healthy_z_range: [0.9, 2.0],
-        terminate_when_unhealthy: false,
-        ..Default::default()
-    })
-    .unwrap();
+    let mut env =
+        Ant::new(AntOptions { healthy_z_range: [0.9, 2.0], terminate_when_unhealthy: false, ..Default::default() })
+            .unwrap();
     env.reset(Some(0)).unwrap();
     assert!(!env.step(&[0.0; 8]).unwrap().terminated);
 }
@@ -204,12 +182,9 @@ fn inverted_pendulum_terminates_past_0_2_rad() {
 
 #[test]
 fn time_limit_truncates() {
-    let mut env = make(
-        &EnvConfig::new("half-cheetah")
-            .with_overrides(&[("max_episode_steps".into(), "7".into())])
-            .unwrap(),
-    )
-    .unwrap();
+    let mut env =
+        make(&EnvConfig::new("half-cheetah").with_overrides(&[("max_episode_steps".into(), "7".into())]).unwrap())
+            .unwrap();
     env.reset(Some(0)).unwrap();
     for t in 1..=7 {
         let s = env.step(&[0.0; 6]).unwrap();
@@ -239,10 +214,7 @@ fn reset_noise_has_the_documented_distribution() {
             n += 1.0;
         }
     }
-    assert!(
-        max_pos <= 0.1 && max_pos > 0.09,
-        "uniform noise bound {max_pos}"
-    );
+    assert!(max_pos <= 0.1 && max_pos > 0.09, "uniform noise bound {max_pos}");
     let std = (vel_sq / n).sqrt();
     assert!((std - 0.1).abs() < 0.01, "velocity noise std {std}");
     // Humanoid: uniform on both, scale 0.01.
@@ -252,11 +224,7 @@ fn reset_noise_has_the_documented_distribution() {
         assert!(env.data().qvel().iter().all(|v| v.abs() <= 0.01));
     }
     // Zero noise gives exactly the initial state.
-    let mut env = HalfCheetah::new(HalfCheetahOptions {
-        reset_noise_scale: 0.0,
-        ..Default::default()
-    })
-    .unwrap();
+    let mut env = HalfCheetah::new(HalfCheetahOptions { reset_noise_scale: 0.0, ..Default::default() }).unwrap();
     env.reset(Some(9)).unwrap();
     assert_eq!(env.data().qpos(), &qpos0[..]);
     assert!(env.data().qvel().iter().all(|&v| v == 0.0));
@@ -283,11 +251,7 @@ fn same_seed_gives_bit_identical_trajectories() {
     for name in locobench::envs::env_names() {
         let a = trajectory(name, 11, 60);
         assert_eq!(a, trajectory(name, 11, 60), "{name}");
-        assert_ne!(
-            a,
-            trajectory(name, 12, 60),
-            "{name}: different seeds should differ"
-        );
+        assert_ne!(a, trajectory(name, 12, 60), "{name}: different seeds should differ");
     }
 }
 
@@ -307,22 +271,11 @@ fn bad_actions_are_clear_errors() {
     assert!(matches!(env.step(&[0.0; 6]), Err(EnvError::NotReset)));
     env.reset(Some(0)).unwrap();
     let e = env.step(&[0.0; 5]).unwrap_err();
-    assert!(matches!(
-        e,
-        EnvError::ActionLength {
-            expected: 6,
-            got: 5
-        }
-    ));
+    assert!(matches!(e, EnvError::ActionLength { expected: 6, got: 5 }));
     assert!(e.to_string().contains("expects 6"));
     let e = env.step(&[0.0, f64::NAN, 0.0, 0.0, 0.0, 0.0]).unwrap_err();
-    assert!(
-        matches!(e, EnvError::NonFiniteAction { index: 1, .. }),
-        "{e}"
-    );
-    let e = env
-        .step(&[0.0, 0.0, 0.0, f64::INFINITY, 0.0, 0.0])
-        .unwrap_err();
+    assert!(matches!(e, EnvError::NonFiniteAction { index: 1, .. }), "{e}");
+    let e = env.step(&[0.0, 0.0, 0.0, f64::INFINITY, 0.0, 0.0]).unwrap_err();
     assert!(matches!(e, EnvError::NonFiniteAction { index: 3, .. }));
     // Nothing was lost: the episode continues.
     let s = env.step(&[2.0, -3.0, 0.0, 0.0, 0.0, 0.5]).unwrap();
@@ -333,14 +286,9 @@ fn bad_actions_are_clear_errors() {
 #[test]
 fn unknown_env_and_invalid_options_are_clear_errors() {
     let e = make(&EnvConfig::new("hopper")).err().unwrap();
-    assert!(
-        e.to_string().contains("unknown environment 'hopper'")
-            && e.to_string().contains("half-cheetah")
-    );
+    assert!(e.to_string().contains("unknown environment 'hopper'") && e.to_string().contains("half-cheetah"));
     let bad = |name: &str, key: &str, value: &str| {
-        let cfg = EnvConfig::new(name)
-            .with_overrides(&[(key.into(), value.into())])
-            .unwrap();
+        let cfg = EnvConfig::new(name).with_overrides(&[(key.into(), value.into())]).unwrap();
         make(&cfg).err().map(|e| e.to_string()).unwrap_or_default()
     };
     assert!(bad("ant", "ctrl_cost_weight", "-1").contains("ctrl_cost_weight"));

@@ -8,9 +8,7 @@
 use locobench::envs::{make, EnvConfig};
 
 fn action(t: usize, n: usize, scale: f64) -> Vec<f64> {
-    (0..n)
-        .map(|i| scale * ((t * 7 + i * 3) as f64 * 0.37).sin())
-        .collect()
+    (0..n).map(|i| scale * ((t * 7 + i * 3) as f64 * 0.37).sin()).collect()
 }
 
 struct Row {
@@ -20,18 +18,13 @@ struct Row {
 }
 
 fn load(name: &str) -> Vec<Row> {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join(format!("tests/reference/{name}.csv"));
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("tests/reference/{name}.csv"));
     let text = std::fs::read_to_string(&path).unwrap();
     text.lines()
         .skip(1)
         .map(|line| {
             let f: Vec<f64> = line.split(',').map(|v| v.parse().unwrap()).collect();
-            Row {
-                reward: f[1],
-                terminated: f[2] != 0.0,
-                obs: f[3..].to_vec(),
-            }
+            Row { reward: f[1], terminated: f[2] != 0.0, obs: f[3..].to_vec() }
         })
         .collect()
 }
@@ -39,18 +32,11 @@ fn load(name: &str) -> Vec<Row> {
 /// Largest absolute difference in observation and reward over the first `steps` steps.
 fn max_difference(name: &str, scale: f64, steps: usize) -> (f64, f64) {
     let rows = load(name);
-    let cfg = EnvConfig::new(name)
-        .with_overrides(&[("reset_noise_scale".into(), "0.0".into())])
-        .unwrap();
+    let cfg = EnvConfig::new(name).with_overrides(&[("reset_noise_scale".into(), "0.0".into())]).unwrap();
     let mut env = make(&cfg).unwrap();
     let n = env.spec().action_space.dim();
     let (obs, _) = env.reset(Some(0)).unwrap();
-    let diff = |a: &[f64], b: &[f64]| {
-        a.iter()
-            .zip(b)
-            .map(|(x, y)| (x - y).abs())
-            .fold(0.0, f64::max)
-    };
+    let diff = |a: &[f64], b: &[f64]| a.iter().zip(b).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
     assert_eq!(obs.len(), rows[0].obs.len());
     let mut worst_obs = diff(&obs, &rows[0].obs);
     let mut worst_reward: f64 = 0.0;

@@ -10,10 +10,7 @@ fn env(opts: MinitaurOptions) -> Minitaur {
 #[test]
 fn stands_for_ten_seconds_under_default_targets() {
     for randomize in [false, true] {
-        let mut e = env(MinitaurOptions {
-            randomize_dynamics: randomize,
-            ..Default::default()
-        });
+        let mut e = env(MinitaurOptions { randomize_dynamics: randomize, ..Default::default() });
         let (obs, info) = e.reset(Some(3)).unwrap();
         assert_eq!(obs.len(), 28);
         let h0 = info.metric("base_height").unwrap();
@@ -38,10 +35,7 @@ fn stands_for_ten_seconds_under_default_targets() {
 
 #[test]
 fn motors_track_the_leg_model_targets() {
-    let mut e = env(MinitaurOptions {
-        randomize_dynamics: false,
-        ..Default::default()
-    });
+    let mut e = env(MinitaurOptions { randomize_dynamics: false, ..Default::default() });
     e.reset(Some(0)).unwrap();
     let action = [0.2, 0.2, -0.1, -0.1, 0.2, 0.2, 0.2, 0.2];
     let targets = motor_angles_from_leg_model(&action);
@@ -52,30 +46,19 @@ fn motors_track_the_leg_model_targets() {
     // loaded motor sits a little off its target; the differential (swing) part tracks closely.
     let angles = e.motor_angles();
     for i in 0..8 {
-        assert!(
-            (angles[i] - targets[i]).abs() < 0.2,
-            "motor {i}: {} vs {}",
-            angles[i],
-            targets[i]
-        );
+        assert!((angles[i] - targets[i]).abs() < 0.2, "motor {i}: {} vs {}", angles[i], targets[i]);
     }
     for leg in 0..4 {
         let swing = (angles[2 * leg] - angles[2 * leg + 1]) / 2.0;
         let wanted = (targets[2 * leg] - targets[2 * leg + 1]) / 2.0;
-        assert!(
-            (swing - wanted).abs() < 0.05,
-            "leg {leg}: swing {swing} vs {wanted}"
-        );
+        assert!((swing - wanted).abs() < 0.05, "leg {leg}: swing {swing} vs {wanted}");
     }
 }
 
 #[test]
 fn extension_raises_and_lowers_the_base() {
     let height_with = |ext: f64| {
-        let mut e = env(MinitaurOptions {
-            randomize_dynamics: false,
-            ..Default::default()
-        });
+        let mut e = env(MinitaurOptions { randomize_dynamics: false, ..Default::default() });
         e.reset(Some(0)).unwrap();
         let a = [0.0, 0.0, 0.0, 0.0, ext, ext, ext, ext];
         for _ in 0..200 {
@@ -85,10 +68,7 @@ fn extension_raises_and_lowers_the_base() {
     };
     let (low, mid, high) = (height_with(0.5), height_with(0.0), height_with(-0.5));
     assert!(low < mid && mid < high, "{low} {mid} {high}");
-    assert!(
-        mid - low > 0.03,
-        "extension +0.5 should lower the base by several cm: {low} {mid}"
-    );
+    assert!(mid - low > 0.03, "extension +0.5 should lower the base by several cm: {low} {mid}");
 }
 
 #[test]
@@ -128,11 +108,7 @@ fn reward_terms_match_the_definition() {
 #[test]
 fn fall_thresholds_end_the_episode() {
     // Legs fully retracted and swung hard: the robot drops below a strict height threshold.
-    let mut e = env(MinitaurOptions {
-        randomize_dynamics: false,
-        fall_height: 0.17,
-        ..Default::default()
-    });
+    let mut e = env(MinitaurOptions { randomize_dynamics: false, fall_height: 0.17, ..Default::default() });
     e.reset(Some(0)).unwrap();
     let mut terminated = false;
     for _ in 0..300 {
@@ -144,19 +120,13 @@ fn fall_thresholds_end_the_episode() {
         }
     }
     assert!(terminated);
-    assert!(
-        e.step(&[0.0; 8]).is_err(),
-        "stepping a finished episode is an error"
-    );
+    assert!(e.step(&[0.0; 8]).is_err(), "stepping a finished episode is an error");
 }
 
 #[test]
 fn torque_mode_drives_motors_within_limits() {
-    let mut e = env(MinitaurOptions {
-        randomize_dynamics: false,
-        action_mode: ActionMode::Torque,
-        ..Default::default()
-    });
+    let mut e =
+        env(MinitaurOptions { randomize_dynamics: false, action_mode: ActionMode::Torque, ..Default::default() });
     assert_eq!(e.spec().action_space.high[0], 3.5);
     e.reset(Some(0)).unwrap();
     let s = e.step(&[1.0; 8]).unwrap();
@@ -172,10 +142,7 @@ fn torque_mode_drives_motors_within_limits() {
 #[test]
 fn four_bar_kinematics_match_the_simulated_legs() {
     use locobench::controller::fourbar;
-    let mut e = env(MinitaurOptions {
-        randomize_dynamics: false,
-        ..Default::default()
-    });
+    let mut e = env(MinitaurOptions { randomize_dynamics: false, ..Default::default() });
     e.reset(Some(0)).unwrap();
     for _ in 0..50 {
         e.step(&[0.3, -0.2, 0.1, 0.0, 0.2, 0.1, 0.0, -0.1]).unwrap();
@@ -186,20 +153,13 @@ fn four_bar_kinematics_match_the_simulated_legs() {
     let r = &d.xmat()[9 * base..9 * base + 9];
     let angles = e.motor_angles();
     for (leg, name) in ["fl", "bl", "fr", "br"].iter().enumerate() {
-        let (outer, inner) = if leg < 2 {
-            (angles[2 * leg], angles[2 * leg + 1])
-        } else {
-            (angles[2 * leg + 1], angles[2 * leg])
-        };
+        let (outer, inner) =
+            if leg < 2 { (angles[2 * leg], angles[2 * leg + 1]) } else { (angles[2 * leg + 1], angles[2 * leg]) };
         let foot = m.site_id(&format!("foot_{name}")).unwrap();
         let hip = m.site_id(&format!("hip_{name}")).unwrap();
-        let w: Vec<f64> = (0..3)
-            .map(|k| d.site_xpos()[3 * foot + k] - d.site_xpos()[3 * hip + k])
-            .collect();
+        let w: Vec<f64> = (0..3).map(|k| d.site_xpos()[3 * foot + k] - d.site_xpos()[3 * hip + k]).collect();
         // World offset into the base frame (R^T w); keep x and z.
-        let local: Vec<f64> = (0..3)
-            .map(|c| (0..3).map(|k| r[3 * k + c] * w[k]).sum())
-            .collect();
+        let local: Vec<f64> = (0..3).map(|c| (0..3).map(|k| r[3 * k + c] * w[k]).sum()).collect();
         let predicted = fourbar::forward(outer, inner).unwrap();
         assert!(
             (local[0] - predicted[0]).abs() < 2e-3 && (local[2] - predicted[1]).abs() < 2e-3,

@@ -3,18 +3,10 @@ use std::sync::Arc;
 
 use locobench::mujoco::{take_warnings, version, Data, MjError, Model, ObjKind};
 
-const MODELS: [&str; 5] = [
-    "half_cheetah",
-    "ant",
-    "humanoid",
-    "inverted_pendulum",
-    "minitaur",
-];
+const MODELS: [&str; 5] = ["half_cheetah", "ant", "humanoid", "inverted_pendulum", "minitaur"];
 
 fn model_path(name: &str) -> std::path::PathBuf {
-    std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("models")
-        .join(format!("{name}.xml"))
+    std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("models").join(format!("{name}.xml"))
 }
 
 #[test]
@@ -25,8 +17,7 @@ fn library_is_2_2_2() {
 #[test]
 fn every_shipped_model_loads_from_path_and_from_string() {
     for name in MODELS {
-        let from_path =
-            Model::from_xml_path(model_path(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
+        let from_path = Model::from_xml_path(model_path(name)).unwrap_or_else(|e| panic!("{name}: {e}"));
         let text = std::fs::read_to_string(model_path(name)).unwrap();
         let from_str = Model::from_xml_str(&text).unwrap();
         assert_eq!(from_path.nq(), from_str.nq(), "{name}");
@@ -60,25 +51,17 @@ fn half_cheetah_total_mass_is_14kg() {
 
 #[test]
 fn malformed_xml_is_an_error_with_mujocos_message() {
-    let err = Model::from_xml_str(
-        "<mujoco><worldbody><geom type='spherez' size='1'/></worldbody></mujoco>",
-    )
-    .unwrap_err();
+    let err =
+        Model::from_xml_str("<mujoco><worldbody><geom type='spherez' size='1'/></worldbody></mujoco>").unwrap_err();
     match &err {
         MjError::Load(msg) => assert!(msg.contains("spherez"), "{msg}"),
         other => panic!("unexpected {other:?}"),
     }
     let err = Model::from_xml_str("<mujoco><worldbody>").unwrap_err();
-    assert!(
-        matches!(err, MjError::Load(ref m) if m.to_lowercase().contains("xml")),
-        "{err}"
-    );
+    assert!(matches!(err, MjError::Load(ref m) if m.to_lowercase().contains("xml")), "{err}");
     let err = Model::from_xml_path("/nonexistent/model.xml").unwrap_err();
     assert!(matches!(err, MjError::Load(_)), "{err}");
-    assert!(
-        !std::path::Path::new("MUJOCO_LOG.TXT").exists(),
-        "MuJoCo wrote a log file"
-    );
+    assert!(!std::path::Path::new("MUJOCO_LOG.TXT").exists(), "MuJoCo wrote a log file");
 }
 
 #[test]
@@ -87,21 +70,12 @@ fn names_map_to_ids_and_unknown_names_are_errors() {
     assert_eq!(m.body_id("torso").unwrap(), 1);
     assert_eq!(m.id(ObjKind::Body, "world").unwrap(), 0);
     let hip4 = m.joint_id("hip_4").unwrap();
-    assert_eq!(
-        m.name(ObjKind::Joint, hip4).unwrap().as_deref(),
-        Some("hip_4")
-    );
+    assert_eq!(m.name(ObjKind::Joint, hip4).unwrap().as_deref(), Some("hip_4"));
     assert_eq!(m.actuator_id("hip_4").unwrap(), 0);
     assert!(m.geom_id("floor").is_ok());
-    assert!(matches!(
-        m.body_id("tail"),
-        Err(MjError::UnknownName { kind: "body", .. })
-    ));
+    assert!(matches!(m.body_id("tail"), Err(MjError::UnknownName { kind: "body", .. })));
     assert!(m.site_id("nope").is_err());
-    assert!(matches!(
-        m.name(ObjKind::Body, 999),
-        Err(MjError::BadIndex { .. })
-    ));
+    assert!(matches!(m.name(ObjKind::Body, 999), Err(MjError::BadIndex { .. })));
     let mt = Model::from_xml_path(model_path("minitaur")).unwrap();
     assert!(mt.site_id("foot_fl").is_ok());
 }
@@ -117,14 +91,7 @@ fn data_steps_resets_and_checks_lengths() {
     }
     assert!((d.time() - 0.1).abs() < 1e-12);
     assert!(d.qpos().iter().zip(m.qpos0()).any(|(a, b)| a != b));
-    assert!(matches!(
-        d.set_ctrl(&[0.0; 5]),
-        Err(MjError::BadLength {
-            expected: 6,
-            got: 5,
-            ..
-        })
-    ));
+    assert!(matches!(d.set_ctrl(&[0.0; 5]), Err(MjError::BadLength { expected: 6, got: 5, .. })));
     assert!(d.set_state(&[0.0; 3], &[0.0; 9]).is_err());
     d.reset().unwrap();
     assert_eq!(d.time(), 0.0);
@@ -140,10 +107,7 @@ fn cfrc_ext_needs_rne_post_constraint() {
     }
     assert!(d.cfrc_ext().iter().all(|&f| f == 0.0));
     d.rne_post_constraint().unwrap();
-    assert!(
-        d.cfrc_ext().iter().any(|&f| f != 0.0),
-        "the ant should touch the floor after 1 s"
-    );
+    assert!(d.cfrc_ext().iter().any(|&f| f != 0.0), "the ant should touch the floor after 1 s");
     assert!(!d.contacts().is_empty());
 }
 

@@ -177,10 +177,7 @@ impl ReplayBuffer {
         let n = self.len;
         let mut side_index: Vec<u32> = self.side_next.keys().map(|&k| k as u32).collect();
         side_index.sort_unstable();
-        let side_values = side_index
-            .iter()
-            .flat_map(|k| self.side_next[&(*k as usize)].iter().copied())
-            .collect();
+        let side_values = side_index.iter().flat_map(|k| self.side_next[&(*k as usize)].iter().copied()).collect();
         BufferSnapshot {
             capacity: self.capacity,
             obs_dim: self.obs_dim,
@@ -215,10 +212,7 @@ impl ReplayBuffer {
         b.rewards[..s.len].copy_from_slice(&s.rewards);
         b.flags[..s.len].copy_from_slice(&s.flags);
         for (k, idx) in s.side_index.iter().enumerate() {
-            b.side_next.insert(
-                *idx as usize,
-                s.side_values[k * s.obs_dim..(k + 1) * s.obs_dim].to_vec(),
-            );
+            b.side_next.insert(*idx as usize, s.side_values[k * s.obs_dim..(k + 1) * s.obs_dim].to_vec());
         }
         b.newest_next = s.newest_next;
         b.write = s.write;
@@ -250,24 +244,14 @@ mod tests {
     use rand::SeedableRng;
 
     /// Feeds episodes of a counter "environment" whose observation is [t, episode].
-    fn fill(
-        buf: &mut ReplayBuffer,
-        episodes: &[(usize, bool)],
-    ) -> Vec<(Vec<f32>, Vec<f32>, bool, bool)> {
+    fn fill(buf: &mut ReplayBuffer, episodes: &[(usize, bool)]) -> Vec<(Vec<f32>, Vec<f32>, bool, bool)> {
         let mut all = Vec::new();
         for (e, &(len, terminated)) in episodes.iter().enumerate() {
             for t in 0..len {
                 let obs = vec![t as f32, e as f32];
                 let next = vec![t as f32 + 1.0, e as f32];
                 let last = t + 1 == len;
-                buf.add(
-                    &obs,
-                    &[t as f32 * 0.1],
-                    t as f32,
-                    &next,
-                    last && terminated,
-                    last && !terminated,
-                );
+                buf.add(&obs, &[t as f32 * 0.1], t as f32, &next, last && terminated, last && !terminated);
                 all.push((obs, next, last && terminated, last && !terminated));
             }
         }
@@ -290,10 +274,7 @@ mod tests {
                 assert_eq!(buf.next_obs(i), &next[..], "transition {k}");
             }
         }
-        assert!(
-            buf.side_next.len() <= 2,
-            "only truncated ends need a stored next observation"
-        );
+        assert!(buf.side_next.len() <= 2, "only truncated ends need a stored next observation");
     }
 
     #[test]
@@ -326,10 +307,7 @@ mod tests {
             let (t, e) = (big.obs[2 * k] as usize, big.obs[2 * k + 1] as usize);
             counts[e * 20 + t] += 1;
         }
-        assert!(
-            counts.iter().all(|&c| (800..1200).contains(&c)),
-            "{counts:?}"
-        );
+        assert!(counts.iter().all(|&c| (800..1200).contains(&c)), "{counts:?}");
         let mut corrupt = buf.export();
         corrupt.rewards.pop();
         assert!(ReplayBuffer::import(corrupt).is_err());

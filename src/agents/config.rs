@@ -126,13 +126,9 @@ impl TrainConfig {
         match algo {
             Algo::Td3 => td3,
             // "Our DDPG" of the TD3 paper: TD3's settings without its three changes.
-            Algo::Ddpg => TrainConfig {
-                policy_noise: 0.0,
-                noise_clip: 0.0,
-                policy_delay: 1,
-                twin_critics: false,
-                ..td3
-            },
+            Algo::Ddpg => {
+                TrainConfig { policy_noise: 0.0, noise_clip: 0.0, policy_delay: 1, twin_critics: false, ..td3 }
+            }
             Algo::Sac => TrainConfig {
                 batch_size: 256,
                 hidden: vec![256, 256],
@@ -146,10 +142,7 @@ impl TrainConfig {
 
     pub fn validate(&self) -> anyhow::Result<()> {
         let positive = |name: &str, v: f64| -> anyhow::Result<()> {
-            anyhow::ensure!(
-                v.is_finite() && v > 0.0,
-                "{name} must be a finite number > 0, got {v}"
-            );
+            anyhow::ensure!(v.is_finite() && v > 0.0, "{name} must be a finite number > 0, got {v}");
             Ok(())
         };
         positive("actor_lr", self.actor_lr)?;
@@ -157,33 +150,21 @@ impl TrainConfig {
         positive("alpha_lr", self.alpha_lr)?;
         positive("value_lr", self.value_lr)?;
         positive("initial_alpha", self.initial_alpha)?;
-        anyhow::ensure!(
-            (0.0..=1.0).contains(&self.gamma),
-            "gamma must lie in [0, 1]"
-        );
+        anyhow::ensure!((0.0..=1.0).contains(&self.gamma), "gamma must lie in [0, 1]");
         anyhow::ensure!(self.tau > 0.0 && self.tau <= 1.0, "tau must lie in (0, 1]");
         anyhow::ensure!(self.batch_size > 0, "batch_size must be at least 1");
-        anyhow::ensure!(
-            self.buffer_capacity > 0,
-            "buffer_capacity must be at least 1"
-        );
+        anyhow::ensure!(self.buffer_capacity > 0, "buffer_capacity must be at least 1");
         anyhow::ensure!(
             !self.hidden.is_empty() && self.hidden.iter().all(|&h| h > 0),
             "hidden needs at least one layer size > 0"
         );
         anyhow::ensure!(self.policy_delay >= 1, "policy_delay must be at least 1");
-        anyhow::ensure!(
-            self.updates_per_step >= 1,
-            "updates_per_step must be at least 1"
-        );
+        anyhow::ensure!(self.updates_per_step >= 1, "updates_per_step must be at least 1");
         anyhow::ensure!(
             self.eval_every > 0 && self.eval_episodes > 0,
             "eval_every and eval_episodes must be at least 1"
         );
-        anyhow::ensure!(
-            self.checkpoint_every > 0,
-            "checkpoint_every must be at least 1"
-        );
+        anyhow::ensure!(self.checkpoint_every > 0, "checkpoint_every must be at least 1");
         anyhow::ensure!(
             self.exploration_noise >= 0.0 && self.policy_noise >= 0.0 && self.noise_clip >= 0.0,
             "noise scales must be >= 0"

@@ -32,41 +32,18 @@ pub struct DeterministicAgent {
 }
 
 impl DeterministicAgent {
-    pub fn new(
-        cfg: &TrainConfig,
-        obs_dim: usize,
-        act_dim: usize,
-        rng: &mut ChaCha8Rng,
-    ) -> Result<Self> {
-        let actor = Mlp::new(
-            &layer_sizes(obs_dim, &cfg.hidden, act_dim),
-            Output::Tanh,
-            rng,
-        )?;
+    pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
+        let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), Output::Tanh, rng)?;
         let n_critics = if cfg.twin_critics { 2 } else { 1 };
         let critics = (0..n_critics)
-            .map(|_| {
-                Mlp::new(
-                    &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1),
-                    Output::Linear,
-                    rng,
-                )
-            })
+            .map(|_| Mlp::new(&layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), Output::Linear, rng))
             .collect::<Result<Vec<_>>>()?;
         let actor_target = actor.deep_copy()?;
-        let critic_targets = critics
-            .iter()
-            .map(|c| c.deep_copy())
-            .collect::<Result<Vec<_>>>()?;
+        let critic_targets = critics.iter().map(|c| c.deep_copy()).collect::<Result<Vec<_>>>()?;
         let actor_opt = Adam::new(actor.vars(), cfg.actor_lr);
-        let critic_opt = Adam::new(
-            critics.iter().flat_map(|c| c.vars()).collect(),
-            cfg.critic_lr,
-        );
+        let critic_opt = Adam::new(critics.iter().flat_map(|c| c.vars()).collect(), cfg.critic_lr);
         let noise = match cfg.noise {
-            NoiseKind::Gaussian => Noise::Gaussian {
-                sigma: cfg.exploration_noise,
-            },
+            NoiseKind::Gaussian => Noise::Gaussian { sigma: cfg.exploration_noise },
             NoiseKind::OrnsteinUhlenbeck => Noise::ornstein_uhlenbeck(
                 act_dim,
                 cfg.ou_theta,
@@ -103,10 +80,7 @@ impl DeterministicAgent {
     /// min_i Q'_i(s, a) over the target critics, one value per row (diagnostics and tests).
     pub fn target_q_min(&self, obs: &[f32], actions: &[f32]) -> Result<Vec<f32>> {
         let n = obs.len() / self.obs_dim;
-        let (o, a) = (
-            batch_tensor(obs, n, self.obs_dim)?,
-            batch_tensor(actions, n, self.act_dim)?,
-        );
+        let (o, a) = (batch_tensor(obs, n, self.obs_dim)?, batch_tensor(actions, n, self.act_dim)?);
         let mut q = Self::q(&self.critic_targets[0], &o, &a)?;
         for t in &self.critic_targets[1..] {
             q = q.minimum(&Self::q(t, &o, &a)?)?;
@@ -117,10 +91,7 @@ impl DeterministicAgent {
     /// The target actor's action for each row.
     pub fn target_actions(&self, obs: &[f32]) -> Result<Vec<f32>> {
         let n = obs.len() / self.obs_dim;
-        self.actor_target
-            .forward(&batch_tensor(obs, n, self.obs_dim)?)?
-            .flatten_all()?
-            .to_vec1::<f32>()
+        self.actor_target.forward(&batch_tensor(obs, n, self.obs_dim)?)?.flatten_all()?.to_vec1::<f32>()
     }
 
     /// y = r + gamma * (1 - terminated) * min_i Q'_i(s', clip(pi'(s') + smoothing noise)).
@@ -132,11 +103,9 @@ impl DeterministicAgent {
         if self.policy_noise > 0.0 {
             let normal = Normal::new(0.0, self.policy_noise).expect("policy_noise >= 0");
             let c = self.noise_clip;
-            let eps: Vec<f32> = (0..n * self.act_dim)
-                .map(|_| normal.sample(rng).clamp(-c, c) as f32)
-                .collect();
-            next_action = (next_action + Tensor::from_vec(eps, (n, self.act_dim), &Device::Cpu)?)?
-                .clamp(-1f32, 1f32)?;
+            let eps: Vec<f32> = (0..n * self.act_dim).map(|_| normal.sample(rng).clamp(-c, c) as f32).collect();
+            next_action =
+                (next_action + Tensor::from_vec(eps, (n, self.act_dim), &Device::Cpu)?)?.clamp(-1f32, 1f32)?;
         }
         let mut q_next = Self::q(&self.critic_targets[0], &next_obs, &next_action)?;
         for t in &self.critic_targets[1..] {
@@ -161,10 +130,7 @@ impl Agent for DeterministicAgent {
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
         let a = self.act(obs)?;
         let noise = self.noise.sample(self.act_dim, rng);
-        Ok(a.iter()
-            .zip(noise)
-            .map(|(a, n)| (*a as f64 + n).clamp(-1.0, 1.0) as f32)
-            .collect())
+        Ok(a.iter().zip(noise).map(|(a, n)| (*a as f64 + n).clamp(-1.0, 1.0) as f32).collect())
     }
 
     fn begin_episode(&mut self) {
@@ -177,26 +143,17 @@ impl Agent for DeterministicAgent {
         let actions = batch_tensor(&batch.actions, n, self.act_dim)?;
         let y = self.td_targets(batch, rng)?;
 
-        let mut critic_loss = Self::q(&self.critics[0], &obs, &actions)?
-            .sub(&y)?
-            .sqr()?
-            .mean_all()?;
+        let mut critic_loss = Self::q(&self.critics[0], &obs, &actions)?.sub(&y)?.sqr()?.mean_all()?;
         for c in &self.critics[1..] {
-            critic_loss =
-                (critic_loss + Self::q(c, &obs, &actions)?.sub(&y)?.sqr()?.mean_all()?)?;
+            critic_loss = (critic_loss + Self::q(c, &obs, &actions)?.sub(&y)?.sqr()?.mean_all()?)?;
         }
         let grads = critic_loss.backward()?;
         self.critic_opt.step(&grads)?;
         self.updates += 1;
 
-        let mut losses = Losses {
-            critic: critic_loss.to_scalar::<f32>()? as f64,
-            ..Default::default()
-        };
+        let mut losses = Losses { critic: critic_loss.to_scalar::<f32>()? as f64, ..Default::default() };
         if self.updates % self.policy_delay == 0 {
-            let actor_loss = Self::q(&self.critics[0], &obs, &self.actor.forward(&obs)?)?
-                .mean_all()?
-                .neg()?;
+            let actor_loss = Self::q(&self.critics[0], &obs, &self.actor.forward(&obs)?)?.mean_all()?.neg()?;
             let grads = actor_loss.backward()?;
             self.actor_opt.step(&grads)?;
             polyak_update(&self.actor, &self.actor_target, self.tau)?;
@@ -219,17 +176,11 @@ impl Agent for DeterministicAgent {
     }
 
     fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
-        vec![
-            ("actor_opt", &mut self.actor_opt),
-            ("critic_opt", &mut self.critic_opt),
-        ]
+        vec![("actor_opt", &mut self.actor_opt), ("critic_opt", &mut self.critic_opt)]
     }
 
     fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![
-            ("updates", self.updates),
-            ("noise_steps", self.noise.steps()),
-        ]
+        vec![("updates", self.updates), ("noise_steps", self.noise.steps())]
     }
 
     fn set_counter(&mut self, name: &str, value: u64) {

@@ -49,12 +49,7 @@ pub trait Agent: Send {
 }
 
 /// Builds the agent a config asks for, initialised from `rng`.
-pub fn make_agent(
-    cfg: &TrainConfig,
-    obs_dim: usize,
-    act_dim: usize,
-    rng: &mut ChaCha8Rng,
-) -> Result<Box<dyn Agent>> {
+pub fn make_agent(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
     Ok(match cfg.algo {
         Algo::Td3 | Algo::Ddpg => Box::new(DeterministicAgent::new(cfg, obs_dim, act_dim, rng)?),
         Algo::Sac => Box::new(SacAgent::new(cfg, obs_dim, act_dim, rng)?),
@@ -63,8 +58,5 @@ pub fn make_agent(
 
 /// Layer sizes `input, hidden..., output`.
 pub(crate) fn layer_sizes(input: usize, hidden: &[usize], output: usize) -> Vec<usize> {
-    std::iter::once(input)
-        .chain(hidden.iter().copied())
-        .chain(std::iter::once(output))
-        .collect()
+    std::iter::once(input).chain(hidden.iter().copied()).chain(std::iter::once(output)).collect()
 }

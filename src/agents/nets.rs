@@ -27,14 +27,9 @@ impl Mlp {
         for w in sizes.windows(2) {
             let (fan_in, fan_out) = (w[0], w[1]);
             let bound = 1.0 / (fan_in as f32).sqrt();
-            let weight: Vec<f32> = (0..fan_in * fan_out)
-                .map(|_| rng.random_range(-bound..bound))
-                .collect();
-            let bias: Vec<f32> = (0..fan_out)
-                .map(|_| rng.random_range(-bound..bound))
-                .collect();
-            let weight =
-                Var::from_tensor(&Tensor::from_vec(weight, (fan_out, fan_in), &Device::Cpu)?)?;
+            let weight: Vec<f32> = (0..fan_in * fan_out).map(|_| rng.random_range(-bound..bound)).collect();
+            let bias: Vec<f32> = (0..fan_out).map(|_| rng.random_range(-bound..bound)).collect();
+            let weight = Var::from_tensor(&Tensor::from_vec(weight, (fan_out, fan_in), &Device::Cpu)?)?;
             let bias = Var::from_tensor(&Tensor::from_vec(bias, fan_out, &Device::Cpu)?)?;
             params.push((weight, bias));
         }
@@ -42,15 +37,9 @@ impl Mlp {
     }
 
     fn from_params(params: Vec<(Var, Var)>, output: Output) -> Mlp {
-        let layers = params
-            .iter()
-            .map(|(w, b)| Linear::new(w.as_tensor().clone(), Some(b.as_tensor().clone())))
-            .collect();
-        Mlp {
-            params,
-            layers,
-            output,
-        }
+        let layers =
+            params.iter().map(|(w, b)| Linear::new(w.as_tensor().clone(), Some(b.as_tensor().clone()))).collect();
+        Mlp { params, layers, output }
     }
 
     /// An independent copy with equal weights (for target networks).
@@ -58,12 +47,7 @@ impl Mlp {
         let params = self
             .params
             .iter()
-            .map(|(w, b)| {
-                Ok((
-                    Var::from_tensor(&w.as_tensor().copy()?)?,
-                    Var::from_tensor(&b.as_tensor().copy()?)?,
-                ))
-            })
+            .map(|(w, b)| Ok((Var::from_tensor(&w.as_tensor().copy()?)?, Var::from_tensor(&b.as_tensor().copy()?)?)))
             .collect::<Result<Vec<_>>>()?;
         Ok(Self::from_params(params, self.output))
     }
@@ -83,10 +67,7 @@ impl Mlp {
     }
 
     pub fn vars(&self) -> Vec<Var> {
-        self.params
-            .iter()
-            .flat_map(|(w, b)| [w.clone(), b.clone()])
-            .collect()
+        self.params.iter().flat_map(|(w, b)| [w.clone(), b.clone()]).collect()
     }
 
     /// Parameters named `<prefix>.<layer>.weight` / `.bias`, for checkpoints.
@@ -95,10 +76,7 @@ impl Mlp {
             .iter()
             .enumerate()
             .flat_map(|(i, (w, b))| {
-                [
-                    (format!("{prefix}.{i}.weight"), w.clone()),
-                    (format!("{prefix}.{i}.bias"), b.clone()),
-                ]
+                [(format!("{prefix}.{i}.weight"), w.clone()), (format!("{prefix}.{i}.bias"), b.clone())]
             })
             .collect()
     }
@@ -141,21 +119,12 @@ mod tests {
         let b = Mlp::new(&[3, 8, 2], Output::Tanh, &mut ChaCha8Rng::seed_from_u64(1)).unwrap();
         let c = Mlp::new(&[3, 8, 2], Output::Tanh, &mut ChaCha8Rng::seed_from_u64(2)).unwrap();
         let flat = |m: &Mlp| {
-            m.vars()
-                .iter()
-                .flat_map(|v| v.flatten_all().unwrap().to_vec1::<f32>().unwrap())
-                .collect::<Vec<_>>()
+            m.vars().iter().flat_map(|v| v.flatten_all().unwrap().to_vec1::<f32>().unwrap()).collect::<Vec<_>>()
         };
         assert_eq!(flat(&a), flat(&b));
         assert_ne!(flat(&a), flat(&c));
         let bound = 1.0 / 3f32.sqrt();
-        assert!(a.vars()[0]
-            .flatten_all()
-            .unwrap()
-            .to_vec1::<f32>()
-            .unwrap()
-            .iter()
-            .all(|w| w.abs() <= bound));
+        assert!(a.vars()[0].flatten_all().unwrap().to_vec1::<f32>().unwrap().iter().all(|w| w.abs() <= bound));
 
         let target = c.deep_copy().unwrap();
         let (before_t, online) = (flat(&target), flat(&a));

@@ -35,33 +35,15 @@ impl Noise {
         decay_steps: u64,
         dt: f64,
     ) -> Noise {
-        Noise::OrnsteinUhlenbeck {
-            theta,
-            sigma_max,
-            sigma_min,
-            decay_steps,
-            dt,
-            state: vec![0.0; dim],
-            steps: 0,
-        }
+        Noise::OrnsteinUhlenbeck { theta, sigma_max, sigma_min, decay_steps, dt, state: vec![0.0; dim], steps: 0 }
     }
 
     /// The current standard deviation of the driving noise.
     pub fn sigma(&self) -> f64 {
         match self {
             Noise::Gaussian { sigma } => *sigma,
-            Noise::OrnsteinUhlenbeck {
-                sigma_max,
-                sigma_min,
-                decay_steps,
-                steps,
-                ..
-            } => {
-                let frac = if *decay_steps == 0 {
-                    1.0
-                } else {
-                    (*steps as f64 / *decay_steps as f64).min(1.0)
-                };
+            Noise::OrnsteinUhlenbeck { sigma_max, sigma_min, decay_steps, steps, .. } => {
+                let frac = if *decay_steps == 0 { 1.0 } else { (*steps as f64 / *decay_steps as f64).min(1.0) };
                 sigma_max - (sigma_max - sigma_min) * frac
             }
         }
@@ -84,13 +66,7 @@ impl Noise {
                     sigma * z
                 })
                 .collect(),
-            Noise::OrnsteinUhlenbeck {
-                theta,
-                dt,
-                state,
-                steps,
-                ..
-            } => {
+            Noise::OrnsteinUhlenbeck { theta, dt, state, steps, .. } => {
                 for x in state.iter_mut() {
                     let z: f64 = StandardNormal.sample(rng);
                     *x += *theta * (0.0 - *x) * *dt + sigma * dt.sqrt() * z;
@@ -136,8 +112,7 @@ mod tests {
         assert!((n.sigma() - 0.1).abs() < 1e-12);
         // Successive OU samples are strongly correlated; Gaussian ones are not.
         let xs: Vec<f64> = (0..2000).map(|_| n.sample(1, &mut rng)[0]).collect();
-        let corr =
-            xs.windows(2).map(|w| w[0] * w[1]).sum::<f64>() / xs.iter().map(|x| x * x).sum::<f64>();
+        let corr = xs.windows(2).map(|w| w[0] * w[1]).sum::<f64>() / xs.iter().map(|x| x * x).sum::<f64>();
         assert!(corr > 0.9, "{corr}");
         let mut g = Noise::Gaussian { sigma: 0.1 };
         let ys: Vec<f64> = (0..20000).map(|_| g.sample(1, &mut rng)[0]).collect();

@@ -19,16 +19,7 @@ impl Adam {
     pub fn new(params: Vec<Var>, lr: f64) -> Adam {
         let m = params.iter().map(|p| vec![0.0; p.elem_count()]).collect();
         let v = params.iter().map(|p| vec![0.0; p.elem_count()]).collect();
-        Adam {
-            lr,
-            beta1: 0.9,
-            beta2: 0.999,
-            eps: 1e-8,
-            step: 0,
-            params,
-            m,
-            v,
-        }
+        Adam { lr, beta1: 0.9, beta2: 0.999, eps: 1e-8, step: 0, params, m, v }
     }
 
     pub fn steps(&self) -> u64 {
@@ -63,14 +54,8 @@ impl Adam {
     pub fn state(&self, prefix: &str) -> Result<(Vec<(String, Tensor)>, u64)> {
         let mut out = Vec::new();
         for (i, (m, v)) in self.m.iter().zip(&self.v).enumerate() {
-            out.push((
-                format!("{prefix}.{i}.m"),
-                Tensor::from_slice(m, m.len(), &Device::Cpu)?,
-            ));
-            out.push((
-                format!("{prefix}.{i}.v"),
-                Tensor::from_slice(v, v.len(), &Device::Cpu)?,
-            ));
+            out.push((format!("{prefix}.{i}.m"), Tensor::from_slice(m, m.len(), &Device::Cpu)?));
+            out.push((format!("{prefix}.{i}.v"), Tensor::from_slice(v, v.len(), &Device::Cpu)?));
         }
         Ok((out, self.step))
     }
@@ -84,16 +69,10 @@ impl Adam {
         for i in 0..self.params.len() {
             for (name, slot) in [("m", &mut self.m[i]), ("v", &mut self.v[i])] {
                 let key = format!("{prefix}.{i}.{name}");
-                let t = tensors
-                    .get(&key)
-                    .ok_or_else(|| anyhow::anyhow!("checkpoint lacks optimiser tensor {key}"))?;
+                let t = tensors.get(&key).ok_or_else(|| anyhow::anyhow!("checkpoint lacks optimiser tensor {key}"))?;
                 let data = t.flatten_all()?.to_vec1::<f32>()?;
                 if data.len() != slot.len() {
-                    anyhow::bail!(
-                        "optimiser tensor {key} has {} values, expected {}",
-                        data.len(),
-                        slot.len()
-                    );
+                    anyhow::bail!("optimiser tensor {key} has {} values, expected {}", data.len(), slot.len());
                 }
                 *slot = data;
             }
@@ -114,21 +93,12 @@ mod tests {
         let ours_p = Var::from_tensor(&init).unwrap();
         let theirs_p = Var::from_tensor(&init.copy().unwrap()).unwrap();
         let mut ours = Adam::new(vec![ours_p.clone()], 1e-2);
-        let params = ParamsAdamW {
-            lr: 1e-2,
-            weight_decay: 0.0,
-            ..Default::default()
-        };
+        let params = ParamsAdamW { lr: 1e-2, weight_decay: 0.0, ..Default::default() };
         let mut theirs = AdamW::new(vec![theirs_p.clone()], params).unwrap();
         let target = Tensor::new(&[[1.0f32, 2.0], [-1.0, 0.5]], &Device::Cpu).unwrap();
         for _ in 0..50 {
             for (p, step) in [(&ours_p, 0), (&theirs_p, 1)] {
-                let loss = (p.as_tensor() - &target)
-                    .unwrap()
-                    .sqr()
-                    .unwrap()
-                    .sum_all()
-                    .unwrap();
+                let loss = (p.as_tensor() - &target).unwrap().sqr().unwrap().sum_all().unwrap();
                 let grads = loss.backward().unwrap();
                 if step == 0 {
                     ours.step(&grads).unwrap()

@@ -53,24 +53,10 @@ pub fn squashed_gaussian_log_prob(u: &Tensor, eps: &Tensor, log_std: &Tensor) ->
 }
 
 impl SacAgent {
-    pub fn new(
-        cfg: &TrainConfig,
-        obs_dim: usize,
-        act_dim: usize,
-        rng: &mut ChaCha8Rng,
-    ) -> Result<Self> {
-        let actor = Mlp::new(
-            &layer_sizes(obs_dim, &cfg.hidden, 2 * act_dim),
-            Output::Linear,
-            rng,
-        )?;
-        let critic = |rng: &mut ChaCha8Rng| {
-            Mlp::new(
-                &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1),
-                Output::Linear,
-                rng,
-            )
-        };
+    pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
+        let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 2 * act_dim), Output::Linear, rng)?;
+        let critic =
+            |rng: &mut ChaCha8Rng| Mlp::new(&layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), Output::Linear, rng);
         let critics = [critic(rng)?, critic(rng)?];
         let critic_targets = [critics[0].deep_copy()?, critics[1].deep_copy()?];
         let value = match cfg.sac_version {
@@ -90,10 +76,7 @@ impl SacAgent {
             gamma: cfg.gamma,
             tau: cfg.tau,
             actor_opt: Adam::new(actor.vars(), cfg.actor_lr),
-            critic_opt: Adam::new(
-                critics.iter().flat_map(|c| c.vars()).collect(),
-                cfg.critic_lr,
-            ),
+            critic_opt: Adam::new(critics.iter().flat_map(|c| c.vars()).collect(), cfg.critic_lr),
             alpha_opt: autotune.then(|| Adam::new(vec![log_alpha.clone()], cfg.alpha_lr)),
             actor,
             critics,
@@ -106,20 +89,13 @@ impl SacAgent {
     }
 
     pub fn alpha(&self) -> Result<f64> {
-        Ok(self
-            .log_alpha
-            .as_tensor()
-            .exp()?
-            .flatten_all()?
-            .to_vec1::<f32>()?[0] as f64)
+        Ok(self.log_alpha.as_tensor().exp()?.flatten_all()?.to_vec1::<f32>()?[0] as f64)
     }
 
     fn mean_log_std(&self, obs: &Tensor) -> Result<(Tensor, Tensor)> {
         let out = self.actor.forward(obs)?;
         let mean = out.narrow(1, 0, self.act_dim)?;
-        let log_std = out
-            .narrow(1, self.act_dim, self.act_dim)?
-            .clamp(LOG_STD_MIN as f32, LOG_STD_MAX as f32)?;
+        let log_std = out.narrow(1, self.act_dim, self.act_dim)?.clamp(LOG_STD_MIN as f32, LOG_STD_MAX as f32)?;
         Ok((mean, log_std))
     }
 
@@ -127,9 +103,7 @@ impl SacAgent {
     fn sample(&self, obs: &Tensor, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
         let n = obs.dims()[0];
         let (mean, log_std) = self.mean_log_std(obs)?;
-        let eps: Vec<f32> = (0..n * self.act_dim)
-            .map(|_| StandardNormal.sample(rng))
-            .collect();
+        let eps: Vec<f32> = (0..n * self.act_dim).map(|_| StandardNormal.sample(rng)).collect();
         let eps = Tensor::from_vec(eps, (n, self.act_dim), &Device::Cpu)?;
         let u = (mean + (log_std.exp()? * &eps)?)?;
         let log_prob = squashed_gaussian_log_prob(&u, &eps, &log_std)?;
@@ -172,8 +146,7 @@ impl Agent for SacAgent {
         let next_value = match &self.value {
             None => {
                 let (next_a, next_logp) = self.sample(&next_obs, rng)?;
-                (Self::min_q(&self.critic_targets, &next_obs, &next_a)?
-                    - next_logp.affine(alpha, 0.0)?)?
+                (Self::min_q(&self.critic_targets, &next_obs, &next_a)? - next_logp.affine(alpha, 0.0)?)?
             }
             Some(v) => v.target.forward(&next_obs)?,
         };
@@ -198,12 +171,7 @@ impl Agent for SacAgent {
 
         if let Some(opt) = &mut self.alpha_opt {
             let gap = logp.detach().affine(1.0, self.target_entropy)?;
-            let alpha_loss = self
-                .log_alpha
-                .as_tensor()
-                .broadcast_mul(&gap)?
-                .mean_all()?
-                .neg()?;
+            let alpha_loss = self.log_alpha.as_tensor().broadcast_mul(&gap)?.mean_all()?.neg()?;
             opt.step(&alpha_loss.backward()?)?;
             losses.alpha_loss = Some(alpha_loss.to_scalar::<f32>()? as f64);
         }
@@ -236,10 +204,7 @@ impl Agent for SacAgent {
     }
 
     fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
-        let mut out = vec![
-            ("actor_opt", &mut self.actor_opt),
-            ("critic_opt", &mut self.critic_opt),
-        ];
+        let mut out = vec![("actor_opt", &mut self.actor_opt), ("critic_opt", &mut self.critic_opt)];
         if let Some(o) = &mut self.alpha_opt {
             out.push(("alpha_opt", o));
         }
@@ -278,24 +243,13 @@ mod tests {
             })
             .sum();
         let t = |v: &[f64]| {
-            Tensor::from_vec(
-                v.iter().map(|x| *x as f32).collect::<Vec<_>>(),
-                (1, 3),
-                &Device::Cpu,
-            )
-            .unwrap()
+            Tensor::from_vec(v.iter().map(|x| *x as f32).collect::<Vec<_>>(), (1, 3), &Device::Cpu).unwrap()
         };
         let log_std: Vec<f64> = s.iter().map(|x| x.ln()).collect();
-        let got = squashed_gaussian_log_prob(&t(&u), &t(&eps), &t(&log_std))
-            .unwrap()
-            .to_vec2::<f32>()
-            .unwrap()[0][0];
+        let got = squashed_gaussian_log_prob(&t(&u), &t(&eps), &t(&log_std)).unwrap().to_vec2::<f32>().unwrap()[0][0];
         assert!((got as f64 - expected).abs() < 1e-4, "{got} vs {expected}");
         // Far in the tails the naive formula overflows; the stable one does not.
-        let big = log_one_minus_tanh_sq(&t(&[30.0, -30.0, 0.0]))
-            .unwrap()
-            .to_vec2::<f32>()
-            .unwrap();
+        let big = log_one_minus_tanh_sq(&t(&[30.0, -30.0, 0.0])).unwrap().to_vec2::<f32>().unwrap();
         assert!(big[0].iter().all(|v| v.is_finite()));
         assert!((big[0][0] as f64 - (4f64.ln() - 60.0)).abs() < 1e-3);
     }

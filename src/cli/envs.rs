@@ -2,10 +2,7 @@ use anyhow::Result;
 use locobench::envs::{env_names, make, EnvConfig};
 
 pub fn run() -> Result<()> {
-    println!(
-        "{:<18} {:>5} {:>7} {:>8} {:>9}  reward terms",
-        "name", "obs", "action", "dt (s)", "max steps"
-    );
+    println!("{:<18} {:>5} {:>7} {:>8} {:>9}  reward terms", "name", "obs", "action", "dt (s)", "max steps");
     for name in env_names() {
         let env = make(&EnvConfig::new(name))?;
         let s = env.spec();

@@ -30,12 +30,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let extra = env_config(&run.env.name, &args.options, args.reward.as_deref())?;
     env_cfg.options.extend(extra.options);
     let mut env = make(&env_cfg)?;
-    let e = evaluate(
-        agent.as_ref(),
-        env.as_mut(),
-        args.episodes,
-        args.seed.unwrap_or(run.seed),
-    )?;
+    let e = evaluate(agent.as_ref(), env.as_mut(), args.episodes, args.seed.unwrap_or(run.seed))?;
     println!(
         "{} {} on {}: return {:.2} ± {:.2} over {} episodes (mean length {:.1})",
         args.checkpoint.display(),
@@ -50,10 +45,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         println!("  {term:<14} {v:>12.3}");
     }
     if e.unstable_episodes > 0 {
-        println!(
-            "  {} episode(s) ended by a physics blow-up",
-            e.unstable_episodes
-        );
+        println!("  {} episode(s) ended by a physics blow-up", e.unstable_episodes);
     }
     Ok(())
 }

@@ -1,4 +1,5 @@
 //! The `locobench` command line.
+mod baseline;
 mod envs;
 mod eval;
 mod rollout;
@@ -8,11 +9,7 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 #[derive(Parser)]
-#[command(
-    name = "locobench",
-    version,
-    about = "Legged-locomotion RL and classical control on MuJoCo"
-)]
+#[command(name = "locobench", version, about = "Legged-locomotion RL and classical control on MuJoCo")]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -28,6 +25,8 @@ enum Command {
     Train(train::TrainArgs),
     /// Evaluate a checkpoint: mean and std of the return and of every reward term.
     Eval(eval::EvalArgs),
+    /// Run the Raibert/QP baseline controller and report how it walks.
+    Baseline(baseline::BaselineArgs),
 }
 
 pub fn run() -> Result<()> {
@@ -36,6 +35,7 @@ pub fn run() -> Result<()> {
         Command::Rollout(args) => rollout::run(args),
         Command::Train(args) => train::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Baseline(args) => baseline::run(args),
     }
 }
 
@@ -58,11 +58,8 @@ impl EnvArgs {
         use anyhow::Context;
         let mut cfg = locobench::envs::EnvConfig::new(&self.env);
         if let Some(path) = &self.env_config {
-            let text = std::fs::read_to_string(path)
-                .with_context(|| format!("reading {}", path.display()))?;
-            let table: toml::Table = text
-                .parse()
-                .with_context(|| format!("parsing {}", path.display()))?;
+            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            let table: toml::Table = text.parse().with_context(|| format!("parsing {}", path.display()))?;
             cfg.options = match table.get("options") {
                 Some(toml::Value::Table(t)) => t.clone(),
                 _ => table,

@@ -56,35 +56,25 @@ pub fn run(args: RolloutArgs) -> Result<()> {
     write_atomic(&args.out, |w| {
         let mut csv = csv::Writer::from_writer(w);
         csv.write_record(&header)?;
-        summaries = run_episodes(
-            env.as_mut(),
-            policy.as_mut(),
-            args.episodes,
-            args.seed,
-            |ep, t, action, step| {
-                let mut row: Vec<String> = vec![ep.to_string(), t.to_string()];
-                // `{:?}` prints the shortest text that reads back as the same f64: replays are exact.
-                row.extend(action.iter().map(|v| format!("{v:?}")));
-                row.push(format!("{:?}", step.reward));
-                row.extend(step.info.reward_terms.iter().map(|(_, v)| format!("{v:?}")));
-                row.push((step.terminated as u8).to_string());
-                row.push((step.truncated as u8).to_string());
-                row.push((step.info.unstable as u8).to_string());
-                row.push(step.info.clipped_actions.to_string());
-                row.extend(step.observation.iter().map(|v| format!("{v:?}")));
-                csv.write_record(&row)?;
-                Ok(())
-            },
-        )?;
+        summaries = run_episodes(env.as_mut(), policy.as_mut(), args.episodes, args.seed, |ep, t, action, step| {
+            let mut row: Vec<String> = vec![ep.to_string(), t.to_string()];
+            // `{:?}` prints the shortest text that reads back as the same f64: replays are exact.
+            row.extend(action.iter().map(|v| format!("{v:?}")));
+            row.push(format!("{:?}", step.reward));
+            row.extend(step.info.reward_terms.iter().map(|(_, v)| format!("{v:?}")));
+            row.push((step.terminated as u8).to_string());
+            row.push((step.truncated as u8).to_string());
+            row.push((step.info.unstable as u8).to_string());
+            row.push(step.info.clipped_actions.to_string());
+            row.extend(step.observation.iter().map(|v| format!("{v:?}")));
+            csv.write_record(&row)?;
+            Ok(())
+        })?;
         csv.flush()?;
         Ok(())
     })?;
     for s in &summaries {
-        let terms: Vec<String> = s
-            .term_totals
-            .iter()
-            .map(|(n, v)| format!("{n} {v:.3}"))
-            .collect();
+        let terms: Vec<String> = s.term_totals.iter().map(|(n, v)| format!("{n} {v:.3}")).collect();
         let end = if s.unstable {
             "physics unstable"
         } else if s.terminated {

@@ -60,10 +60,7 @@ pub fn env_config(env: &str, options: &[String], reward: Option<&str>) -> Result
 }
 
 pub fn run(args: TrainArgs) -> Result<()> {
-    let control = RunControl {
-        show_progress: !args.quiet,
-        ..Default::default()
-    };
+    let control = RunControl { show_progress: !args.quiet, ..Default::default() };
     let summary = if let Some(dir) = &args.resume {
         println!("resuming {}", dir.display());
         train::resume(dir, &control)?
@@ -82,14 +79,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
         let cfg = build_config(env, algo, &overrides)?;
         let env_cfg = env_config(env, &args.options, args.reward.as_deref())?;
-        let out = args.out.clone().unwrap_or_else(|| {
-            PathBuf::from(format!("runs/{env}-{}-seed{}", algo.name(), args.seed))
-        });
+        let out =
+            args.out.clone().unwrap_or_else(|| PathBuf::from(format!("runs/{env}-{}-seed{}", algo.name(), args.seed)));
         if args.init_from.as_ref().is_some_and(|p| !p.exists()) {
-            bail!(
-                "checkpoint {} does not exist",
-                args.init_from.as_ref().unwrap().display()
-            );
+            bail!("checkpoint {} does not exist", args.init_from.as_ref().unwrap().display());
         }
         println!(
             "training {} on {env}, seed {}, {} steps -> {}",
@@ -98,15 +91,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             cfg.total_steps,
             out.display()
         );
-        train::train(
-            env_cfg,
-            cfg,
-            args.seed,
-            &out,
-            args.init_from.as_deref(),
-            args.force,
-            &control,
-        )?
+        train::train(env_cfg, cfg, args.seed, &out, args.init_from.as_deref(), args.force, &control)?
     };
     if let Some(e) = &summary.last_eval {
         println!(

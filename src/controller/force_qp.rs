@@ -3,19 +3,19 @@
 //!     minimise (A f - b)' S (A f - b) + alpha |f|^2
 //!     subject to |f_x|, |f_y| <= mu f_z and f_min <= f_z <= f_max,
 //! with A = [I ... I; [r_1]x ... [r_n]x] (r_i: foot position relative to the centre of mass).
-//! Solved by clarabel. `Planar` drops y, roll and yaw (Minitaur has no abduction).
+//! Solved by clarabel. `Planar` has no lateral foot forces (Minitaur has no abduction): forces
+//! (f_x, f_z) per foot, wrench (F_x, F_z, M_x, M_y); roll is still controlled through the
+//! vertical forces of feet on either side.
 use anyhow::{bail, Result};
 use clarabel::algebra::CscMatrix;
-use clarabel::solver::{
-    DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT,
-};
+use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
 use nalgebra::{DMatrix, DVector, Vector3};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Dimension {
     /// Forces (f_x, f_y, f_z) per foot; wrench (F_x, F_y, F_z, M_x, M_y, M_z).
     Spatial,
-    /// Forces (f_x, f_z) per foot; wrench (F_x, F_z, M_y).
+    /// Forces (f_x, f_z) per foot; wrench (F_x, F_z, M_x, M_y).
     Planar,
 }
 
@@ -45,15 +45,16 @@ impl ForceQp {
         match self.dimension {
             Dimension::Spatial => {
                 let mut m = DMatrix::zeros(6, 3);
-                m.view_mut((0, 0), (3, 3))
-                    .copy_from(&nalgebra::Matrix3::identity());
+                m.view_mut((0, 0), (3, 3)).copy_from(&nalgebra::Matrix3::identity());
                 m.view_mut((3, 0), (3, 3)).copy_from(&cross);
                 m
             }
-            // Keep F_x, F_z, M_y and forces f_x, f_z.
-            Dimension::Planar => {
-                DMatrix::from_row_slice(3, 2, &[1.0, 0.0, 0.0, 1.0, cross[(1, 0)], cross[(1, 2)]])
-            }
+            // Forces f_x, f_z (f_y = 0); rows F_x, F_z, M_x, M_y.
+            Dimension::Planar => DMatrix::from_row_slice(
+                4,
+                2,
+                &[1.0, 0.0, 0.0, 1.0, cross[(0, 0)], cross[(0, 2)], cross[(1, 0)], cross[(1, 2)]],
+            ),
         }
     }
 
@@ -65,11 +66,10 @@ impl ForceQp {
 
     fn stacked_map(&self, feet: &[Vector3<f64>]) -> DMatrix<f64> {
         let k = self.force_dim();
-        let rows = if k == 3 { 6 } else { 3 };
+        let rows = if k == 3 { 6 } else { 4 };
         let mut a = DMatrix::zeros(rows, k * feet.len());
         for (i, r) in feet.iter().enumerate() {
-            a.view_mut((0, k * i), (rows, k))
-                .copy_from(&self.wrench_map(*r));
+            a.view_mut((0, k * i), (rows, k)).copy_from(&self.wrench_map(*r));
         }
         a
     }
@@ -110,11 +110,7 @@ impl ForceQp {
         let p_upper = dense_to_csc_upper(&p);
         let g = rows_to_csc(&g_rows, n);
         let cones = [SupportedConeT::NonnegativeConeT(h.len())];
-        let settings = DefaultSettingsBuilder::default()
-            .verbose(false)
-            .max_iter(50)
-            .build()
-            .expect("valid settings");
+        let settings = DefaultSettingsBuilder::default().verbose(false).max_iter(50).build().expect("valid settings");
         let mut solver = DefaultSolver::new(&p_upper, q.as_slice(), &g, &h, &cones, settings)
             .map_err(|e| anyhow::anyhow!("QP setup failed: {e:?}"))?;
         solver.solve();
@@ -188,10 +184,7 @@ mod tests {
             let fz = foot[k - 1];
             assert!(fz >= qp.f_min - 1e-6 && fz <= qp.f_max + 1e-6, "{foot:?}");
             for t in &foot[..k - 1] {
-                assert!(
-                    t.abs() <= qp.friction * fz + 1e-6,
-                    "friction cone violated: {foot:?}"
-                );
+                assert!(t.abs() <= qp.friction * fz + 1e-6, "friction cone violated: {foot:?}");
             }
         }
     }
@@ -200,54 +193,36 @@ mod tests {
     fn reproduces_a_feasible_wrench_inside_the_cones() {
         let qp = qp();
         // A wrench made from forces that satisfy the constraints is feasible.
-        let truth = [
-            2.0, 1.0, 20.0, -1.0, 0.5, 15.0, 3.0, -2.0, 18.0, 0.0, 1.0, 12.0,
-        ];
+        let truth = [2.0, 1.0, 20.0, -1.0, 0.5, 15.0, 3.0, -2.0, 18.0, 0.0, 1.0, 12.0];
         let wrench = qp.wrench(&feet(), &truth);
         let f = qp.solve(&feet(), wrench.as_slice()).unwrap();
         check_constraints(&qp, &f);
         let got = qp.wrench(&feet(), &f);
-        assert!(
-            (got - &wrench).norm() < 1e-3 * wrench.norm(),
-            "wrench not reproduced"
-        );
+        assert!((got - &wrench).norm() < 1e-3 * wrench.norm(), "wrench not reproduced");
     }
 
     #[test]
     fn infeasible_wrench_is_approximated_within_the_constraints() {
         let qp = qp();
         // Pulling the robot down and sideways harder than friction allows.
-        let f = qp
-            .solve(&feet(), &[50.0, 0.0, -10.0, 0.0, 0.0, 0.0])
-            .unwrap();
+        let f = qp.solve(&feet(), &[50.0, 0.0, -10.0, 0.0, 0.0, 0.0]).unwrap();
         check_constraints(&qp, &f);
-        let f = qp
-            .solve(&feet()[..2], &[0.0, 0.0, 500.0, 0.0, 0.0, 0.0])
-            .unwrap();
+        let f = qp.solve(&feet()[..2], &[0.0, 0.0, 500.0, 0.0, 0.0, 0.0]).unwrap();
         check_constraints(&qp, &f);
         assert!(f.chunks(3).all(|c| (c[2] - qp.f_max).abs() < 1e-3));
     }
 
     #[test]
     fn planar_version_for_minitaur() {
-        let qp = ForceQp {
-            dimension: Dimension::Planar,
-            wrench_weights: vec![1.0; 3],
-            ..qp()
-        };
-        let feet = [
-            Vector3::new(0.21, 0.0, -0.2),
-            Vector3::new(-0.21, 0.0, -0.2),
-        ];
-        // Weight 60 N, a small pitching moment.
-        let f = qp.solve(&feet, &[0.0, 60.0, 1.0]).unwrap();
+        let qp = ForceQp { dimension: Dimension::Planar, wrench_weights: vec![1.0; 4], ..qp() };
+        // A trot's diagonal pair: front-left and back-right.
+        let feet = [Vector3::new(0.21, 0.09, -0.2), Vector3::new(-0.21, -0.09, -0.2)];
+        // Weight 60 N, a small rolling and pitching moment.
+        let f = qp.solve(&feet, &[0.0, 60.0, 0.5, 1.0]).unwrap();
         check_constraints(&qp, &f);
         let w = qp.wrench(&feet, &f);
-        assert!(
-            (w[1] - 60.0).abs() < 1e-3 && (w[2] - 1.0).abs() < 1e-3,
-            "{w}"
-        );
-        assert!(qp.solve(&[], &[0.0, 60.0, 0.0]).is_err());
+        assert!((w[1] - 60.0).abs() < 1e-3 && (w[2] - 0.5).abs() < 1e-2 && (w[3] - 1.0).abs() < 1e-2, "{w}");
+        assert!(qp.solve(&[], &[0.0, 60.0, 0.0, 0.0]).is_err());
         assert!(qp.solve(&feet, &[0.0, 60.0]).is_err());
     }
 }

@@ -11,10 +11,7 @@ pub const UPPER: f64 = 0.1177;
 pub const LOWER: f64 = 0.2;
 
 fn knees(outer: f64, inner: f64) -> ([f64; 2], [f64; 2]) {
-    (
-        [UPPER * outer.sin(), UPPER * outer.cos()],
-        [-UPPER * inner.sin(), UPPER * inner.cos()],
-    )
+    ([UPPER * outer.sin(), UPPER * outer.cos()], [-UPPER * inner.sin(), UPPER * inner.cos()])
 }
 
 /// Foot position for motor angles (outer, inner); None where the lower links cannot meet.
@@ -42,9 +39,7 @@ pub fn inverse(foot: [f64; 2]) -> Option<[f64; 2]> {
     // Angle of the hip-to-foot line from straight down, positive towards the front.
     let swing = foot[0].atan2(-foot[1]);
     // Angle between that line and each upper link (law of cosines).
-    let spread = ((UPPER * UPPER + r * r - LOWER * LOWER) / (2.0 * UPPER * r))
-        .clamp(-1.0, 1.0)
-        .acos();
+    let spread = ((UPPER * UPPER + r * r - LOWER * LOWER) / (2.0 * UPPER * r)).clamp(-1.0, 1.0).acos();
     let pi = std::f64::consts::PI;
     Some([pi - (swing + spread), pi - spread + swing])
 }
@@ -55,20 +50,14 @@ pub fn jacobian(outer: f64, inner: f64) -> Option<[[f64; 2]; 2]> {
     let d_outer = (forward(outer + h, inner)?, forward(outer - h, inner)?);
     let d_inner = (forward(outer, inner + h)?, forward(outer, inner - h)?);
     let col = |(p, m): ([f64; 2], [f64; 2]), k: usize| (p[k] - m[k]) / (2.0 * h);
-    Some([
-        [col(d_outer, 0), col(d_inner, 0)],
-        [col(d_outer, 1), col(d_inner, 1)],
-    ])
+    Some([[col(d_outer, 0), col(d_inner, 0)], [col(d_outer, 1), col(d_inner, 1)]])
 }
 
 /// Motor torques (outer, inner) that make the ground push on the foot with `force` (x, z):
 /// tau = -J^T f.
 pub fn torques_for_ground_force(outer: f64, inner: f64, force: [f64; 2]) -> Option<[f64; 2]> {
     let j = jacobian(outer, inner)?;
-    Some([
-        -(j[0][0] * force[0] + j[1][0] * force[1]),
-        -(j[0][1] * force[0] + j[1][1] * force[1]),
-    ])
+    Some([-(j[0][0] * force[0] + j[1][0] * force[1]), -(j[0][1] * force[0] + j[1][1] * force[1])])
 }
 
 #[cfg(test)]
@@ -80,12 +69,8 @@ mod tests {
     fn symmetric_leg_points_straight_down() {
         for theta in [PI / 2.0, 5.0 * PI / 8.0, 0.75 * PI] {
             let f = forward(theta, theta).unwrap();
-            let depth =
-                -UPPER * theta.cos() + (LOWER * LOWER - (UPPER * theta.sin()).powi(2)).sqrt();
-            assert!(
-                f[0].abs() < 1e-12 && (f[1] + depth).abs() < 1e-12,
-                "{theta}: {f:?}"
-            );
+            let depth = -UPPER * theta.cos() + (LOWER * LOWER - (UPPER * theta.sin()).powi(2)).sqrt();
+            assert!(f[0].abs() < 1e-12 && (f[1] + depth).abs() < 1e-12, "{theta}: {f:?}");
         }
         // Zero leg-model action (5pi/8) puts the foot about 0.213 m below the axis (REFERENCE: 0.215).
         assert!((forward(5.0 * PI / 8.0, 5.0 * PI / 8.0).unwrap()[1] + 0.2129).abs() < 1e-3);
@@ -97,10 +82,7 @@ mod tests {
             for z in [-0.14, -0.18, -0.22, -0.26] {
                 let q = inverse([x, z]).unwrap();
                 let p = forward(q[0], q[1]).unwrap();
-                assert!(
-                    (p[0] - x).abs() < 1e-9 && (p[1] - z).abs() < 1e-9,
-                    "({x}, {z}) -> {q:?} -> {p:?}"
-                );
+                assert!((p[0] - x).abs() < 1e-9 && (p[1] - z).abs() < 1e-9, "({x}, {z}) -> {q:?} -> {p:?}");
             }
         }
         assert!(inverse([0.0, -0.5]).is_none());
@@ -120,9 +102,6 @@ mod tests {
         let p1 = forward(t + dq[0], t + 0.05 + dq[1]).unwrap();
         let work_joint = tau[0] * dq[0] + tau[1] * dq[1];
         let work_foot = -(f[0] * (p1[0] - p0[0]) + f[1] * (p1[1] - p0[1]));
-        assert!(
-            (work_joint - work_foot).abs() < 1e-8,
-            "{work_joint} vs {work_foot}"
-        );
+        assert!((work_joint - work_foot).abs() < 1e-8, "{work_joint} vs {work_foot}");
     }
 }

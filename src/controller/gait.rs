@@ -43,25 +43,10 @@ pub struct GaitScheduler {
 }
 
 impl GaitScheduler {
-    pub fn new(
-        kind: GaitKind,
-        stance_duration: f64,
-        duty_factor: f64,
-    ) -> anyhow::Result<GaitScheduler> {
-        anyhow::ensure!(
-            stance_duration > 0.0 && stance_duration.is_finite(),
-            "stance duration must be > 0"
-        );
-        anyhow::ensure!(
-            duty_factor > 0.0 && duty_factor < 1.0,
-            "duty factor must lie in (0, 1)"
-        );
-        Ok(GaitScheduler {
-            kind,
-            stance_duration,
-            duty_factor,
-            time: 0.0,
-        })
+    pub fn new(kind: GaitKind, stance_duration: f64, duty_factor: f64) -> anyhow::Result<GaitScheduler> {
+        anyhow::ensure!(stance_duration > 0.0 && stance_duration.is_finite(), "stance duration must be > 0");
+        anyhow::ensure!(duty_factor > 0.0 && duty_factor < 1.0, "duty factor must lie in (0, 1)");
+        Ok(GaitScheduler { kind, stance_duration, duty_factor, time: 0.0 })
     }
 
     pub fn period(&self) -> f64 {
@@ -85,15 +70,9 @@ impl GaitScheduler {
         std::array::from_fn(|leg| {
             let phase = (self.time / self.period() + offsets[leg]).rem_euclid(1.0);
             if phase < self.duty_factor {
-                LegPhase {
-                    in_stance: true,
-                    progress: phase / self.duty_factor,
-                }
+                LegPhase { in_stance: true, progress: phase / self.duty_factor }
             } else {
-                LegPhase {
-                    in_stance: false,
-                    progress: (phase - self.duty_factor) / (1.0 - self.duty_factor),
-                }
+                LegPhase { in_stance: false, progress: (phase - self.duty_factor) / (1.0 - self.duty_factor) }
             }
         })
     }

@@ -1,19 +1,18 @@
-//! Building blocks of the Raibert-style baseline controller with QP force distribution
-//! (REFERENCE §3-4): gait scheduling, Raibert foot placement, Minitaur four-bar leg kinematics
-//! and the stance-force QP solved by clarabel. The controller that drives the environments
-//! through the shared policy interface is not assembled yet (see the open baseline issue).
+//! The conventional baseline: Raibert-style gaits with QP force distribution (REFERENCE §3-4).
+//! Gait scheduling, Raibert foot placement, Minitaur four-bar leg kinematics, the stance-force
+//! QP (clarabel), and the Minitaur and Ant controllers, which implement the same `Policy`
+//! interface as every other policy and run through the same `Env`, scored by the same reward.
+pub mod ant;
+pub mod baseline;
 pub mod force_qp;
 pub mod fourbar;
 pub mod gait;
+pub mod minitaur;
+pub mod report;
 
 /// Raibert's foothold relative to the hip: p_f = (T_st / 2) v + k (v - v_des), per horizontal
 /// axis; add the hip position for a world target.
-pub fn raibert_foothold(
-    stance_duration: f64,
-    velocity: [f64; 2],
-    desired: [f64; 2],
-    gain: f64,
-) -> [f64; 2] {
+pub fn raibert_foothold(stance_duration: f64, velocity: [f64; 2], desired: [f64; 2], gain: f64) -> [f64; 2] {
     std::array::from_fn(|i| 0.5 * stance_duration * velocity[i] + gain * (velocity[i] - desired[i]))
 }
 

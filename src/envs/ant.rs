@@ -79,21 +79,12 @@ impl Ant {
             reward_terms: vec!["forward", "healthy", "ctrl_cost", "contact_cost"],
         };
         let torso = m.body_id("torso")?;
-        Ok(Ant {
-            opts,
-            core: EnvCore::new(sim, spec),
-            torso,
-        })
+        Ok(Ant { opts, core: EnvCore::new(sim, spec), torso })
     }
 
     fn clipped_contact_forces(&self) -> impl Iterator<Item = f64> + '_ {
         let [lo, hi] = self.opts.contact_force_range;
-        self.core
-            .sim
-            .data
-            .cfrc_ext()
-            .iter()
-            .map(move |f| f.clamp(lo, hi))
+        self.core.sim.data.cfrc_ext().iter().map(move |f| f.clamp(lo, hi))
     }
 
     fn observation(&self) -> Vec<f64> {
@@ -122,8 +113,7 @@ impl Env for Ant {
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.core
-            .reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Normal)?;
+        self.core.reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Normal)?;
         self.core.last_obs = self.observation();
         Ok((self.core.last_obs.clone(), reset_info(&self.core)))
     }
@@ -131,28 +121,20 @@ impl Env for Ant {
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
         let start = self.core.begin_step(action)?;
         let before = self.torso_xy();
+        let z_before = self.core.sim.data.qpos()[2];
         let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
             Ok(w) => w,
             Err(unstable) => return Ok(unstable),
         };
         self.core.sim.data.rne_post_constraint()?;
         let after = self.torso_xy();
-        let velocity = [
-            (after[0] - before[0]) / self.core.spec.dt,
-            (after[1] - before[1]) / self.core.spec.dt,
-        ];
+        let velocity = [(after[0] - before[0]) / self.core.spec.dt, (after[1] - before[1]) / self.core.spec.dt];
 
         let healthy = self.is_healthy();
         let forward = self.opts.forward_reward_weight * velocity[0];
-        let healthy_reward = if healthy {
-            self.opts.healthy_reward
-        } else {
-            0.0
-        };
-        let ctrl_cost =
-            self.opts.ctrl_cost_weight * start.action.iter().map(|a| a * a).sum::<f64>();
-        let contact_cost = self.opts.contact_cost_weight
-            * self.clipped_contact_forces().map(|f| f * f).sum::<f64>();
+        let healthy_reward = if healthy { self.opts.healthy_reward } else { 0.0 };
+        let ctrl_cost = self.opts.ctrl_cost_weight * start.action.iter().map(|a| a * a).sum::<f64>();
+        let contact_cost = self.opts.contact_cost_weight * self.clipped_contact_forces().map(|f| f * f).sum::<f64>();
         let info = Info {
             reward_terms: vec![
                 ("forward", forward),
@@ -160,7 +142,19 @@ impl Env for Ant {
                 ("ctrl_cost", -ctrl_cost),
                 ("contact_cost", -contact_cost),
             ],
-            metrics: locomotion_metrics(&self.core, velocity),
+            metrics: {
+                let d = &self.core.sim.data;
+                // Motor power sampled at the end of the control step (an estimate; the exact
+                // integral would need every physics step).
+                let power: f64 = d.qfrc_actuator().iter().zip(d.qvel()).map(|(f, v)| (f * v).abs()).sum();
+                let mut m = locomotion_metrics(&self.core, velocity);
+                m.extend([
+                    ("dy", after[1] - before[1]),
+                    ("dz", d.qpos()[2] - z_before),
+                    ("mechanical_energy", power * self.core.spec.dt),
+                ]);
+                m
+            },
             clipped_actions: start.clipped,
             unstable: false,
             warnings,

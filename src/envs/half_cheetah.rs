@@ -34,9 +34,7 @@ impl Default for HalfCheetahOptions {
 
 impl HalfCheetahOptions {
     pub fn validate(&self) -> Result<(), EnvError> {
-        let c = Check {
-            env: "half-cheetah",
-        };
+        let c = Check { env: "half-cheetah" };
         c.non_negative("forward_reward_weight", self.forward_reward_weight)?;
         c.non_negative("ctrl_cost_weight", self.ctrl_cost_weight)?;
         c.non_negative("reset_noise_scale", self.reset_noise_scale)?;
@@ -62,10 +60,7 @@ impl HalfCheetah {
             max_episode_steps: opts.max_episode_steps,
             reward_terms: vec!["forward", "ctrl_cost"],
         };
-        Ok(HalfCheetah {
-            opts,
-            core: EnvCore::new(sim, spec),
-        })
+        Ok(HalfCheetah { opts, core: EnvCore::new(sim, spec) })
     }
 
     fn observation(&self) -> Vec<f64> {
@@ -80,13 +75,9 @@ impl Env for HalfCheetah {
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.core
-            .reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Normal)?;
+        self.core.reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Normal)?;
         self.core.last_obs = self.observation();
-        let info = Info {
-            metrics: vec![("x_position", self.core.sim.data.qpos()[0])],
-            ..Info::default()
-        };
+        let info = Info { metrics: vec![("x_position", self.core.sim.data.qpos()[0])], ..Info::default() };
         Ok((self.core.last_obs.clone(), info))
     }
 
@@ -100,8 +91,7 @@ impl Env for HalfCheetah {
         let x_after = self.core.sim.data.qpos()[0];
         let x_velocity = (x_after - x_before) / self.core.spec.dt;
         let forward = self.opts.forward_reward_weight * x_velocity;
-        let ctrl_cost =
-            self.opts.ctrl_cost_weight * start.action.iter().map(|a| a * a).sum::<f64>();
+        let ctrl_cost = self.opts.ctrl_cost_weight * start.action.iter().map(|a| a * a).sum::<f64>();
         let info = Info {
             reward_terms: vec![("forward", forward), ("ctrl_cost", -ctrl_cost)],
             metrics: vec![("x_position", x_after), ("x_velocity", x_velocity)],

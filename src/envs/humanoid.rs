@@ -84,10 +84,7 @@ impl Humanoid {
             max_episode_steps: opts.max_episode_steps,
             reward_terms: vec!["forward", "healthy", "ctrl_cost", "contact_cost"],
         };
-        Ok(Humanoid {
-            opts,
-            core: EnvCore::new(sim, spec),
-        })
+        Ok(Humanoid { opts, core: EnvCore::new(sim, spec) })
     }
 
     fn observation(&self) -> Vec<f64> {
@@ -128,8 +125,7 @@ impl Env for Humanoid {
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.core
-            .reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Uniform)?;
+        self.core.reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Uniform)?;
         self.core.last_obs = self.observation();
         Ok((self.core.last_obs.clone(), reset_info(&self.core)))
     }
@@ -143,23 +139,15 @@ impl Env for Humanoid {
         };
         self.core.sim.data.rne_post_constraint()?;
         let after = self.mass_center();
-        let velocity = [
-            (after[0] - before[0]) / self.core.spec.dt,
-            (after[1] - before[1]) / self.core.spec.dt,
-        ];
+        let velocity = [(after[0] - before[0]) / self.core.spec.dt, (after[1] - before[1]) / self.core.spec.dt];
 
         let d = &self.core.sim.data;
         let healthy = self.is_healthy();
         let forward = self.opts.forward_reward_weight * velocity[0];
-        let healthy_reward = if healthy {
-            self.opts.healthy_reward
-        } else {
-            0.0
-        };
+        let healthy_reward = if healthy { self.opts.healthy_reward } else { 0.0 };
         let ctrl_cost = self.opts.ctrl_cost_weight * d.ctrl().iter().map(|a| a * a).sum::<f64>();
-        let contact_cost = (self.opts.contact_cost_weight
-            * d.cfrc_ext().iter().map(|f| f * f).sum::<f64>())
-        .min(self.opts.contact_cost_max);
+        let contact_cost = (self.opts.contact_cost_weight * d.cfrc_ext().iter().map(|f| f * f).sum::<f64>())
+            .min(self.opts.contact_cost_max);
         let info = Info {
             reward_terms: vec![
                 ("forward", forward),

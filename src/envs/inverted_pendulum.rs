@@ -22,26 +22,14 @@ pub struct InvertedPendulumOptions {
 
 impl Default for InvertedPendulumOptions {
     fn default() -> Self {
-        InvertedPendulumOptions {
-            max_pole_angle: 0.2,
-            reset_noise_scale: 0.01,
-            max_episode_steps: 1000,
-            frame_skip: 2,
-        }
+        InvertedPendulumOptions { max_pole_angle: 0.2, reset_noise_scale: 0.01, max_episode_steps: 1000, frame_skip: 2 }
     }
 }
 
 impl InvertedPendulumOptions {
     pub fn validate(&self) -> Result<(), EnvError> {
-        let c = Check {
-            env: "inverted-pendulum",
-        };
-        c.within(
-            "max_pole_angle",
-            self.max_pole_angle,
-            0.0,
-            std::f64::consts::FRAC_PI_2,
-        )?;
+        let c = Check { env: "inverted-pendulum" };
+        c.within("max_pole_angle", self.max_pole_angle, 0.0, std::f64::consts::FRAC_PI_2)?;
         c.non_negative("reset_noise_scale", self.reset_noise_scale)?;
         c.positive_count("max_episode_steps", self.max_episode_steps)?;
         c.positive_count("frame_skip", self.frame_skip)
@@ -66,10 +54,7 @@ impl InvertedPendulum {
             max_episode_steps: opts.max_episode_steps,
             reward_terms: vec!["healthy"],
         };
-        Ok(InvertedPendulum {
-            opts,
-            core: EnvCore::new(sim, spec),
-        })
+        Ok(InvertedPendulum { opts, core: EnvCore::new(sim, spec) })
     }
 
     fn observation(&self) -> Vec<f64> {
@@ -84,8 +69,7 @@ impl Env for InvertedPendulum {
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.core
-            .reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Uniform)?;
+        self.core.reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Uniform)?;
         self.core.last_obs = self.observation();
         Ok((self.core.last_obs.clone(), Info::default()))
     }
@@ -97,8 +81,7 @@ impl Env for InvertedPendulum {
             Err(unstable) => return Ok(unstable),
         };
         let observation = self.observation();
-        let terminated = !observation.iter().all(|v| v.is_finite())
-            || observation[1].abs() > self.opts.max_pole_angle;
+        let terminated = !observation.iter().all(|v| v.is_finite()) || observation[1].abs() > self.opts.max_pole_angle;
         let q = self.core.sim.data.qpos();
         let info = Info {
             reward_terms: vec![("healthy", if terminated { 0.0 } else { 1.0 })],

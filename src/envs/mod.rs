@@ -42,10 +42,7 @@ impl BoxSpace {
         BoxSpace { low, high }
     }
     pub fn uniform(dim: usize, low: f64, high: f64) -> BoxSpace {
-        BoxSpace {
-            low: vec![low; dim],
-            high: vec![high; dim],
-        }
+        BoxSpace { low: vec![low; dim], high: vec![high; dim] }
     }
     pub fn unbounded(dim: usize) -> BoxSpace {
         Self::uniform(dim, f64::NEG_INFINITY, f64::INFINITY)
@@ -54,11 +51,7 @@ impl BoxSpace {
         self.low.len()
     }
     pub fn contains(&self, x: &[f64]) -> bool {
-        x.len() == self.dim()
-            && x.iter()
-                .zip(&self.low)
-                .zip(&self.high)
-                .all(|((v, l), h)| v >= l && v <= h)
+        x.len() == self.dim() && x.iter().zip(&self.low).zip(&self.high).all(|((v, l), h)| v >= l && v <= h)
     }
 }
 
@@ -92,16 +85,10 @@ pub struct Info {
 
 impl Info {
     pub fn term(&self, name: &str) -> Option<f64> {
-        self.reward_terms
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, v)| *v)
+        self.reward_terms.iter().find(|(n, _)| *n == name).map(|(_, v)| *v)
     }
     pub fn metric(&self, name: &str) -> Option<f64> {
-        self.metrics
-            .iter()
-            .find(|(n, _)| *n == name)
-            .map(|(_, v)| *v)
+        self.metrics.iter().find(|(n, _)| *n == name).map(|(_, v)| *v)
     }
 }
 
@@ -151,16 +138,10 @@ pub fn model_xml(env_name: &str) -> Option<&'static str> {
 /// Checks an action against the space and returns a clipped copy and the number clipped.
 pub(crate) fn clip_action(space: &BoxSpace, action: &[f64]) -> Result<(Vec<f64>, usize), EnvError> {
     if action.len() != space.dim() {
-        return Err(EnvError::ActionLength {
-            expected: space.dim(),
-            got: action.len(),
-        });
+        return Err(EnvError::ActionLength { expected: space.dim(), got: action.len() });
     }
     if let Some(index) = action.iter().position(|a| !a.is_finite()) {
-        return Err(EnvError::NonFiniteAction {
-            index,
-            value: action[index],
-        });
+        return Err(EnvError::NonFiniteAction { index, value: action[index] });
     }
     let mut clipped = 0;
     let out = action
@@ -186,11 +167,7 @@ pub(crate) struct EpisodeClock {
 
 impl EpisodeClock {
     pub fn start(&mut self) {
-        *self = EpisodeClock {
-            steps: 0,
-            started: true,
-            finished: false,
-        };
+        *self = EpisodeClock { steps: 0, started: true, finished: false };
     }
     pub fn check_can_step(&self) -> Result<(), EnvError> {
         if !self.started {

@@ -7,10 +7,7 @@ pub(crate) struct Check<'a> {
 
 impl Check<'_> {
     fn fail(&self, message: String) -> EnvError {
-        EnvError::InvalidOption {
-            env: self.env.to_string(),
-            message,
-        }
+        EnvError::InvalidOption { env: self.env.to_string(), message }
     }
     pub fn non_negative(&self, name: &str, v: f64) -> Result<(), EnvError> {
         if v.is_finite() && v >= 0.0 {
@@ -21,9 +18,7 @@ impl Check<'_> {
     }
     pub fn range(&self, name: &str, r: [f64; 2]) -> Result<(), EnvError> {
         if r[0].is_nan() || r[1].is_nan() || r[0] >= r[1] {
-            Err(self.fail(format!(
-                "{name} must be [low, high] with low < high, got {r:?}"
-            )))
+            Err(self.fail(format!("{name} must be [low, high] with low < high, got {r:?}")))
         } else {
             Ok(())
         }

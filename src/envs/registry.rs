@@ -3,17 +3,11 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    Ant, AntOptions, Env, EnvError, HalfCheetah, HalfCheetahOptions, Humanoid, HumanoidOptions,
-    InvertedPendulum, InvertedPendulumOptions, Minitaur, MinitaurOptions,
+    Ant, AntOptions, Env, EnvError, HalfCheetah, HalfCheetahOptions, Humanoid, HumanoidOptions, InvertedPendulum,
+    InvertedPendulumOptions, Minitaur, MinitaurOptions,
 };
 
-const NAMES: [&str; 5] = [
-    "half-cheetah",
-    "ant",
-    "humanoid",
-    "inverted-pendulum",
-    "minitaur",
-];
+const NAMES: [&str; 5] = ["half-cheetah", "ant", "humanoid", "inverted-pendulum", "minitaur"];
 
 pub fn env_names() -> &'static [&'static str] {
     &NAMES
@@ -30,18 +24,13 @@ pub struct EnvConfig {
 
 impl EnvConfig {
     pub fn new(name: &str) -> EnvConfig {
-        EnvConfig {
-            name: name.to_string(),
-            options: toml::Table::new(),
-        }
+        EnvConfig { name: name.to_string(), options: toml::Table::new() }
     }
 
     /// Reads `name = "..."` and an `[options]` table from TOML text.
     pub fn from_toml(text: &str) -> Result<EnvConfig, EnvError> {
-        toml::from_str(text).map_err(|e| EnvError::InvalidOption {
-            env: "<config>".into(),
-            message: e.message().to_string(),
-        })
+        toml::from_str(text)
+            .map_err(|e| EnvError::InvalidOption { env: "<config>".into(), message: e.message().to_string() })
     }
 
     /// Sets options from `key=value` pairs (values parsed as TOML: numbers, booleans, arrays,
@@ -56,9 +45,7 @@ impl EnvConfig {
 
     /// Every option with its effective value (defaults filled in), validated.
     pub fn resolved_options(&self) -> Result<toml::Table, EnvError> {
-        fn resolve<T: DeserializeOwned + Serialize>(
-            c: &EnvConfig,
-        ) -> Result<toml::Table, EnvError> {
+        fn resolve<T: DeserializeOwned + Serialize>(c: &EnvConfig) -> Result<toml::Table, EnvError> {
             let typed: T = typed_options(c)?;
             Ok(toml::Table::try_from(&typed).expect("options serialise to a table"))
         }
@@ -77,9 +64,7 @@ impl EnvConfig {
 fn parse_value(text: &str) -> toml::Value {
     let wrapped = format!("v = {text}");
     match wrapped.parse::<toml::Table>() {
-        Ok(mut t) => t
-            .remove("v")
-            .unwrap_or_else(|| toml::Value::String(text.to_string())),
+        Ok(mut t) => t.remove("v").unwrap_or_else(|| toml::Value::String(text.to_string())),
         Err(_) => toml::Value::String(text.to_string()),
     }
 }
@@ -89,12 +74,10 @@ pub fn parse_overrides(text: &str) -> Result<Vec<(String, String)>, EnvError> {
     text.split(',')
         .filter(|s| !s.trim().is_empty())
         .map(|item| {
-            let (k, v) = item
-                .split_once('=')
-                .ok_or_else(|| EnvError::InvalidOption {
-                    env: "<overrides>".into(),
-                    message: format!("'{item}' is not key=value"),
-                })?;
+            let (k, v) = item.split_once('=').ok_or_else(|| EnvError::InvalidOption {
+                env: "<overrides>".into(),
+                message: format!("'{item}' is not key=value"),
+            })?;
             Ok((k.trim().to_string(), v.trim().to_string()))
         })
         .collect()
@@ -130,10 +113,7 @@ fn check_name(name: &str) -> Result<(), EnvError> {
     if NAMES.contains(&name) {
         Ok(())
     } else {
-        Err(EnvError::UnknownEnv {
-            name: name.to_string(),
-            known: NAMES.join(", "),
-        })
+        Err(EnvError::UnknownEnv { name: name.to_string(), known: NAMES.join(", ") })
     }
 }
 
@@ -152,10 +132,7 @@ fn typed_options<T: DeserializeOwned>(c: &EnvConfig) -> Result<T, EnvError> {
             }
             _ => e.message().to_string(),
         };
-        EnvError::InvalidOption {
-            env: c.name.clone(),
-            message,
-        }
+        EnvError::InvalidOption { env: c.name.clone(), message }
     })
 }
 

@@ -70,13 +70,7 @@ impl Simulation {
     /// Gymnasium's `set_state` does; `cfrc_ext` stays zero until the first step).
     pub fn reset_to(&mut self, qpos_noise: &[f64], qvel_noise: &[f64]) -> Result<(), EnvError> {
         self.data.reset()?;
-        let qpos: Vec<f64> = self
-            .model
-            .qpos0()
-            .iter()
-            .zip(qpos_noise)
-            .map(|(a, b)| a + b)
-            .collect();
+        let qpos: Vec<f64> = self.model.qpos0().iter().zip(qpos_noise).map(|(a, b)| a + b).collect();
         self.data.set_state(&qpos, qvel_noise)?;
         take_warnings();
         Ok(())
@@ -103,23 +97,13 @@ impl Simulation {
         let after = self.data.instability_counts();
         // MuJoCo's automatic reset also rewinds time, which catches a repeat of the same warning.
         let rewound = self.data.time() <= time_before;
-        let finite = self
-            .data
-            .qpos()
-            .iter()
-            .chain(self.data.qvel())
-            .all(|v| v.is_finite());
+        let finite = self.data.qpos().iter().chain(self.data.qvel()).all(|v| v.is_finite());
         Ok(after != before || rewound || !finite)
     }
 }
 
 /// The step reported when the physics blew up: last good observation, zero reward, truncated.
-pub(crate) fn unstable_step(
-    last_obs: &[f64],
-    spec: &EnvSpec,
-    clipped: usize,
-    warnings: Vec<String>,
-) -> Step {
+pub(crate) fn unstable_step(last_obs: &[f64], spec: &EnvSpec, clipped: usize, warnings: Vec<String>) -> Step {
     Step {
         observation: last_obs.to_vec(),
         reward: 0.0,
@@ -161,22 +145,11 @@ pub(crate) struct StepStart {
 
 impl EnvCore {
     pub fn new(sim: Simulation, spec: EnvSpec) -> EnvCore {
-        EnvCore {
-            sim,
-            spec,
-            rng: EnvRng::new(),
-            clock: EpisodeClock::default(),
-            last_obs: vec![],
-        }
+        EnvCore { sim, spec, rng: EnvRng::new(), clock: EpisodeClock::default(), last_obs: vec![] }
     }
 
     /// Reseeds (if asked), resets to qpos0 plus noise of scale `scale`, starts the clock.
-    pub fn reset_with_noise(
-        &mut self,
-        seed: Option<u64>,
-        scale: f64,
-        velocity: VelocityNoise,
-    ) -> Result<(), EnvError> {
+    pub fn reset_with_noise(&mut self, seed: Option<u64>, scale: f64, velocity: VelocityNoise) -> Result<(), EnvError> {
         self.rng.reseed(seed);
         let qpos_noise = self.rng.uniform(self.sim.model.nq(), scale);
         let nv = self.sim.model.nv();
@@ -198,20 +171,11 @@ impl EnvCore {
 
     /// Runs the physics for one control step. `Err(step)` carries the step to return when the
     /// physics blew up (the episode is then over).
-    pub fn advance(
-        &mut self,
-        start: &StepStart,
-        frames: usize,
-    ) -> Result<Result<Vec<String>, Step>, EnvError> {
+    pub fn advance(&mut self, start: &StepStart, frames: usize) -> Result<Result<Vec<String>, Step>, EnvError> {
         let adv = self.sim.advance(&start.action, frames)?;
         if adv.unstable {
             self.clock.finish_if(true);
-            return Ok(Err(unstable_step(
-                &self.last_obs,
-                &self.spec,
-                start.clipped,
-                adv.warnings,
-            )));
+            return Ok(Err(unstable_step(&self.last_obs, &self.spec, start.clipped, adv.warnings)));
         }
         Ok(Ok(adv.warnings))
     }
@@ -222,23 +186,14 @@ impl EnvCore {
         self.clock.finish_if(terminated || truncated);
         self.last_obs.clone_from(&observation);
         let reward = info.reward_terms.iter().map(|(_, v)| v).sum();
-        Step {
-            observation,
-            reward,
-            terminated,
-            truncated,
-            info,
-        }
+        Step { observation, reward, terminated, truncated, info }
     }
 }
 
 /// Positions of a free-floating robot at reset (x, y of qpos).
 pub(crate) fn reset_info(core: &EnvCore) -> Info {
     let q = core.sim.data.qpos();
-    Info {
-        metrics: vec![("x_position", q[0]), ("y_position", q[1])],
-        ..Info::default()
-    }
+    Info { metrics: vec![("x_position", q[0]), ("y_position", q[1])], ..Info::default() }
 }
 
 /// Positions, planar velocity and torso height of a free-floating robot after a step.

@@ -66,12 +66,8 @@ impl Data {
         install_handlers();
         let mut out: *mut sys::mjData = std::ptr::null_mut();
         check(unsafe { sys::lb_make_data(model.as_ptr(), &mut out) })?;
-        let ptr =
-            NonNull::new(out).ok_or_else(|| MjError::Engine("mj_makeData returned NULL".into()))?;
-        Ok(Data {
-            ptr,
-            model: Arc::clone(model),
-        })
+        let ptr = NonNull::new(out).ok_or_else(|| MjError::Engine("mj_makeData returned NULL".into()))?;
+        Ok(Data { ptr, model: Arc::clone(model) })
     }
 
     pub fn model(&self) -> &Arc<Model> {
@@ -157,6 +153,10 @@ impl Data {
         geom_xpos, geom_xpos_mut, geom_xpos, |m: &Model| 3 * m.ngeom();
         /// Geom orientations (ngeom x 9).
         geom_xmat, geom_xmat_mut, geom_xmat, |m: &Model| 9 * m.ngeom();
+        /// Joint anchor points in world coordinates (njnt x 3).
+        xanchor, xanchor_mut, xanchor, |m: &Model| 3 * m.njnt();
+        /// Joint axes in world coordinates (njnt x 3).
+        xaxis, xaxis_mut, xaxis, |m: &Model| 3 * m.njnt();
         /// Site positions (nsite x 3).
         site_xpos, site_xpos_mut, site_xpos, |m: &Model| 3 * m.nsite();
         /// Site orientations (nsite x 9).
@@ -175,18 +175,10 @@ impl Data {
     pub fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> MjResult<()> {
         let (nq, nv) = (self.model.nq(), self.model.nv());
         if qpos.len() != nq {
-            return Err(MjError::BadLength {
-                what: "qpos",
-                expected: nq,
-                got: qpos.len(),
-            });
+            return Err(MjError::BadLength { what: "qpos", expected: nq, got: qpos.len() });
         }
         if qvel.len() != nv {
-            return Err(MjError::BadLength {
-                what: "qvel",
-                expected: nv,
-                got: qvel.len(),
-            });
+            return Err(MjError::BadLength { what: "qvel", expected: nv, got: qvel.len() });
         }
         self.qpos_mut().copy_from_slice(qpos);
         self.qvel_mut().copy_from_slice(qvel);
@@ -197,11 +189,7 @@ impl Data {
     pub fn set_ctrl(&mut self, ctrl: &[f64]) -> MjResult<()> {
         let nu = self.model.nu();
         if ctrl.len() != nu {
-            return Err(MjError::BadLength {
-                what: "ctrl",
-                expected: nu,
-                got: ctrl.len(),
-            });
+            return Err(MjError::BadLength { what: "ctrl", expected: nu, got: ctrl.len() });
         }
         self.ctrl_mut().copy_from_slice(ctrl);
         Ok(())
@@ -211,22 +199,12 @@ impl Data {
     pub fn jacobian_site(&mut self, site: usize) -> MjResult<(Vec<f64>, Vec<f64>)> {
         let count = self.model.nsite();
         if site >= count {
-            return Err(MjError::BadIndex {
-                kind: "site",
-                index: site,
-                count,
-            });
+            return Err(MjError::BadIndex { kind: "site", index: site, count });
         }
         let nv = self.model.nv();
         let (mut jacp, mut jacr) = (vec![0.0; 3 * nv], vec![0.0; 3 * nv]);
         check(unsafe {
-            sys::lb_jac_site(
-                self.model.as_ptr(),
-                self.ptr.as_ptr(),
-                jacp.as_mut_ptr(),
-                jacr.as_mut_ptr(),
-                site as i32,
-            )
+            sys::lb_jac_site(self.model.as_ptr(), self.ptr.as_ptr(), jacp.as_mut_ptr(), jacr.as_mut_ptr(), site as i32)
         })?;
         Ok((jacp, jacr))
     }
@@ -235,22 +213,12 @@ impl Data {
     pub fn jacobian_body(&mut self, body: usize) -> MjResult<(Vec<f64>, Vec<f64>)> {
         let count = self.model.nbody();
         if body >= count {
-            return Err(MjError::BadIndex {
-                kind: "body",
-                index: body,
-                count,
-            });
+            return Err(MjError::BadIndex { kind: "body", index: body, count });
         }
         let nv = self.model.nv();
         let (mut jacp, mut jacr) = (vec![0.0; 3 * nv], vec![0.0; 3 * nv]);
         check(unsafe {
-            sys::lb_jac_body(
-                self.model.as_ptr(),
-                self.ptr.as_ptr(),
-                jacp.as_mut_ptr(),
-                jacr.as_mut_ptr(),
-                body as i32,
-            )
+            sys::lb_jac_body(self.model.as_ptr(), self.ptr.as_ptr(), jacp.as_mut_ptr(), jacr.as_mut_ptr(), body as i32)
         })?;
         Ok((jacp, jacr))
     }
@@ -258,23 +226,12 @@ impl Data {
     /// The active contacts with their forces in the contact frame.
     pub fn contacts(&self) -> Vec<Contact> {
         let n = self.raw().ncon.max(0) as usize;
-        let list = if n == 0 {
-            &[][..]
-        } else {
-            unsafe { std::slice::from_raw_parts(self.raw().contact, n) }
-        };
+        let list = if n == 0 { &[][..] } else { unsafe { std::slice::from_raw_parts(self.raw().contact, n) } };
         list.iter()
             .enumerate()
             .map(|(i, c)| {
                 let mut f = [0.0f64; 6];
-                unsafe {
-                    sys::mj_contactForce(
-                        self.model.as_ptr(),
-                        self.ptr.as_ptr(),
-                        i as i32,
-                        f.as_mut_ptr(),
-                    )
-                };
+                unsafe { sys::mj_contactForce(self.model.as_ptr(), self.ptr.as_ptr(), i as i32, f.as_mut_ptr()) };
                 Contact {
                     geom1: c.geom1 as usize,
                     geom2: c.geom2 as usize,
@@ -306,7 +263,8 @@ mod tests {
 
     #[test]
     fn fatal_engine_error_becomes_err_and_process_survives() {
-        let xml = r#"<mujoco><worldbody><body><freejoint/><geom type="sphere" size="0.1"/></body></worldbody></mujoco>"#;
+        let xml =
+            r#"<mujoco><worldbody><body><freejoint/><geom type="sphere" size="0.1"/></body></worldbody></mujoco>"#;
         let mut model = Model::from_xml_str(xml).unwrap();
         // An integrator id MuJoCo does not know: mj_step calls mju_error("Invalid integrator"),
         // whose default handler would wait on stdin and then exit the process.

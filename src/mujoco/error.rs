@@ -20,17 +20,9 @@ pub enum MjError {
     #[error("unknown {kind} name '{name}'")]
     UnknownName { kind: &'static str, name: String },
     #[error("{kind} index {index} out of range (model has {count})")]
-    BadIndex {
-        kind: &'static str,
-        index: usize,
-        count: usize,
-    },
+    BadIndex { kind: &'static str, index: usize, count: usize },
     #[error("{what}: expected length {expected}, got {got}")]
-    BadLength {
-        what: &'static str,
-        expected: usize,
-        got: usize,
-    },
+    BadLength { what: &'static str, expected: usize, got: usize },
 }
 
 pub type MjResult<T> = Result<T, MjError>;
@@ -47,9 +39,7 @@ unsafe extern "C" fn on_warning(msg: *const c_char) {
         let text = if msg.is_null() {
             String::from("unknown MuJoCo warning")
         } else {
-            unsafe { CStr::from_ptr(msg) }
-                .to_string_lossy()
-                .into_owned()
+            unsafe { CStr::from_ptr(msg) }.to_string_lossy().into_owned()
         };
         WARNINGS.with(|w| {
             let mut w = w.borrow_mut();
@@ -72,14 +62,8 @@ pub fn take_warnings() -> Vec<String> {
 }
 
 pub(crate) fn last_engine_error() -> MjError {
-    let msg = unsafe { CStr::from_ptr(sys::lb_last_error()) }
-        .to_string_lossy()
-        .into_owned();
-    MjError::Engine(if msg.is_empty() {
-        "unknown error".into()
-    } else {
-        msg
-    })
+    let msg = unsafe { CStr::from_ptr(sys::lb_last_error()) }.to_string_lossy().into_owned();
+    MjError::Engine(if msg.is_empty() { "unknown error".into() } else { msg })
 }
 
 /// Turns a guarded shim call's return code into a `Result`.

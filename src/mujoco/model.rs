@@ -54,11 +54,7 @@ unsafe impl Sync for Model {}
 const ERR_LEN: usize = 1000;
 
 fn error_text(buf: &[c_char]) -> String {
-    let bytes: Vec<u8> = buf
-        .iter()
-        .take_while(|&&c| c != 0)
-        .map(|&c| c as u8)
-        .collect();
+    let bytes: Vec<u8> = buf.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
     String::from_utf8_lossy(&bytes).trim().to_string()
 }
 
@@ -71,9 +67,7 @@ impl Model {
             .map_err(|_| MjError::Load(format!("path {} contains a NUL byte", path.display())))?;
         let mut err = [0 as c_char; ERR_LEN];
         let mut out: *mut sys::mjModel = std::ptr::null_mut();
-        let rc = unsafe {
-            sys::lb_load_xml_file(c_path.as_ptr(), err.as_mut_ptr(), ERR_LEN as i32, &mut out)
-        };
+        let rc = unsafe { sys::lb_load_xml_file(c_path.as_ptr(), err.as_mut_ptr(), ERR_LEN as i32, &mut out) };
         Self::finish_load(rc, out, &err, &path.display().to_string())
     }
 
@@ -83,8 +77,7 @@ impl Model {
         if xml.contains('\0') {
             return Err(MjError::Load("model text contains a NUL byte".into()));
         }
-        let len =
-            i32::try_from(xml.len()).map_err(|_| MjError::Load("model text too large".into()))?;
+        let len = i32::try_from(xml.len()).map_err(|_| MjError::Load("model text too large".into()))?;
         let name = CString::new("locobench_model.xml").unwrap();
         let mut err = [0 as c_char; ERR_LEN];
         let mut out: *mut sys::mjModel = std::ptr::null_mut();
@@ -101,30 +94,15 @@ impl Model {
         Self::finish_load(rc, out, &err, "<string>")
     }
 
-    fn finish_load(
-        rc: i32,
-        out: *mut sys::mjModel,
-        err: &[c_char],
-        source: &str,
-    ) -> MjResult<Model> {
+    fn finish_load(rc: i32, out: *mut sys::mjModel, err: &[c_char], source: &str) -> MjResult<Model> {
         if rc < 0 {
-            return Err(MjError::Load(format!(
-                "{source}: {}",
-                super::error::last_engine_error()
-            )));
+            return Err(MjError::Load(format!("{source}: {}", super::error::last_engine_error())));
         }
         match NonNull::new(out) {
             Some(ptr) if rc == 0 => Ok(Model { ptr }),
             _ => {
                 let msg = error_text(err);
-                Err(MjError::Load(format!(
-                    "{source}: {}",
-                    if msg.is_empty() {
-                        "unknown error"
-                    } else {
-                        &msg
-                    }
-                )))
+                Err(MjError::Load(format!("{source}: {}", if msg.is_empty() { "unknown error" } else { &msg })))
             }
         }
     }
@@ -133,9 +111,7 @@ impl Model {
     pub fn try_clone(&self) -> MjResult<Model> {
         let mut out: *mut sys::mjModel = std::ptr::null_mut();
         check(unsafe { sys::lb_copy_model(self.ptr.as_ptr(), &mut out) })?;
-        NonNull::new(out)
-            .map(|ptr| Model { ptr })
-            .ok_or_else(|| MjError::Engine("mj_copyModel returned NULL".into()))
+        NonNull::new(out).map(|ptr| Model { ptr }).ok_or_else(|| MjError::Engine("mj_copyModel returned NULL".into()))
     }
 
     pub(crate) fn raw(&self) -> &sys::mjModel {
@@ -199,10 +175,7 @@ impl Model {
 
     /// Name → index; an unknown name is an error.
     pub fn id(&self, kind: ObjKind, name: &str) -> MjResult<usize> {
-        let unknown = || MjError::UnknownName {
-            kind: kind.label(),
-            name: name.to_string(),
-        };
+        let unknown = || MjError::UnknownName { kind: kind.label(), name: name.to_string() };
         let c_name = CString::new(name).map_err(|_| unknown())?;
         let id = unsafe { sys::mj_name2id(self.as_ptr(), kind.raw(), c_name.as_ptr()) };
         if id < 0 {
@@ -216,11 +189,7 @@ impl Model {
     pub fn name(&self, kind: ObjKind, index: usize) -> MjResult<Option<String>> {
         let count = self.count(kind);
         if index >= count {
-            return Err(MjError::BadIndex {
-                kind: kind.label(),
-                index,
-                count,
-            });
+            return Err(MjError::BadIndex { kind: kind.label(), index, count });
         }
         let p = unsafe { sys::mj_id2name(self.as_ptr(), kind.raw(), index as i32) };
         if p.is_null() {
@@ -270,10 +239,7 @@ impl Model {
     }
     pub fn actuator_ctrllimited(&self) -> Vec<bool> {
         let r = self.raw();
-        unsafe { std::slice::from_raw_parts(r.actuator_ctrllimited, self.nu()) }
-            .iter()
-            .map(|&b| b != 0)
-            .collect()
+        unsafe { std::slice::from_raw_parts(r.actuator_ctrllimited, self.nu()) }.iter().map(|&b| b != 0).collect()
     }
     pub fn actuator_trnid(&self) -> &[i32] {
         self.slice_i32(self.raw().actuator_trnid, 2 * self.nu())
@@ -336,14 +302,7 @@ impl Drop for Model {
 
 impl std::fmt::Debug for Model {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "Model(nq={}, nv={}, nu={}, nbody={})",
-            self.nq(),
-            self.nv(),
-            self.nu(),
-            self.nbody()
-        )
+        write!(f, "Model(nq={}, nv={}, nu={}, nbody={})", self.nq(), self.nv(), self.nu(), self.nbody())
     }
 }
 

@@ -35,24 +35,14 @@ pub fn checkpoints_dir(run_dir: &Path) -> PathBuf {
 
 /// Writes a checkpoint for `state.step` and makes it the latest. Older checkpoints keep their
 /// weights but lose their replay buffer (the only large file).
-pub fn save(
-    run_dir: &Path,
-    agent: &mut dyn Agent,
-    buffer: &ReplayBuffer,
-    state: &TrainState,
-) -> Result<PathBuf> {
+pub fn save(run_dir: &Path, agent: &mut dyn Agent, buffer: &ReplayBuffer, state: &TrainState) -> Result<PathBuf> {
     let root = checkpoints_dir(run_dir);
     std::fs::create_dir_all(&root)?;
     let name = format!("step_{:09}", state.step);
-    let tmp = tempfile::Builder::new()
-        .prefix(".incomplete-")
-        .tempdir_in(&root)?;
+    let tmp = tempfile::Builder::new().prefix(".incomplete-").tempdir_in(&root)?;
 
-    let params: HashMap<String, Tensor> = agent
-        .parameters()
-        .into_iter()
-        .map(|(n, v)| (n, v.as_tensor().clone()))
-        .collect();
+    let params: HashMap<String, Tensor> =
+        agent.parameters().into_iter().map(|(n, v)| (n, v.as_tensor().clone())).collect();
     candle_core::safetensors::save(&params, tmp.path().join("model.safetensors"))?;
 
     let mut optim = HashMap::new();
@@ -63,18 +53,11 @@ pub fn save(
         optimizer_steps.insert(name.to_string(), steps);
     }
     candle_core::safetensors::save(&optim, tmp.path().join("optim.safetensors"))?;
-    candle_core::safetensors::save(
-        &buffer_tensors(&buffer.export())?,
-        tmp.path().join("buffer.safetensors"),
-    )?;
+    candle_core::safetensors::save(&buffer_tensors(&buffer.export())?, tmp.path().join("buffer.safetensors"))?;
 
     let state = TrainState {
         optimizer_steps,
-        counters: agent
-            .counters()
-            .into_iter()
-            .map(|(k, v)| (k.to_string(), v))
-            .collect(),
+        counters: agent.counters().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
         ..state.clone()
     };
     std::fs::write(tmp.path().join("state.toml"), toml::to_string(&state)?)?;
@@ -84,8 +67,7 @@ pub fn save(
         std::fs::remove_dir_all(&dest)?;
     }
     let tmp_path = tmp.keep();
-    std::fs::rename(&tmp_path, &dest)
-        .with_context(|| format!("moving checkpoint into {}", dest.display()))?;
+    std::fs::rename(&tmp_path, &dest).with_context(|| format!("moving checkpoint into {}", dest.display()))?;
     write_bytes_atomic(&root.join("latest"), name.as_bytes())?;
     for entry in std::fs::read_dir(&root)?.flatten() {
         let p = entry.path();
@@ -99,12 +81,8 @@ pub fn save(
 /// The newest checkpoint of a run.
 pub fn latest(run_dir: &Path) -> Result<PathBuf> {
     let root = checkpoints_dir(run_dir);
-    let name = std::fs::read_to_string(root.join("latest")).with_context(|| {
-        format!(
-            "{} has no checkpoint (missing checkpoints/latest)",
-            run_dir.display()
-        )
-    })?;
+    let name = std::fs::read_to_string(root.join("latest"))
+        .with_context(|| format!("{} has no checkpoint (missing checkpoints/latest)", run_dir.display()))?;
     Ok(root.join(name.trim()))
 }
 
@@ -112,12 +90,8 @@ fn read_tensors(path: &Path) -> Result<HashMap<String, Tensor>> {
     if !path.exists() {
         bail!("checkpoint file {} is missing", path.display());
     }
-    candle_core::safetensors::load(path, &Device::Cpu).with_context(|| {
-        format!(
-            "checkpoint file {} is corrupt or unreadable",
-            path.display()
-        )
-    })
+    candle_core::safetensors::load(path, &Device::Cpu)
+        .with_context(|| format!("checkpoint file {} is corrupt or unreadable", path.display()))
 }
 
 /// Loads network weights into `agent`, checking every name and shape.
@@ -125,10 +99,7 @@ pub fn load_weights(checkpoint: &Path, agent: &dyn Agent) -> Result<()> {
     let tensors = read_tensors(&checkpoint.join("model.safetensors"))?;
     let params = agent.parameters();
     if let Some((name, _)) = params.iter().find(|(n, _)| !tensors.contains_key(n)) {
-        bail!(
-            "checkpoint {} has no tensor '{name}': was it written by another algorithm?",
-            checkpoint.display()
-        );
+        bail!("checkpoint {} has no tensor '{name}': was it written by another algorithm?", checkpoint.display());
     }
     for (name, var) in params {
         let t = &tensors[&name];
@@ -147,8 +118,7 @@ pub fn load_weights(checkpoint: &Path, agent: &dyn Agent) -> Result<()> {
 
 pub fn load_state(checkpoint: &Path) -> Result<TrainState> {
     let path = checkpoint.join("state.toml");
-    let text =
-        std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
     toml::from_str(&text).with_context(|| format!("{} is corrupt", path.display()))
 }
 
@@ -158,18 +128,14 @@ pub fn load_all(checkpoint: &Path, agent: &mut dyn Agent) -> Result<(TrainState,
     let state = load_state(checkpoint)?;
     let optim = read_tensors(&checkpoint.join("optim.safetensors"))?;
     for (name, opt) in agent.optimizers() {
-        let steps = *state
-            .optimizer_steps
-            .get(name)
-            .with_context(|| format!("state.toml lacks the step count of {name}"))?;
+        let steps =
+            *state.optimizer_steps.get(name).with_context(|| format!("state.toml lacks the step count of {name}"))?;
         opt.load_state(name, &optim, steps)?;
     }
     for (name, value) in &state.counters {
         agent.set_counter(name, *value);
     }
-    let buffer = ReplayBuffer::import(buffer_snapshot(&read_tensors(
-        &checkpoint.join("buffer.safetensors"),
-    )?)?)?;
+    let buffer = ReplayBuffer::import(buffer_snapshot(&read_tensors(&checkpoint.join("buffer.safetensors"))?)?)?;
     Ok((state, buffer))
 }
 
@@ -182,31 +148,19 @@ fn buffer_tensors(s: &BufferSnapshot) -> Result<HashMap<String, Tensor>> {
     t.insert("obs".into(), f(&s.obs)?);
     t.insert("actions".into(), f(&s.actions)?);
     t.insert("rewards".into(), f(&s.rewards)?);
-    t.insert(
-        "flags".into(),
-        Tensor::from_slice(&s.flags, s.flags.len(), &dev)?,
-    );
+    t.insert("flags".into(), Tensor::from_slice(&s.flags, s.flags.len(), &dev)?);
     let side: Vec<i64> = s.side_index.iter().map(|&i| i as i64).collect();
-    t.insert(
-        "side_index".into(),
-        Tensor::from_slice(&side, side.len(), &dev)?,
-    );
+    t.insert("side_index".into(), Tensor::from_slice(&side, side.len(), &dev)?);
     t.insert("side_values".into(), f(&s.side_values)?);
     t.insert("newest_next".into(), f(&s.newest_next)?);
     Ok(t)
 }
 
 fn buffer_snapshot(t: &HashMap<String, Tensor>) -> Result<BufferSnapshot> {
-    let get = |k: &str| {
-        t.get(k)
-            .with_context(|| format!("buffer checkpoint lacks '{k}'"))
-    };
+    let get = |k: &str| t.get(k).with_context(|| format!("buffer checkpoint lacks '{k}'"));
     let f32s = |k: &str| -> Result<Vec<f32>> { Ok(get(k)?.to_vec1::<f32>()?) };
     let meta = get("meta")?.to_vec1::<i64>()?;
-    anyhow::ensure!(
-        meta.len() == 5 && meta.iter().all(|&v| v >= 0),
-        "buffer checkpoint metadata is corrupt"
-    );
+    anyhow::ensure!(meta.len() == 5 && meta.iter().all(|&v| v >= 0), "buffer checkpoint metadata is corrupt");
     Ok(BufferSnapshot {
         capacity: meta[0] as usize,
         obs_dim: meta[1] as usize,
@@ -217,11 +171,7 @@ fn buffer_snapshot(t: &HashMap<String, Tensor>) -> Result<BufferSnapshot> {
         actions: f32s("actions")?,
         rewards: f32s("rewards")?,
         flags: get("flags")?.to_vec1::<u8>()?,
-        side_index: get("side_index")?
-            .to_vec1::<i64>()?
-            .into_iter()
-            .map(|i| i as u32)
-            .collect(),
+        side_index: get("side_index")?.to_vec1::<i64>()?.into_iter().map(|i| i as u32).collect(),
         side_values: f32s("side_values")?,
         newest_next: f32s("newest_next")?,
     })

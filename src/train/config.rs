@@ -22,23 +22,16 @@ pub fn build_config(env: &str, algo: Algo, overrides: &[(String, String)]) -> Re
         }
     }
     apply_overrides(&mut table, overrides)?;
-    let cfg: TrainConfig = toml::Value::Table(table)
-        .try_into()
-        .map_err(|e: toml::de::Error| anyhow::anyhow!("{}", e.message()))?;
+    let cfg: TrainConfig =
+        toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| anyhow::anyhow!("{}", e.message()))?;
     cfg.validate()?;
     Ok(cfg)
 }
 
 pub fn apply_overrides(table: &mut toml::Table, overrides: &[(String, String)]) -> Result<()> {
     for (key, value) in overrides {
-        anyhow::ensure!(
-            key != "algo",
-            "choose the algorithm with --algo, not --set algo="
-        );
-        anyhow::ensure!(
-            table.contains_key(key) || key == "target_entropy",
-            "unknown hyperparameter '{key}'"
-        );
+        anyhow::ensure!(key != "algo", "choose the algorithm with --algo, not --set algo=");
+        anyhow::ensure!(table.contains_key(key) || key == "target_entropy", "unknown hyperparameter '{key}'");
         let parsed: toml::Value = format!("v = {value}")
             .parse::<toml::Table>()
             .ok()
@@ -69,9 +62,7 @@ pub fn split_pairs(text: &str) -> Result<Vec<(String, String)>> {
         .into_iter()
         .filter(|s| !s.trim().is_empty())
         .map(|item| {
-            let (k, v) = item
-                .split_once('=')
-                .with_context(|| format!("'{item}' is not key=value"))?;
+            let (k, v) = item.split_once('=').with_context(|| format!("'{item}' is not key=value"))?;
             Ok((k.trim().to_string(), v.trim().to_string()))
         })
         .collect()
@@ -87,22 +78,12 @@ mod tests {
         assert_eq!(c.hidden, vec![64, 64]);
         assert_eq!(c.batch_size, 256);
         assert_eq!(c.policy_delay, 2);
-        let c = build_config(
-            "half-cheetah",
-            Algo::Ddpg,
-            &split_pairs("hidden=[32,32],tau=0.01").unwrap(),
-        )
-        .unwrap();
+        let c = build_config("half-cheetah", Algo::Ddpg, &split_pairs("hidden=[32,32],tau=0.01").unwrap()).unwrap();
         assert_eq!(c.hidden, vec![32, 32]);
         assert_eq!(c.tau, 0.01);
         assert!(!c.twin_critics);
         assert!(build_config("ant", Algo::Sac, &split_pairs("nonsense=1").unwrap()).is_err());
         assert!(build_config("ant", Algo::Sac, &split_pairs("tau=2").unwrap()).is_err());
-        assert!(build_config(
-            "ant",
-            Algo::Sac,
-            &split_pairs("batch_size=\"big\"").unwrap()
-        )
-        .is_err());
+        assert!(build_config("ant", Algo::Sac, &split_pairs("batch_size=\"big\"").unwrap()).is_err());
     }
 }

@@ -24,8 +24,7 @@ impl Evaluation {
     /// Population standard deviation (as numpy's default).
     pub fn std(&self) -> f64 {
         let m = self.mean();
-        (self.returns.iter().map(|r| (r - m).powi(2)).sum::<f64>() / self.returns.len() as f64)
-            .sqrt()
+        (self.returns.iter().map(|r| (r - m).powi(2)).sum::<f64>() / self.returns.len() as f64).sqrt()
     }
 }
 
@@ -39,12 +38,7 @@ pub fn to_env_action(env: &dyn Env, normalised: &[f32]) -> Vec<f64> {
         .collect()
 }
 
-pub fn evaluate(
-    agent: &dyn Agent,
-    env: &mut dyn Env,
-    episodes: usize,
-    run_seed: u64,
-) -> Result<Evaluation> {
+pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed: u64) -> Result<Evaluation> {
     let terms = env.spec().reward_terms.clone();
     let mut eval = Evaluation {
         returns: Vec::with_capacity(episodes),

@@ -68,18 +68,9 @@ pub fn read(path: &Path) -> Result<Vec<MetricsRow>> {
     let mut reader = csv::Reader::from_path(path)?;
     for rec in reader.records() {
         let rec = rec?;
-        let f = |i: usize| {
-            rec.get(i)
-                .filter(|s| !s.is_empty())
-                .map(|s| s.parse::<f64>())
-                .transpose()
-        };
+        let f = |i: usize| rec.get(i).filter(|s| !s.is_empty()).map(|s| s.parse::<f64>()).transpose();
         rows.push(MetricsRow {
-            kind: if rec.get(0) == Some("eval") {
-                "eval"
-            } else {
-                "episode"
-            },
+            kind: if rec.get(0) == Some("eval") { "eval" } else { "episode" },
             step: rec.get(1).unwrap_or("0").parse()?,
             episode_return: f(2)?,
             episode_length: f(3)?.map(|v| v as u64),

@@ -86,9 +86,7 @@ fn git_commit() -> Option<String> {
         .current_dir(env!("CARGO_MANIFEST_DIR"))
         .output()
         .ok()?;
-    out.status
-        .success()
-        .then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+    out.status.success().then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
 }
 
 /// Starts a new run in `run_dir`. An existing non-empty directory is an error unless `force`.
@@ -106,10 +104,12 @@ pub fn train(
     env.options = env.resolved_options()?;
     if run_dir.exists() && std::fs::read_dir(run_dir)?.next().is_some() {
         if !force {
-            bail!("run directory {} already exists; use --force to overwrite it or --resume to continue it", run_dir.display());
+            bail!(
+                "run directory {} already exists; use --force to overwrite it or --resume to continue it",
+                run_dir.display()
+            );
         }
-        std::fs::remove_dir_all(run_dir)
-            .with_context(|| format!("removing {}", run_dir.display()))?;
+        std::fs::remove_dir_all(run_dir).with_context(|| format!("removing {}", run_dir.display()))?;
     }
     let init_checkpoint = init_from.map(resolve_checkpoint).transpose()?;
     let run = RunConfig {
@@ -125,10 +125,7 @@ pub fn train(
         checkpoint::load_weights(ckpt, trainer.agent.as_ref())?;
     }
     std::fs::create_dir_all(run_dir)?;
-    write_bytes_atomic(
-        &run_dir.join("config.toml"),
-        toml::to_string(&run)?.as_bytes(),
-    )?;
+    write_bytes_atomic(&run_dir.join("config.toml"), toml::to_string(&run)?.as_bytes())?;
     trainer.run(control)
 }
 
@@ -145,22 +142,15 @@ pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
     trainer.wall_offset = state.wall_time;
     let metrics_path = run_dir.join("metrics.csv");
     if metrics_path.exists() {
-        trainer.metrics = metrics::read(&metrics_path)?
-            .into_iter()
-            .filter(|r| r.step <= state.step)
-            .collect();
+        trainer.metrics = metrics::read(&metrics_path)?.into_iter().filter(|r| r.step <= state.step).collect();
     }
     trainer.run(control)
 }
 
 pub fn read_run_config(run_dir: &Path) -> Result<RunConfig> {
     let path = run_dir.join("config.toml");
-    let text = std::fs::read_to_string(&path).with_context(|| {
-        format!(
-            "{} is not a run directory (no config.toml)",
-            run_dir.display()
-        )
-    })?;
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("{} is not a run directory (no config.toml)", run_dir.display()))?;
     toml::from_str(&text).with_context(|| format!("{} is corrupt", path.display()))
 }
 
@@ -173,23 +163,20 @@ pub fn resolve_checkpoint(path: &Path) -> Result<PathBuf> {
     } else if path.file_name().is_some_and(|n| n == "model.safetensors") && path.exists() {
         Ok(path.parent().unwrap().to_path_buf())
     } else {
-        bail!("no checkpoint at {} (expected a checkpoint directory with model.safetensors, or a run directory)", path.display())
+        bail!(
+            "no checkpoint at {} (expected a checkpoint directory with model.safetensors, or a run directory)",
+            path.display()
+        )
     }
 }
 
 /// Builds the agent of a run and loads a checkpoint's weights into it.
 pub fn load_policy(checkpoint: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
     let ckpt = resolve_checkpoint(checkpoint)?;
-    let run_dir = ckpt
-        .parent()
-        .and_then(Path::parent)
-        .context("checkpoint is not inside a run directory")?;
+    let run_dir = ckpt.parent().and_then(Path::parent).context("checkpoint is not inside a run directory")?;
     let run = read_run_config(run_dir)?;
     let env = make(&run.env)?;
-    let (obs_dim, act_dim) = (
-        env.spec().observation_space.dim(),
-        env.spec().action_space.dim(),
-    );
+    let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
     let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
     checkpoint::load_weights(&ckpt, agent.as_ref())?;
     Ok((run, agent))
@@ -215,10 +202,7 @@ impl Trainer {
     fn new(run_dir: &Path, run: &RunConfig) -> Result<Trainer> {
         let env = make(&run.env)?;
         let eval_env = make(&run.env)?;
-        let (obs_dim, act_dim) = (
-            env.spec().observation_space.dim(),
-            env.spec().action_space.dim(),
-        );
+        let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
         let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
         Ok(Trainer {
             run_dir: run_dir.to_path_buf(),
@@ -240,17 +224,11 @@ impl Trainer {
     fn run(&mut self, control: &RunControl) -> Result<RunSummary> {
         let cfg = self.cfg.clone();
         let interrupted = interrupt_flag();
-        let bar = if control.show_progress {
-            ProgressBar::new(cfg.total_steps)
-        } else {
-            ProgressBar::hidden()
-        };
+        let bar = if control.show_progress { ProgressBar::new(cfg.total_steps) } else { ProgressBar::hidden() };
         bar.set_style(
-            ProgressStyle::with_template(
-                "{elapsed_precise} [{bar:30}] {pos}/{len} steps, {per_sec} {msg}",
-            )
-            .expect("valid template")
-            .progress_chars("=> "),
+            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} steps, {per_sec} {msg}")
+                .expect("valid template")
+                .progress_chars("=> "),
         );
         bar.set_position(self.step);
         let started = Instant::now();
@@ -264,25 +242,19 @@ impl Trainer {
         let mut need_reset = true;
         let (mut ep_return, mut ep_len) = (0.0, 0u64);
         let wall = |offset: f64| offset + started.elapsed().as_secs_f64();
-        let rate =
-            |step: u64| (step - start_step) as f64 / started.elapsed().as_secs_f64().max(1e-9);
+        let rate = |step: u64| (step - start_step) as f64 / started.elapsed().as_secs_f64().max(1e-9);
 
         let outcome = loop {
-            let solved = control
-                .target_return
-                .is_some_and(|t| last_eval.as_ref().is_some_and(|e| e.mean() >= t));
+            let solved = control.target_return.is_some_and(|t| last_eval.as_ref().is_some_and(|e| e.mean() >= t));
             if self.step >= cfg.total_steps || solved {
                 break Outcome::Finished;
             }
-            if interrupted.load(Ordering::SeqCst)
-                || (need_reset && control.stop_after.is_some_and(|s| self.step >= s))
+            if interrupted.load(Ordering::SeqCst) || (need_reset && control.stop_after.is_some_and(|s| self.step >= s))
             {
                 break Outcome::Stopped;
             }
             if need_reset {
-                (obs, _) = self
-                    .env
-                    .reset(Some(train_episode_seed(self.seed, self.episodes)))?;
+                (obs, _) = self.env.reset(Some(train_episode_seed(self.seed, self.episodes)))?;
                 self.episodes += 1;
                 self.agent.begin_episode();
                 (ep_return, ep_len, need_reset) = (0.0, 0, false);
@@ -291,9 +263,7 @@ impl Trainer {
             // Act: random during warm-up, then the agent's exploratory action.
             let obs32: Vec<f32> = obs.iter().map(|&v| v as f32).collect();
             let action: Vec<f32> = if self.step < cfg.warmup_steps {
-                (0..act_dim)
-                    .map(|_| self.rng.random_range(-1.0f32..=1.0))
-                    .collect()
+                (0..act_dim).map(|_| self.rng.random_range(-1.0f32..=1.0)).collect()
             } else {
                 self.agent.explore(&obs32, &mut self.rng)?
             };
@@ -309,14 +279,7 @@ impl Trainer {
                 need_reset = true;
             } else {
                 let next32: Vec<f32> = s.observation.iter().map(|&v| v as f32).collect();
-                self.buffer.add(
-                    &obs32,
-                    &action,
-                    s.reward as f32,
-                    &next32,
-                    s.terminated,
-                    s.truncated,
-                );
+                self.buffer.add(&obs32, &action, s.reward as f32, &next32, s.terminated, s.truncated);
                 ep_return += s.reward;
                 ep_len += 1;
                 if s.done() {
@@ -339,28 +302,17 @@ impl Trainer {
             }
 
             // Learn.
-            if self.step >= cfg.learning_starts
-                && self.buffer.len() >= cfg.batch_size.min(self.buffer.capacity())
-            {
+            if self.step >= cfg.learning_starts && self.buffer.len() >= cfg.batch_size.min(self.buffer.capacity()) {
                 for _ in 0..cfg.updates_per_step {
                     self.buffer.sample_into(&mut self.batch, &mut self.rng);
                     let l = self.agent.update(&self.batch, &mut self.rng)?;
-                    losses = Losses {
-                        actor: l.actor.or(losses.actor),
-                        alpha: l.alpha.or(losses.alpha),
-                        ..l
-                    };
+                    losses = Losses { actor: l.actor.or(losses.actor), alpha: l.alpha.or(losses.alpha), ..l };
                 }
             }
 
             // Evaluate.
             if self.step % cfg.eval_every == 0 || self.step == cfg.total_steps {
-                let e = evaluate(
-                    self.agent.as_ref(),
-                    self.eval_env.as_mut(),
-                    cfg.eval_episodes,
-                    self.seed,
-                )?;
+                let e = evaluate(self.agent.as_ref(), self.eval_env.as_mut(), cfg.eval_episodes, self.seed)?;
                 best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
                 self.metrics.push(MetricsRow {

@@ -45,11 +45,7 @@ pub struct RngState {
 
 impl RngState {
     pub fn of(rng: &ChaCha8Rng) -> RngState {
-        RngState {
-            seed: rng.get_seed(),
-            stream: rng.get_stream(),
-            word_pos: rng.get_word_pos().to_string(),
-        }
+        RngState { seed: rng.get_seed(), stream: rng.get_stream(), word_pos: rng.get_word_pos().to_string() }
     }
     pub fn restore(&self) -> anyhow::Result<ChaCha8Rng> {
         let mut r = ChaCha8Rng::from_seed(self.seed);

@@ -51,12 +51,7 @@ mod tests {
         assert!((a[1] - (base - PI / 8.0)).abs() < 1e-12);
         // The other legs are untouched except front-right, whose extension shrinks both angles.
         assert!((a[2] - base).abs() < 1e-12 && (a[3] - base).abs() < 1e-12);
-        assert!(
-            (a[4] - (base - PI / 8.0)).abs() < 1e-12 && (a[5] - (base - PI / 8.0)).abs() < 1e-12
-        );
-        assert_eq!(
-            [swing_sign(4), swing_sign(5), swing_sign(6), swing_sign(7)],
-            [-1.0, 1.0, -1.0, 1.0]
-        );
+        assert!((a[4] - (base - PI / 8.0)).abs() < 1e-12 && (a[5] - (base - PI / 8.0)).abs() < 1e-12);
+        assert_eq!([swing_sign(4), swing_sign(5), swing_sign(6), swing_sign(7)], [-1.0, 1.0, -1.0, 1.0]);
     }
 }

@@ -12,9 +12,7 @@ use rand::Rng;
 use serde::{Deserialize, Serialize};
 
 use self::leg_model::{motor_angles_from_leg_model, NUM_MOTORS};
-use self::motor::{
-    MotorParams, MAX_TORQUE, OBSERVED_TORQUE_LIMIT, OVERHEAT_SECONDS, OVERHEAT_TORQUE,
-};
+use self::motor::{MotorParams, MAX_TORQUE, OBSERVED_TORQUE_LIMIT, OVERHEAT_SECONDS, OVERHEAT_TORQUE};
 use super::options::Check;
 use super::simulation::{unstable_step, EnvCore, Simulation};
 use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
@@ -137,25 +135,16 @@ impl Minitaur {
         let mut motors = [MotorJoint { qpos: 0, dof: 0 }; NUM_MOTORS];
         for (i, motor) in motors.iter_mut().enumerate() {
             let joint = trn[2 * i] as usize;
-            *motor = MotorJoint {
-                qpos: m.joint_qpos_adr(joint),
-                dof: m.joint_dof_adr(joint),
-            };
+            *motor = MotorJoint { qpos: m.joint_qpos_adr(joint), dof: m.joint_dof_adr(joint) };
         }
-        let foot_geoms = ["foot_fl", "foot_bl", "foot_fr", "foot_br"]
-            .iter()
-            .map(|n| m.geom_id(n))
-            .collect::<Result<Vec<_>, _>>()?;
+        let foot_geoms =
+            ["foot_fl", "foot_bl", "foot_fr", "foot_br"].iter().map(|n| m.geom_id(n)).collect::<Result<Vec<_>, _>>()?;
         let action_space = match opts.action_mode {
             ActionMode::Leg => BoxSpace::uniform(NUM_MOTORS, -1.0, 1.0),
             ActionMode::MotorAngle => BoxSpace::uniform(NUM_MOTORS, 0.0, std::f64::consts::PI),
             ActionMode::Torque => BoxSpace::uniform(NUM_MOTORS, -MAX_TORQUE, MAX_TORQUE),
         };
-        let params = MotorParams {
-            kp: opts.motor_kp,
-            kd: opts.motor_kd,
-            ..MotorParams::default()
-        };
+        let params = MotorParams { kp: opts.motor_kp, kd: opts.motor_kd, ..MotorParams::default() };
         let speed = params.speed_limit();
         let mut low = vec![-std::f64::consts::PI; 8];
         low.extend([-speed; 8]);
@@ -215,8 +204,7 @@ impl Minitaur {
     }
 
     pub fn is_fallen(&self) -> bool {
-        self.base_up_z() < self.opts.fall_up_threshold
-            || self.base_position()[2] < self.opts.fall_height
+        self.base_up_z() < self.opts.fall_up_threshold || self.base_position()[2] < self.opts.fall_height
     }
 
     fn observation(&self) -> Vec<f64> {
@@ -244,11 +232,8 @@ impl Minitaur {
             let (applied, observed) = p.torque(pwm, velocities[i]);
             let applied = if self.enabled[i] { applied } else { 0.0 };
             if self.opts.overheat_protection {
-                self.overheat_time[i] = if applied.abs() > OVERHEAT_TORQUE {
-                    self.overheat_time[i] + SIM_DT
-                } else {
-                    0.0
-                };
+                self.overheat_time[i] =
+                    if applied.abs() > OVERHEAT_TORQUE { self.overheat_time[i] + SIM_DT } else { 0.0 };
                 if self.overheat_time[i] >= OVERHEAT_SECONDS {
                     self.enabled[i] = false;
                 }
@@ -294,11 +279,7 @@ impl Env for Minitaur {
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
         self.core.rng.reseed(seed);
-        let nominal = MotorParams {
-            kp: self.opts.motor_kp,
-            kd: self.opts.motor_kd,
-            ..MotorParams::default()
-        };
+        let nominal = MotorParams { kp: self.opts.motor_kp, kd: self.opts.motor_kd, ..MotorParams::default() };
         self.params = [nominal; NUM_MOTORS];
         if self.opts.randomize_dynamics {
             self.core.sim = self.randomized_simulation()?;
@@ -310,10 +291,7 @@ impl Env for Minitaur {
         self.observed_torque = [0.0; NUM_MOTORS];
         self.applied_torque = [0.0; NUM_MOTORS];
 
-        let noise = self
-            .core
-            .rng
-            .uniform(NUM_MOTORS, self.opts.reset_noise_scale);
+        let noise = self.core.rng.uniform(NUM_MOTORS, self.opts.reset_noise_scale);
         let mut qpos_noise = vec![0.0; self.core.sim.model.nq()];
         for (i, n) in noise.iter().enumerate() {
             qpos_noise[self.motors[i].qpos] = *n;
@@ -334,11 +312,7 @@ impl Env for Minitaur {
         self.core.last_obs = self.observation();
         let p = self.base_position();
         let info = Info {
-            metrics: vec![
-                ("x_position", p[0]),
-                ("y_position", p[1]),
-                ("base_height", p[2]),
-            ],
+            metrics: vec![("x_position", p[0]), ("y_position", p[1]), ("base_height", p[2])],
             ..Info::default()
         };
         Ok((self.core.last_obs.clone(), info))
@@ -366,39 +340,20 @@ impl Env for Minitaur {
         let warnings = crate::mujoco::take_warnings();
         if unstable {
             self.core.clock.finish_if(true);
-            return Ok(unstable_step(
-                &self.core.last_obs,
-                &self.core.spec,
-                clipped,
-                warnings,
-            ));
+            return Ok(unstable_step(&self.core.last_obs, &self.core.spec, clipped, warnings));
         }
         let after = self.base_position();
-        let (dx, dy, dz) = (
-            after[0] - before[0],
-            after[1] - before[1],
-            after[2] - before[2],
-        );
+        let (dx, dy, dz) = (after[0] - before[0], after[1] - before[1], after[2] - before[2]);
         // PyBullet's energy term: |observed torque . velocity| times one physics step.
         let velocities = self.motor_velocities();
-        let power: f64 = self
-            .observed_torque
-            .iter()
-            .zip(&velocities)
-            .map(|(t, v)| t * v)
-            .sum();
+        let power: f64 = self.observed_torque.iter().zip(&velocities).map(|(t, v)| t * v).sum();
         let o = &self.opts;
         let distance = o.distance_weight * dx;
         let energy = -o.energy_weight * power.abs() * SIM_DT;
         let drift = -o.drift_weight * dy.abs();
         let shake = -o.shake_weight * dz.abs();
         let info = Info {
-            reward_terms: vec![
-                ("distance", distance),
-                ("energy", energy),
-                ("drift", drift),
-                ("shake", shake),
-            ],
+            reward_terms: vec![("distance", distance), ("energy", energy), ("drift", drift), ("shake", shake)],
             metrics: vec![
                 ("x_position", after[0]),
                 ("y_position", after[1]),
@@ -409,10 +364,7 @@ impl Env for Minitaur {
                 ("dz", dz),
                 ("up_z", self.base_up_z()),
                 ("mechanical_energy", mechanical_energy),
-                (
-                    "motors_disabled",
-                    self.enabled.iter().filter(|e| !**e).count() as f64,
-                ),
+                ("motors_disabled", self.enabled.iter().filter(|e| !**e).count() as f64),
             ],
             clipped_actions: clipped,
             unstable: false,

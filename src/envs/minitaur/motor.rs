@@ -59,8 +59,7 @@ impl MotorParams {
     pub fn torque(&self, pwm: f64, velocity: f64) -> (f64, f64) {
         let observed = (self.torque_constant * pwm * self.voltage / self.resistance)
             .clamp(-OBSERVED_TORQUE_LIMIT, OBSERVED_TORQUE_LIMIT);
-        let net_voltage = (pwm * self.voltage
-            - (self.torque_constant + self.viscous_damping) * velocity)
+        let net_voltage = (pwm * self.voltage - (self.torque_constant + self.viscous_damping) * velocity)
             .clamp(-VOLTAGE_CLIP, VOLTAGE_CLIP);
         let current = net_voltage / self.resistance;
         let applied = current.signum() * interpolate(current.abs(), &CURRENT_TABLE, &TORQUE_TABLE);

@@ -1,0 +1,49 @@
+//! The baseline controllers behind one entry point: build the env they need and the matching
+//! controller for a speed set-point.
+use anyhow::{bail, Result};
+
+use super::ant::{AntController, AntGaitParams};
+use super::gait::GaitKind;
+use super::minitaur::{MinitaurController, MinitaurGaitParams};
+use crate::envs::EnvConfig;
+use crate::policy::Policy;
+
+/// The env config the baseline runs in (Minitaur switches to its torque action mode).
+pub fn baseline_env(env: &str) -> Result<EnvConfig> {
+    Ok(match env {
+        "minitaur" => EnvConfig::new("minitaur").with_overrides(&[("action_mode".into(), "\"torque\"".into())])?,
+        "ant" => EnvConfig::new("ant"),
+        other => bail!("the Raibert baseline exists for minitaur and ant, not '{other}'"),
+    })
+}
+
+/// A controller for `env` tracking `speed`; `gait` overrides Minitaur's default bound.
+pub fn baseline_controller(env: &str, speed: f64, gait: Option<GaitKind>) -> Result<Box<dyn Policy>> {
+    anyhow::ensure!(speed.is_finite() && speed >= 0.0, "speed must be a finite number >= 0");
+    Ok(match env {
+        "minitaur" => {
+            let defaults = MinitaurGaitParams::default();
+            Box::new(MinitaurController::new(MinitaurGaitParams {
+                speed,
+                gait: gait.unwrap_or(defaults.gait),
+                ..defaults
+            })?)
+        }
+        "ant" => {
+            if gait.is_some_and(|g| g != GaitKind::Trot) {
+                bail!("the Ant controller trots only");
+            }
+            Box::new(AntController::new(AntGaitParams { speed, ..Default::default() })?)
+        }
+        other => bail!("the Raibert baseline exists for minitaur and ant, not '{other}'"),
+    })
+}
+
+pub fn parse_gait(name: &str) -> Result<GaitKind> {
+    match name {
+        "trot" => Ok(GaitKind::Trot),
+        "bound" => Ok(GaitKind::Bound),
+        "pace" => Ok(GaitKind::Pace),
+        other => bail!("unknown gait '{other}': use trot, bound or pace"),
+    }
+}

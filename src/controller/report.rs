@@ -1,0 +1,68 @@
+//! Running a controller for whole episodes and measuring how it walks.
+use anyhow::Result;
+
+use crate::envs::Env;
+use crate::policy::Policy;
+use crate::rollout::run_episodes;
+
+/// Locomotion measures of one episode.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct GaitEpisode {
+    pub episode_return: f64,
+    pub length: usize,
+    pub fell: bool,
+    /// Mean forward speed (m/s): forward distance over episode time.
+    pub mean_speed: f64,
+    /// Mean |forward velocity - set-point| over steps (m/s).
+    pub speed_error: f64,
+    /// Mechanical energy delivered by the motors (J), where the env reports it.
+    pub energy: f64,
+    /// energy / (m g distance); infinite when the robot did not advance.
+    pub cost_of_transport: f64,
+    pub drift: f64,
+    pub shake: f64,
+}
+
+/// Runs `episodes` episodes and measures each; `mass` and `gravity` give the cost of transport.
+pub fn measure(
+    env: &mut dyn Env,
+    policy: &mut dyn Policy,
+    episodes: usize,
+    seed: u64,
+    set_point: f64,
+) -> Result<Vec<GaitEpisode>> {
+    let dt = env.spec().dt;
+    let mass: f64 = env.data().model().body_mass().iter().sum();
+    let gravity = -env.data().model().gravity()[2];
+    let mut per: Vec<GaitEpisode> = vec![GaitEpisode::default(); episodes];
+    let mut start_x = vec![f64::NAN; episodes];
+    let mut end_x = vec![0.0; episodes];
+    run_episodes(env, policy, episodes, seed, |ep, t, _, step| {
+        let e = &mut per[ep];
+        let x = step.info.metric("x_position").unwrap_or(0.0);
+        let vx = step.info.metric("x_velocity").unwrap_or(0.0);
+        if t == 0 {
+            start_x[ep] = x - vx * dt;
+        }
+        end_x[ep] = x;
+        e.speed_error += (vx - set_point).abs();
+        e.energy += step.info.metric("mechanical_energy").unwrap_or(0.0);
+        e.drift += step.info.metric("dy").map(f64::abs).unwrap_or(0.0);
+        e.shake += step.info.metric("dz").map(f64::abs).unwrap_or(0.0);
+        Ok(())
+    })?
+    .into_iter()
+    .zip(per.iter_mut())
+    .enumerate()
+    .for_each(|(ep, (summary, e))| {
+        e.episode_return = summary.episode_return;
+        e.length = summary.length;
+        e.fell = summary.terminated || summary.unstable;
+        let distance = end_x[ep] - start_x[ep];
+        let time = summary.length as f64 * dt;
+        e.mean_speed = if time > 0.0 { distance / time } else { 0.0 };
+        e.speed_error /= summary.length.max(1) as f64;
+        e.cost_of_transport = if distance > 0.0 { e.energy / (mass * gravity * distance) } else { f64::INFINITY };
+    });
+    Ok(per)
+}
