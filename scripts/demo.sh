@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # The main job: build locobench, list the environments, roll out each one, then train SAC on
-# InvertedPendulum until it balances (about a minute on 2 cores) and evaluate it.
+# InvertedPendulum until it balances (about a minute on 2 cores), evaluate it, and run the
+# Raibert/QP baseline on Minitaur.
 # Everything it writes goes under demo/; it says where at the end.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -16,6 +17,7 @@ done
 "$bin" rollout --env minitaur --policy zero --episodes 1 --seed 0 --out "$out/minitaur-standing.csv"
 "$bin" train --env inverted-pendulum --algo sac --seed 0 --out "$out/run-inverted-pendulum-sac" --force
 "$bin" eval --checkpoint "$out/run-inverted-pendulum-sac" --episodes 10
+"$bin" baseline --env minitaur --speed 0.35,1.0 --episodes 3 --seed 0
 echo
 echo "Rollouts (one CSV row per step): $(pwd)/$out/rollout-*.csv"
 echo "Training run (config.toml, metrics.csv, checkpoints/): $(pwd)/$out/run-inverted-pendulum-sac"
