@@ -3,4 +3,4 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
-cargo test --locked --all-targets
+cargo test --locked --all-targets --no-fail-fast

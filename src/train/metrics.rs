@@ -3,6 +3,7 @@ use std::path::Path;
 
 use anyhow::Result;
 
+use crate::agents::Losses;
 use crate::io::write_atomic;
 
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -19,6 +20,28 @@ pub struct MetricsRow {
     pub alpha: Option<f64>,
     pub steps_per_s: f64,
     pub wall_time: f64,
+}
+
+impl MetricsRow {
+    /// A row with the fields every row carries: losses (once learning started), speed, time.
+    pub fn progress(
+        kind: &'static str,
+        step: u64,
+        losses: Option<Losses>,
+        steps_per_s: f64,
+        wall_time: f64,
+    ) -> MetricsRow {
+        MetricsRow {
+            kind,
+            step,
+            critic_loss: losses.map(|l| l.critic),
+            actor_loss: losses.and_then(|l| l.actor),
+            alpha: losses.and_then(|l| l.alpha),
+            steps_per_s,
+            wall_time,
+            ..Default::default()
+        }
+    }
 }
 
 pub const HEADER: [&str; 11] = [

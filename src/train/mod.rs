@@ -234,7 +234,7 @@ impl Trainer {
         let started = Instant::now();
         let start_step = self.step;
         let act_dim = self.env.spec().action_space.dim();
-        let mut losses = Losses::default();
+        let mut losses: Option<Losses> = None;
         let mut last_eval: Option<Evaluation> = None;
         let mut best_eval: Option<f64> = None;
         let mut next_checkpoint = (self.step / cfg.checkpoint_every + 1) * cfg.checkpoint_every;
@@ -284,16 +284,9 @@ impl Trainer {
                 ep_len += 1;
                 if s.done() {
                     self.metrics.push(MetricsRow {
-                        kind: "episode",
-                        step: self.step,
                         episode_return: Some(ep_return),
                         episode_length: Some(ep_len),
-                        critic_loss: (losses.critic != 0.0).then_some(losses.critic),
-                        actor_loss: losses.actor,
-                        alpha: losses.alpha,
-                        steps_per_s: rate(self.step),
-                        wall_time: wall(self.wall_offset),
-                        ..Default::default()
+                        ..MetricsRow::progress("episode", self.step, losses, rate(self.step), wall(self.wall_offset))
                     });
                     need_reset = true;
                 } else {
@@ -306,7 +299,9 @@ impl Trainer {
                 for _ in 0..cfg.updates_per_step {
                     self.buffer.sample_into(&mut self.batch, &mut self.rng);
                     let l = self.agent.update(&self.batch, &mut self.rng)?;
-                    losses = Losses { actor: l.actor.or(losses.actor), alpha: l.alpha.or(losses.alpha), ..l };
+                    // Delayed updates leave actor/alpha unset: keep their latest values.
+                    let previous = losses.unwrap_or_default();
+                    losses = Some(Losses { actor: l.actor.or(previous.actor), alpha: l.alpha.or(previous.alpha), ..l });
                 }
             }
 
@@ -316,16 +311,9 @@ impl Trainer {
                 best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
                 self.metrics.push(MetricsRow {
-                    kind: "eval",
-                    step: self.step,
                     eval_mean: Some(e.mean()),
                     eval_std: Some(e.std()),
-                    critic_loss: (losses.critic != 0.0).then_some(losses.critic),
-                    actor_loss: losses.actor,
-                    alpha: losses.alpha,
-                    steps_per_s: rate(self.step),
-                    wall_time: wall(self.wall_offset),
-                    ..Default::default()
+                    ..MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset))
                 });
                 metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
                 last_eval = Some(e);
