@@ -17,6 +17,10 @@ pub trait Policy {
     fn exhausted(&self) -> bool {
         false
     }
+    /// Counters a policy keeps about itself (e.g. failed QP solves), since the last episode start.
+    fn diagnostics(&self) -> Vec<(&'static str, f64)> {
+        Vec::new()
+    }
 }
 
 pub struct ZeroPolicy;

@@ -39,8 +39,8 @@ pub fn run(args: BaselineArgs) -> Result<()> {
     }
     let mut env = make(&cfg)?;
     println!(
-        "{:>6} {:>17} {:>8} {:>9} {:>9} {:>7} {:>8} {:>8} {:>6} {:>7}",
-        "speed", "return", "v mean", "v error", "energy J", "CoT", "drift m", "shake m", "falls", "length"
+        "{:>6} {:>17} {:>8} {:>9} {:>9} {:>7} {:>8} {:>8} {:>6} {:>7} {:>8}",
+        "speed", "return", "v mean", "v error", "energy J", "CoT", "drift m", "shake m", "falls", "length", "QP fails"
     );
     for &speed in &args.speed {
         let mut controller = baseline_controller(&args.env, speed, gait)?;
@@ -52,7 +52,7 @@ pub fn run(args: BaselineArgs) -> Result<()> {
         let finite_cot: Vec<f64> = eps.iter().map(|e| e.cost_of_transport).filter(|c| c.is_finite()).collect();
         let cot = if finite_cot.is_empty() { f64::INFINITY } else { mean_std(&finite_cot).0 };
         println!(
-            "{:>6.2} {:>9.2} ± {:>5.2} {:>8.3} {:>9.3} {:>9.1} {:>7.2} {:>8.3} {:>8.3} {:>3}/{:<2} {:>7.1}",
+            "{:>6.2} {:>9.2} ± {:>5.2} {:>8.3} {:>9.3} {:>9.1} {:>7.2} {:>8.3} {:>8.3} {:>3}/{:<2} {:>7.1} {:>8}",
             speed,
             ret,
             ret_std,
@@ -65,6 +65,7 @@ pub fn run(args: BaselineArgs) -> Result<()> {
             eps.iter().filter(|e| e.fell).count(),
             eps.len(),
             col(|e| e.length as f64).0,
+            eps.iter().map(|e| e.qp_failures).sum::<f64>(),
         );
         if args.verbose {
             for (i, e) in eps.iter().enumerate() {

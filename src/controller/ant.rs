@@ -214,4 +214,7 @@ impl Policy for AntController {
     fn act(&mut self, env: &dyn Env, _observation: &[f64]) -> Result<Vec<f64>> {
         self.controls(env)
     }
+    fn diagnostics(&self) -> Vec<(&'static str, f64)> {
+        vec![("qp_failures", self.qp_failures as f64)]
+    }
 }

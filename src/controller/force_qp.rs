@@ -213,6 +213,13 @@ mod tests {
     }
 
     #[test]
+    fn an_unsolvable_problem_is_an_error_not_a_panic() {
+        // Normal force bounds that exclude each other: no admissible force exists.
+        let qp = ForceQp { f_min: 10.0, f_max: 5.0, ..qp() };
+        assert!(qp.solve(&feet(), &[0.0, 0.0, 60.0, 0.0, 0.0, 0.0]).is_err());
+    }
+
+    #[test]
     fn planar_version_for_minitaur() {
         let qp = ForceQp { dimension: Dimension::Planar, wrench_weights: vec![1.0; 4], ..qp() };
         // A trot's diagonal pair: front-left and back-right.

@@ -252,4 +252,7 @@ impl Policy for MinitaurController {
     fn act(&mut self, env: &dyn Env, observation: &[f64]) -> Result<Vec<f64>> {
         Ok(self.torques(env, observation)?.to_vec())
     }
+    fn diagnostics(&self) -> Vec<(&'static str, f64)> {
+        vec![("ticks", self.stats.ticks as f64), ("qp_failures", self.stats.qp_failures as f64)]
+    }
 }

@@ -3,7 +3,7 @@ use anyhow::Result;
 
 use crate::envs::Env;
 use crate::policy::Policy;
-use crate::rollout::run_episodes;
+use crate::rollout::run_episode;
 
 /// Locomotion measures of one episode.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -21,9 +21,12 @@ pub struct GaitEpisode {
     pub cost_of_transport: f64,
     pub drift: f64,
     pub shake: f64,
+    /// Control ticks whose force QP failed and fell back to sharing the weight.
+    pub qp_failures: f64,
 }
 
-/// Runs `episodes` episodes and measures each; `mass` and `gravity` give the cost of transport.
+/// Runs `episodes` episodes (the first reset seeded with `seed`) and measures each against
+/// the speed set-point.
 pub fn measure(
     env: &mut dyn Env,
     policy: &mut dyn Policy,
@@ -34,35 +37,34 @@ pub fn measure(
     let dt = env.spec().dt;
     let mass: f64 = env.data().model().body_mass().iter().sum();
     let gravity = -env.data().model().gravity()[2];
-    let mut per: Vec<GaitEpisode> = vec![GaitEpisode::default(); episodes];
-    let mut start_x = vec![f64::NAN; episodes];
-    let mut end_x = vec![0.0; episodes];
-    run_episodes(env, policy, episodes, seed, |ep, t, _, step| {
-        let e = &mut per[ep];
-        let x = step.info.metric("x_position").unwrap_or(0.0);
-        let vx = step.info.metric("x_velocity").unwrap_or(0.0);
-        if t == 0 {
-            start_x[ep] = x - vx * dt;
-        }
-        end_x[ep] = x;
-        e.speed_error += (vx - set_point).abs();
-        e.energy += step.info.metric("mechanical_energy").unwrap_or(0.0);
-        e.drift += step.info.metric("dy").map(f64::abs).unwrap_or(0.0);
-        e.shake += step.info.metric("dz").map(f64::abs).unwrap_or(0.0);
-        Ok(())
-    })?
-    .into_iter()
-    .zip(per.iter_mut())
-    .enumerate()
-    .for_each(|(ep, (summary, e))| {
+    let mut out = Vec::with_capacity(episodes);
+    for episode in 0..episodes {
+        let mut e = GaitEpisode::default();
+        let (mut start_x, mut end_x) = (0.0, 0.0);
+        let reset_seed = if episode == 0 { Some(seed) } else { None };
+        let summary = run_episode(env, policy, episode, reset_seed, |t, _, step| {
+            let x = step.info.metric("x_position").unwrap_or(0.0);
+            let vx = step.info.metric("x_velocity").unwrap_or(0.0);
+            if t == 0 {
+                start_x = x - vx * dt;
+            }
+            end_x = x;
+            e.speed_error += (vx - set_point).abs();
+            e.energy += step.info.metric("mechanical_energy").unwrap_or(0.0);
+            e.drift += step.info.metric("dy").map(f64::abs).unwrap_or(0.0);
+            e.shake += step.info.metric("dz").map(f64::abs).unwrap_or(0.0);
+            Ok(())
+        })?;
         e.episode_return = summary.episode_return;
         e.length = summary.length;
         e.fell = summary.terminated || summary.unstable;
-        let distance = end_x[ep] - start_x[ep];
+        let distance = end_x - start_x;
         let time = summary.length as f64 * dt;
         e.mean_speed = if time > 0.0 { distance / time } else { 0.0 };
         e.speed_error /= summary.length.max(1) as f64;
         e.cost_of_transport = if distance > 0.0 { e.energy / (mass * gravity * distance) } else { f64::INFINITY };
-    });
-    Ok(per)
+        e.qp_failures = policy.diagnostics().iter().find(|(n, _)| *n == "qp_failures").map_or(0.0, |(_, v)| *v);
+        out.push(e);
+    }
+    Ok(out)
 }
