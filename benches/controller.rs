@@ -15,28 +15,42 @@ use nalgebra::Vector3;
 fn bench(c: &mut Criterion) {
     let mut group = c.benchmark_group("controller");
     group.measurement_time(Duration::from_secs(5)).warm_up_time(Duration::from_secs(1));
-    let spatial = ForceQp {
-        dimension: Dimension::Spatial,
-        friction: 0.6,
-        f_min: 1.0,
-        f_max: 100.0,
-        wrench_weights: vec![1.0; 6],
-        regularisation: 1e-4,
-    };
-    let feet = [
-        Vector3::new(0.2, 0.1, -0.2),
-        Vector3::new(-0.2, 0.1, -0.2),
-        Vector3::new(0.2, -0.1, -0.2),
-        Vector3::new(-0.2, -0.1, -0.2),
-    ];
+    // Feet move a little from tick to tick, as in a gait.
+    let configs: Vec<Vec<Vector3<f64>>> = (0..16)
+        .map(|k| {
+            let dx = 0.004 * k as f64;
+            vec![
+                Vector3::new(0.2 - dx, 0.1, -0.2),
+                Vector3::new(-0.2 - dx, 0.1, -0.2),
+                Vector3::new(0.2 + dx, -0.1, -0.21),
+                Vector3::new(-0.2 + dx, -0.1, -0.19),
+            ]
+        })
+        .collect();
     let wrench = [2.0, -1.0, 60.0, 0.5, -0.3, 0.1];
-    group.bench_function("force QP 4 feet 3D (12 vars, 24 rows)", |b| {
-        b.iter(|| black_box(spatial.solve(&feet, &wrench).unwrap()))
+    let spatial = || ForceQp::new(Dimension::Spatial, 0.6, 1.0, 100.0, vec![1.0; 6], 1e-4);
+    let mut qp = spatial();
+    let mut k = 0;
+    group.bench_function("force QP 4 feet 3D (12 vars, 24 rows), reused solver", |b| {
+        b.iter(|| {
+            k = (k + 1) % configs.len();
+            black_box(qp.solve(&configs[k], &wrench).unwrap())
+        })
     });
-    let planar = ForceQp { dimension: Dimension::Planar, wrench_weights: vec![1.0; 4], ..spatial };
-    let feet2 = [Vector3::new(0.21, 0.09, -0.2), Vector3::new(-0.21, -0.09, -0.2)];
-    group.bench_function("force QP 2 feet no abduction (4 vars, 8 rows)", |b| {
-        b.iter(|| black_box(planar.solve(&feet2, &[1.0, 60.0, 0.1, 0.3]).unwrap()))
+    group.bench_function("force QP 4 feet 3D (12 vars, 24 rows), new solver each tick", |b| {
+        b.iter(|| {
+            k = (k + 1) % configs.len();
+            black_box(spatial().solve(&configs[k], &wrench).unwrap())
+        })
+    });
+    let mut planar = ForceQp::new(Dimension::Planar, 0.6, 1.0, 100.0, vec![1.0; 4], 1e-4);
+    let pairs: Vec<Vec<Vector3<f64>>> =
+        configs.iter().map(|c| vec![Vector3::new(c[0].x, 0.09, c[0].z), Vector3::new(c[3].x, -0.09, c[3].z)]).collect();
+    group.bench_function("force QP 2 feet no abduction (4 vars, 8 rows), reused solver", |b| {
+        b.iter(|| {
+            k = (k + 1) % pairs.len();
+            black_box(planar.solve(&pairs[k], &[1.0, 60.0, 0.1, 0.3]).unwrap())
+        })
     });
 
     // The whole controller tick (state estimate, gait, QP, kinematics), without the physics.

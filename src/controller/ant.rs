@@ -84,14 +84,8 @@ pub struct AntController {
 impl AntController {
     pub fn new(params: AntGaitParams) -> Result<AntController> {
         let gait = GaitScheduler::new(GaitKind::Trot, params.stance_duration, params.duty_factor)?;
-        let qp = ForceQp {
-            dimension: Dimension::Spatial,
-            friction: params.friction,
-            f_min: 0.1,
-            f_max: 50.0,
-            wrench_weights: vec![1.0, 1.0, 1.0, 10.0, 10.0, 10.0],
-            regularisation: 1e-4,
-        };
+        let qp =
+            ForceQp::new(Dimension::Spatial, params.friction, 0.1, 50.0, vec![1.0, 1.0, 1.0, 10.0, 10.0, 10.0], 1e-4);
         Ok(AntController { params, gait, qp, legs: None, qp_failures: 0 })
     }
 

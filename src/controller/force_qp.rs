@@ -9,6 +9,8 @@
 use anyhow::{bail, Result};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
+use std::collections::HashMap;
+
 use nalgebra::{DMatrix, DVector, Vector3};
 
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -19,7 +21,6 @@ pub enum Dimension {
     Planar,
 }
 
-#[derive(Debug, Clone)]
 pub struct ForceQp {
     pub dimension: Dimension,
     pub friction: f64,
@@ -29,9 +30,22 @@ pub struct ForceQp {
     pub wrench_weights: Vec<f64>,
     /// Regularisation alpha on |f|^2.
     pub regularisation: f64,
+    /// Cached solvers by number of stance feet (see `solve`).
+    solvers: HashMap<usize, DefaultSolver<f64>>,
 }
 
 impl ForceQp {
+    pub fn new(
+        dimension: Dimension,
+        friction: f64,
+        f_min: f64,
+        f_max: f64,
+        wrench_weights: Vec<f64>,
+        regularisation: f64,
+    ) -> ForceQp {
+        ForceQp { dimension, friction, f_min, f_max, wrench_weights, regularisation, solvers: HashMap::new() }
+    }
+
     fn force_dim(&self) -> usize {
         match self.dimension {
             Dimension::Spatial => 3,
@@ -76,7 +90,7 @@ impl ForceQp {
 
     /// Forces for the stance feet at `feet` (flattened per foot), or an error when the solver
     /// fails; callers fall back to a safe default and count it.
-    pub fn solve(&self, feet: &[Vector3<f64>], wrench: &[f64]) -> Result<Vec<f64>> {
+    pub fn solve(&mut self, feet: &[Vector3<f64>], wrench: &[f64]) -> Result<Vec<f64>> {
         let k = self.force_dim();
         let n = k * feet.len();
         if feet.is_empty() {
@@ -107,12 +121,32 @@ impl ForceQp {
             g_rows.push(vec![(z, -1.0)]);
             h.push(-self.f_min);
         }
-        let p_upper = dense_to_csc_upper(&p);
-        let g = rows_to_csc(&g_rows, n);
-        let cones = [SupportedConeT::NonnegativeConeT(h.len())];
-        let settings = DefaultSettingsBuilder::default().verbose(false).max_iter(50).build().expect("valid settings");
-        let mut solver = DefaultSolver::new(&p_upper, q.as_slice(), &g, &h, &cones, settings)
-            .map_err(|e| anyhow::anyhow!("QP setup failed: {e:?}"))?;
+        let q = q.as_slice().to_vec();
+        let values = upper_triangle_values(&p);
+        // One solver per number of stance feet, built once: later ticks only update P and q
+        // (the constraints depend on the foot count alone). Presolve must be off for updates.
+        let solver = match self.solvers.entry(feet.len()) {
+            std::collections::hash_map::Entry::Occupied(e) => {
+                let s = e.into_mut();
+                s.update_P(&values).map_err(|e| anyhow::anyhow!("QP update failed: {e:?}"))?;
+                s.update_q(&q).map_err(|e| anyhow::anyhow!("QP update failed: {e:?}"))?;
+                s
+            }
+            std::collections::hash_map::Entry::Vacant(v) => {
+                let p_upper = dense_pattern_upper(n, values);
+                let g = rows_to_csc(&g_rows, n);
+                let cones = [SupportedConeT::NonnegativeConeT(h.len())];
+                let settings = DefaultSettingsBuilder::default()
+                    .verbose(false)
+                    .max_iter(50)
+                    .presolve_enable(false)
+                    .build()
+                    .expect("valid settings");
+                let solver = DefaultSolver::new(&p_upper, &q, &g, &h, &cones, settings)
+                    .map_err(|e| anyhow::anyhow!("QP setup failed: {e:?}"))?;
+                v.insert(solver)
+            }
+        };
         solver.solve();
         match solver.solution.status {
             SolverStatus::Solved | SolverStatus::AlmostSolved => Ok(solver.solution.x.clone()),
@@ -121,19 +155,19 @@ impl ForceQp {
     }
 }
 
-fn dense_to_csc_upper(m: &DMatrix<f64>) -> CscMatrix<f64> {
-    let n = m.ncols();
-    let (mut colptr, mut rowval, mut nzval) = (vec![0], Vec::new(), Vec::new());
+/// The upper triangle of a square matrix, column by column, zeros included (a fixed pattern,
+/// so a cached solver can take new values).
+fn upper_triangle_values(m: &DMatrix<f64>) -> Vec<f64> {
+    (0..m.ncols()).flat_map(|c| (0..=c).map(move |r| m[(r, c)])).collect()
+}
+
+fn dense_pattern_upper(n: usize, values: Vec<f64>) -> CscMatrix<f64> {
+    let (mut colptr, mut rowval) = (vec![0], Vec::new());
     for c in 0..n {
-        for r in 0..=c {
-            if m[(r, c)] != 0.0 {
-                rowval.push(r);
-                nzval.push(m[(r, c)]);
-            }
-        }
+        rowval.extend(0..=c);
         colptr.push(rowval.len());
     }
-    CscMatrix::new(n, n, colptr, rowval, nzval)
+    CscMatrix::new(n, n, colptr, rowval, values)
 }
 
 fn rows_to_csc(rows: &[Vec<(usize, f64)>], ncols: usize) -> CscMatrix<f64> {
@@ -168,14 +202,7 @@ mod tests {
     }
 
     fn qp() -> ForceQp {
-        ForceQp {
-            dimension: Dimension::Spatial,
-            friction: 0.6,
-            f_min: 1.0,
-            f_max: 100.0,
-            wrench_weights: vec![1.0; 6],
-            regularisation: 1e-6,
-        }
+        ForceQp::new(Dimension::Spatial, 0.6, 1.0, 100.0, vec![1.0; 6], 1e-6)
     }
 
     fn check_constraints(qp: &ForceQp, f: &[f64]) {
@@ -191,7 +218,7 @@ mod tests {
 
     #[test]
     fn reproduces_a_feasible_wrench_inside_the_cones() {
-        let qp = qp();
+        let mut qp = qp();
         // A wrench made from forces that satisfy the constraints is feasible.
         let truth = [2.0, 1.0, 20.0, -1.0, 0.5, 15.0, 3.0, -2.0, 18.0, 0.0, 1.0, 12.0];
         let wrench = qp.wrench(&feet(), &truth);
@@ -203,7 +230,7 @@ mod tests {
 
     #[test]
     fn infeasible_wrench_is_approximated_within_the_constraints() {
-        let qp = qp();
+        let mut qp = qp();
         // Pulling the robot down and sideways harder than friction allows.
         let f = qp.solve(&feet(), &[50.0, 0.0, -10.0, 0.0, 0.0, 0.0]).unwrap();
         check_constraints(&qp, &f);
@@ -215,13 +242,13 @@ mod tests {
     #[test]
     fn an_unsolvable_problem_is_an_error_not_a_panic() {
         // Normal force bounds that exclude each other: no admissible force exists.
-        let qp = ForceQp { f_min: 10.0, f_max: 5.0, ..qp() };
+        let mut qp = ForceQp { f_min: 10.0, f_max: 5.0, ..qp() };
         assert!(qp.solve(&feet(), &[0.0, 0.0, 60.0, 0.0, 0.0, 0.0]).is_err());
     }
 
     #[test]
     fn planar_version_for_minitaur() {
-        let qp = ForceQp { dimension: Dimension::Planar, wrench_weights: vec![1.0; 4], ..qp() };
+        let mut qp = ForceQp { dimension: Dimension::Planar, wrench_weights: vec![1.0; 4], ..qp() };
         // A trot's diagonal pair: front-left and back-right.
         let feet = [Vector3::new(0.21, 0.09, -0.2), Vector3::new(-0.21, -0.09, -0.2)];
         // Roll and pitch are tied on a diagonal pair; a wrench made from admissible forces is

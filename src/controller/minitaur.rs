@@ -103,14 +103,7 @@ pub struct MinitaurController {
 impl MinitaurController {
     pub fn new(params: MinitaurGaitParams) -> Result<MinitaurController> {
         let gait = GaitScheduler::new(params.gait, params.stance_duration, params.duty_factor)?;
-        let qp = ForceQp {
-            dimension: Dimension::Planar,
-            friction: params.friction,
-            f_min: 2.0,
-            f_max: 80.0,
-            wrench_weights: vec![1.0, 1.0, 20.0, 20.0],
-            regularisation: 1e-4,
-        };
+        let qp = ForceQp::new(Dimension::Planar, params.friction, 2.0, 80.0, vec![1.0, 1.0, 20.0, 20.0], 1e-4);
         Ok(MinitaurController {
             params,
             gait,
