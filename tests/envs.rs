@@ -337,3 +337,15 @@ fn a_blow_up_ends_the_episode_with_a_flag() {
     assert_eq!(s.reward, 0.0);
     assert!(matches!(env.step(&[0.0]), Err(EnvError::EpisodeOver)));
 }
+
+#[test]
+fn override_lists_keep_arrays_whole() {
+    let pairs = locobench::envs::parse_overrides("healthy_z_range=[0.3,0.9],reset_noise_scale=0").unwrap();
+    assert_eq!(pairs.len(), 2);
+    let cfg = EnvConfig::new("ant").with_overrides(&pairs).unwrap();
+    let resolved = cfg.resolved_options().unwrap();
+    let range: Vec<f64> =
+        resolved["healthy_z_range"].as_array().unwrap().iter().map(|v| v.as_float().unwrap()).collect();
+    assert_eq!(range, vec![0.3, 0.9]);
+    assert!(locobench::envs::parse_overrides("a=1,b").is_err());
+}

@@ -1,7 +1,7 @@
 use anyhow::Result;
 use locobench::controller::baseline::{baseline_controller, baseline_env, parse_gait};
 use locobench::controller::report::measure;
-use locobench::envs::{make, parse_overrides};
+use locobench::envs::make;
 
 #[derive(clap::Args, Debug)]
 pub struct BaselineArgs {
@@ -33,10 +33,7 @@ fn mean_std(xs: &[f64]) -> (f64, f64) {
 
 pub fn run(args: BaselineArgs) -> Result<()> {
     let gait = args.gait.as_deref().map(parse_gait).transpose()?;
-    let mut cfg = baseline_env(&args.env)?;
-    for o in &args.options {
-        cfg = cfg.with_overrides(&parse_overrides(o)?)?;
-    }
+    let cfg = super::apply_options(baseline_env(&args.env)?, &args.options)?;
     let mut env = make(&cfg)?;
     println!(
         "{:>6} {:>17} {:>8} {:>9} {:>9} {:>7} {:>8} {:>8} {:>6} {:>7} {:>8}",

@@ -65,9 +65,14 @@ impl EnvArgs {
                 _ => table,
             };
         }
-        for o in &self.options {
-            cfg = cfg.with_overrides(&locobench::envs::parse_overrides(o)?)?;
-        }
-        Ok(cfg)
+        apply_options(cfg, &self.options)
     }
+}
+
+/// Applies `--option key=value,...` arguments in order.
+pub fn apply_options(mut cfg: locobench::envs::EnvConfig, options: &[String]) -> Result<locobench::envs::EnvConfig> {
+    for o in options {
+        cfg = cfg.with_overrides(&locobench::envs::parse_overrides(o)?)?;
+    }
+    Ok(cfg)
 }

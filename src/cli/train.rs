@@ -46,10 +46,7 @@ pub struct TrainArgs {
 
 /// Env config from `--option` and `--reward`.
 pub fn env_config(env: &str, options: &[String], reward: Option<&str>) -> Result<EnvConfig> {
-    let mut cfg = EnvConfig::new(env);
-    for o in options {
-        cfg = cfg.with_overrides(&parse_overrides(o)?)?;
-    }
+    let mut cfg = super::apply_options(EnvConfig::new(env), options)?;
     if let Some(r) = reward {
         for (term, value) in parse_overrides(r)? {
             let key = reward_weight_option(env, &term)?;

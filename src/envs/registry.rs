@@ -69,9 +69,25 @@ fn parse_value(text: &str) -> toml::Value {
     }
 }
 
-/// Splits `a=1,b=2` into pairs; an entry without `=` is an error.
+/// Splits `a=1,b=[2,3]` into pairs (commas inside `[...]` belong to the value); an entry
+/// without `=` is an error.
 pub fn parse_overrides(text: &str) -> Result<Vec<(String, String)>, EnvError> {
-    text.split(',')
+    let mut items = Vec::new();
+    let (mut depth, mut start) = (0i32, 0usize);
+    for (i, c) in text.char_indices() {
+        match c {
+            '[' => depth += 1,
+            ']' => depth -= 1,
+            ',' if depth == 0 => {
+                items.push(&text[start..i]);
+                start = i + 1;
+            }
+            _ => {}
+        }
+    }
+    items.push(&text[start..]);
+    items
+        .into_iter()
         .filter(|s| !s.trim().is_empty())
         .map(|item| {
             let (k, v) = item.split_once('=').ok_or_else(|| EnvError::InvalidOption {

@@ -1,6 +1,6 @@
 //! Building a run's configuration: algorithm defaults, then the shipped presets for the
 //! environment, then command-line overrides.
-use anyhow::{Context, Result};
+use anyhow::Result;
 
 use crate::agents::{Algo, TrainConfig};
 
@@ -42,30 +42,9 @@ pub fn apply_overrides(table: &mut toml::Table, overrides: &[(String, String)]) 
     Ok(())
 }
 
-/// Splits `a=1,b=2` (commas inside [...] are kept).
+/// Splits `a=1,b=[2,3]` into pairs, as environment options are split.
 pub fn split_pairs(text: &str) -> Result<Vec<(String, String)>> {
-    let mut items = Vec::new();
-    let (mut depth, mut start) = (0i32, 0usize);
-    for (i, c) in text.char_indices() {
-        match c {
-            '[' => depth += 1,
-            ']' => depth -= 1,
-            ',' if depth == 0 => {
-                items.push(&text[start..i]);
-                start = i + 1;
-            }
-            _ => {}
-        }
-    }
-    items.push(&text[start..]);
-    items
-        .into_iter()
-        .filter(|s| !s.trim().is_empty())
-        .map(|item| {
-            let (k, v) = item.split_once('=').with_context(|| format!("'{item}' is not key=value"))?;
-            Ok((k.trim().to_string(), v.trim().to_string()))
-        })
-        .collect()
+    Ok(crate::envs::parse_overrides(text)?)
 }
 
 #[cfg(test)]
