@@ -1,23 +1,30 @@
 #!/usr/bin/env bash
-# The main job: build locobench, list the environments, roll out each one, then train SAC on
-# InvertedPendulum until it balances (about a minute on 2 cores), evaluate it, and run the
-# Raibert/QP baseline on Minitaur.
-# Everything it writes goes under demo/; it says where at the end.
+# The main job, a short real demo (a few minutes on 2 cores once built):
+#   1. SAC learns to balance InvertedPendulum, recorded into a rerun file as it learns;
+#   2. a two-seed SAC sweep on Minitaur, briefly (two processes side by side);
+#   3. the Raibert/QP baseline walks Minitaur, and is recorded;
+#   4. a report compares everything: learning curves, baseline vs RL under three rewards.
+# Everything goes under demo/; the paths are printed at the end.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 cargo build --release --quiet
 bin=target/release/locobench
 out=demo
+rm -rf "$out"
 mkdir -p "$out"
 "$bin" envs
-for env in half-cheetah ant humanoid inverted-pendulum minitaur; do
-  "$bin" rollout --env "$env" --policy random --episodes 2 --seed 0 --out "$out/rollout-$env.csv"
-done
-"$bin" rollout --env minitaur --policy zero --episodes 1 --seed 0 --out "$out/minitaur-standing.csv"
-"$bin" train --env inverted-pendulum --algo sac --seed 0 --out "$out/run-inverted-pendulum-sac" --force
+"$bin" train --env inverted-pendulum --algo sac --seed 0 --out "$out/run-inverted-pendulum-sac" \
+  --record "$out/inverted-pendulum-training.rrd" --quiet
 "$bin" eval --checkpoint "$out/run-inverted-pendulum-sac" --episodes 10
-"$bin" baseline --env minitaur --speed 0.35,1.0 --episodes 3 --seed 0
+"$bin" sweep --env minitaur --algo sac --seeds 2 --jobs 2 --steps 6000 \
+  --set 'hidden=[64,64],warmup_steps=1000,learning_starts=1000,eval_every=1000,eval_episodes=3' \
+  --out "$out/minitaur-sweep"
+"$bin" baseline --env minitaur --speed 0.35 --episodes 3 --seed 0
+"$bin" record --env minitaur --policy raibert --speed 0.35 --out "$out/minitaur-raibert.rrd"
+"$bin" record --policy "$out/minitaur-sweep/runs/sac-seed0" --out "$out/minitaur-sac.rrd"
+"$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/minitaur-sweep" --out "$out/report" --episodes 3
 echo
-echo "Rollouts (one CSV row per step): $(pwd)/$out/rollout-*.csv"
-echo "Training run (config.toml, metrics.csv, checkpoints/): $(pwd)/$out/run-inverted-pendulum-sac"
+echo "Report (open in a browser):   $(pwd)/$out/report/index.html  (Markdown: $out/report/README.md)"
+echo "rerun recordings:             $(pwd)/$out/*.rrd  (viewer: pip install rerun-sdk==0.36.3; rerun FILE)"
+echo "Training runs:                $(pwd)/$out/run-inverted-pendulum-sac, $(pwd)/$out/minitaur-sweep/runs/"

@@ -5,5 +5,8 @@ pub mod envs;
 pub mod io;
 pub mod mujoco;
 pub mod policy;
+pub mod record;
+pub mod report;
 pub mod rollout;
+pub mod sweep;
 pub mod train;

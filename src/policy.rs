@@ -21,6 +21,17 @@ pub trait Policy {
     fn diagnostics(&self) -> Vec<(&'static str, f64)> {
         Vec::new()
     }
+    /// What the policy decided on its latest `act`, for recorders (gait phases, foot targets).
+    fn telemetry(&self) -> Telemetry {
+        Telemetry::default()
+    }
+}
+
+/// Internal signals of a controller, named: scalar series and world-frame points.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Telemetry {
+    pub scalars: Vec<(String, f64)>,
+    pub points: Vec<(String, [f64; 3])>,
 }
 
 pub struct ZeroPolicy;
@@ -148,5 +159,22 @@ impl Policy for ReplayPolicy {
         let a = a.clone();
         self.cursor += 1;
         Ok(a)
+    }
+}
+
+/// A trained agent acting deterministically (its evaluation action), as a [`Policy`].
+pub struct AgentPolicy<'a> {
+    pub agent: &'a dyn crate::agents::Agent,
+    pub label: String,
+}
+
+impl Policy for AgentPolicy<'_> {
+    fn name(&self) -> String {
+        self.label.clone()
+    }
+    fn act(&mut self, env: &dyn Env, observation: &[f64]) -> Result<Vec<f64>> {
+        let obs: Vec<f32> = observation.iter().map(|&v| v as f32).collect();
+        let normalised = self.agent.act(&obs)?;
+        Ok(crate::train::evaluate::to_env_action(env, &normalised))
     }
 }

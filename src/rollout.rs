@@ -17,19 +17,50 @@ pub struct EpisodeSummary {
     pub term_totals: Vec<(&'static str, f64)>,
 }
 
+/// Everything an observer may look at after one step.
+pub struct StepView<'a> {
+    pub episode: usize,
+    /// Index of the step within the episode, from 0.
+    pub t: usize,
+    pub action: &'a [f64],
+    pub step: &'a Step,
+    /// The environment after the step.
+    pub env: &'a dyn Env,
+    pub policy: &'a dyn Policy,
+}
+
+/// Watches a rollout: recorders, CSV writers, metric accumulators. A closure taking a
+/// [`StepView`] is an observer of steps only.
+pub trait Observer {
+    /// After every reset, with the environment in its initial state.
+    fn reset(&mut self, _episode: usize, _env: &dyn Env) -> Result<()> {
+        Ok(())
+    }
+    fn step(&mut self, view: &StepView) -> Result<()>;
+    fn end(&mut self, _summary: &EpisodeSummary) -> Result<()> {
+        Ok(())
+    }
+}
+
+impl<F: FnMut(&StepView) -> Result<()>> Observer for F {
+    fn step(&mut self, view: &StepView) -> Result<()> {
+        self(view)
+    }
+}
+
 /// Runs `episodes` episodes. The first reset uses `seed`; later ones continue the environment's
-/// random stream, so the whole run is a function of the seed. `on_step` sees every step.
+/// random stream, so the whole run is a function of the seed.
 pub fn run_episodes(
     env: &mut dyn Env,
     policy: &mut dyn Policy,
     episodes: usize,
     seed: u64,
-    mut on_step: impl FnMut(usize, usize, &[f64], &Step) -> Result<()>,
+    observer: &mut dyn Observer,
 ) -> Result<Vec<EpisodeSummary>> {
     (0..episodes)
         .map(|episode| {
             let reset_seed = if episode == 0 { Some(seed) } else { None };
-            run_episode(env, policy, episode, reset_seed, |t, action, step| on_step(episode, t, action, step))
+            run_episode(env, policy, episode, reset_seed, observer)
         })
         .collect()
 }
@@ -41,10 +72,11 @@ pub fn run_episode(
     policy: &mut dyn Policy,
     episode: usize,
     reset_seed: Option<u64>,
-    mut on_step: impl FnMut(usize, &[f64], &Step) -> Result<()>,
+    observer: &mut dyn Observer,
 ) -> Result<EpisodeSummary> {
     let (mut obs, _) = env.reset(reset_seed)?;
     policy.begin_episode(episode);
+    observer.reset(episode, &*env)?;
     let mut summary = EpisodeSummary {
         episode,
         episode_return: 0.0,
@@ -57,7 +89,14 @@ pub fn run_episode(
     while !policy.exhausted() {
         let action = policy.act(&*env, &obs)?;
         let step = env.step(&action)?;
-        on_step(summary.length, &action, &step)?;
+        observer.step(&StepView {
+            episode,
+            t: summary.length,
+            action: &action,
+            step: &step,
+            env: &*env,
+            policy: &*policy,
+        })?;
         summary.length += 1;
         summary.episode_return += step.reward;
         for ((_, total), (_, v)) in summary.term_totals.iter_mut().zip(&step.info.reward_terms) {
@@ -71,5 +110,6 @@ pub fn run_episode(
         }
         obs = step.observation;
     }
+    observer.end(&summary)?;
     Ok(summary)
 }

@@ -2,7 +2,7 @@
 //! (honest) physics: PyBullet's dynamics randomisation on, full motor model, overheat cut-off.
 use locobench::controller::baseline::{baseline_controller, baseline_env};
 use locobench::controller::gait::GaitKind;
-use locobench::controller::report::{measure, GaitEpisode};
+use locobench::controller::measure::{measure, GaitEpisode};
 use locobench::envs::make;
 
 fn run(env: &str, speed: f64, gait: Option<GaitKind>) -> Vec<GaitEpisode> {

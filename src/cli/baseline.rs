@@ -1,6 +1,6 @@
 use anyhow::Result;
 use locobench::controller::baseline::{baseline_controller, baseline_env, parse_gait};
-use locobench::controller::report::measure;
+use locobench::controller::measure::measure;
 use locobench::envs::make;
 
 #[derive(clap::Args, Debug)]
@@ -42,7 +42,7 @@ pub fn run(args: BaselineArgs) -> Result<()> {
     for &speed in &args.speed {
         let mut controller = baseline_controller(&args.env, speed, gait)?;
         let eps = measure(env.as_mut(), controller.as_mut(), args.episodes, args.seed, speed)?;
-        let col = |f: fn(&locobench::controller::report::GaitEpisode) -> f64| {
+        let col = |f: fn(&locobench::controller::measure::GaitEpisode) -> f64| {
             mean_std(&eps.iter().map(f).collect::<Vec<_>>())
         };
         let (ret, ret_std) = col(|e| e.episode_return);

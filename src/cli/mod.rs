@@ -2,7 +2,10 @@
 mod baseline;
 mod envs;
 mod eval;
+mod record;
+mod report;
 mod rollout;
+mod sweep;
 mod train;
 
 use anyhow::Result;
@@ -27,6 +30,12 @@ enum Command {
     Eval(eval::EvalArgs),
     /// Run the Raibert/QP baseline controller and report how it walks.
     Baseline(baseline::BaselineArgs),
+    /// Write a rerun recording (.rrd) of a policy's rollouts: checkpoint, raibert, random, zero.
+    Record(record::RecordArgs),
+    /// Write an HTML + Markdown report of runs: learning curves, baseline vs RL.
+    Report(report::ReportArgs),
+    /// Train a grid of reward weights x algorithms x seeds, each job a separate process.
+    Sweep(sweep::SweepArgs),
 }
 
 pub fn run() -> Result<()> {
@@ -36,6 +45,9 @@ pub fn run() -> Result<()> {
         Command::Train(args) => train::run(args),
         Command::Eval(args) => eval::run(args),
         Command::Baseline(args) => baseline::run(args),
+        Command::Record(args) => record::run(args),
+        Command::Report(args) => report::run(args),
+        Command::Sweep(args) => sweep::run(args),
     }
 }
 

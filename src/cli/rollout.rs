@@ -4,7 +4,7 @@ use anyhow::{bail, Result};
 use locobench::envs::make;
 use locobench::io::write_atomic;
 use locobench::policy::{Policy, RandomPolicy, ReplayPolicy, ZeroPolicy};
-use locobench::rollout::run_episodes;
+use locobench::rollout::{run_episodes, StepView};
 
 use super::EnvArgs;
 
@@ -56,8 +56,9 @@ pub fn run(args: RolloutArgs) -> Result<()> {
     write_atomic(&args.out, |w| {
         let mut csv = csv::Writer::from_writer(w);
         csv.write_record(&header)?;
-        summaries = run_episodes(env.as_mut(), policy.as_mut(), args.episodes, args.seed, |ep, t, action, step| {
-            let mut row: Vec<String> = vec![ep.to_string(), t.to_string()];
+        summaries = run_episodes(env.as_mut(), policy.as_mut(), args.episodes, args.seed, &mut |v: &StepView| {
+            let (action, step) = (v.action, v.step);
+            let mut row: Vec<String> = vec![v.episode.to_string(), v.t.to_string()];
             // `{:?}` prints the shortest text that reads back as the same f64: replays are exact.
             row.extend(action.iter().map(|v| format!("{v:?}")));
             row.push(format!("{:?}", step.reward));

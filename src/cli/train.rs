@@ -42,6 +42,10 @@ pub struct TrainArgs {
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Also write a rerun recording (learning curves and an evaluation rollout at every
+    /// evaluation), e.g. `--record training.rrd`.
+    #[arg(long, value_name = "FILE.rrd")]
+    pub record: Option<PathBuf>,
 }
 
 /// Env config from `--option` and `--reward`.
@@ -57,7 +61,7 @@ pub fn env_config(env: &str, options: &[String], reward: Option<&str>) -> Result
 }
 
 pub fn run(args: TrainArgs) -> Result<()> {
-    let control = RunControl { show_progress: !args.quiet, ..Default::default() };
+    let control = RunControl { show_progress: !args.quiet, record: args.record.clone(), ..Default::default() };
     let summary = if let Some(dir) = &args.resume {
         println!("resuming {}", dir.display());
         train::resume(dir, &control)?
@@ -109,5 +113,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
         ),
     }
     println!("run directory: {}", summary.run_dir.display());
+    if let Some(r) = &args.record {
+        println!("recording: {} (open with `rerun {}`)", r.display(), r.display());
+    }
     Ok(())
 }

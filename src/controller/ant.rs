@@ -8,14 +8,14 @@
 //! a Raibert foothold, (T_st/2) v + k (v - v_des) ahead of the hip's neutral reach, converted
 //! to a hip angle; tracked by joint PD. Runs through the env's ordinary action (gear 150).
 use anyhow::{bail, Result};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
 
 use super::force_qp::{Dimension, ForceQp};
 use super::gait::{GaitKind, GaitScheduler, LEGS};
 use super::raibert_foothold;
 use crate::envs::Env;
 use crate::mujoco::Data;
-use crate::policy::Policy;
+use crate::policy::{Policy, Telemetry};
 
 /// Ant's legs in the scheduler's order (FL, BL, FR, BR): leg 1 (+x+y), leg 2 (-x+y), leg 4
 /// (+x-y), leg 3 (-x-y), so a trot pairs legs 1+3 and 2+4.
@@ -79,6 +79,10 @@ pub struct AntController {
     qp: ForceQp,
     legs: Option<Vec<Leg>>,
     pub qp_failures: u64,
+    /// Stance flags and phase progress per leg during the latest tick, for recorders.
+    last_phase: [(bool, f64); LEGS],
+    /// Where each swing foot lands when its hip reaches the touchdown angle (world).
+    foot_targets: [[f64; 3]; LEGS],
 }
 
 impl AntController {
@@ -86,7 +90,15 @@ impl AntController {
         let gait = GaitScheduler::new(GaitKind::Trot, params.stance_duration, params.duty_factor)?;
         let qp =
             ForceQp::new(Dimension::Spatial, params.friction, 0.1, 50.0, vec![1.0, 1.0, 1.0, 10.0, 10.0, 10.0], 1e-4);
-        Ok(AntController { params, gait, qp, legs: None, qp_failures: 0 })
+        Ok(AntController {
+            params,
+            gait,
+            qp,
+            legs: None,
+            qp_failures: 0,
+            last_phase: [(true, 0.0); LEGS],
+            foot_targets: [[0.0; 3]; LEGS],
+        })
     }
 
     fn legs(d: &Data) -> Result<Vec<Leg>> {
@@ -142,6 +154,7 @@ impl AntController {
         let att = Vector3::new(r[(2, 1)] - r[(1, 2)], r[(0, 2)] - r[(2, 0)], r[(1, 0)] - r[(0, 1)]) * 0.5;
 
         let phases = self.gait.legs();
+        self.last_phase = phases.map(|l| (l.in_stance, l.progress));
         let mut ctrl = vec![0.0; m.nu()];
         let stance: Vec<usize> = (0..LEGS).filter(|&k| phases[k].in_stance).collect();
         if !stance.is_empty() {
@@ -188,6 +201,11 @@ impl AntController {
                 continue;
             }
             let hip_target = leg.forward_sign * amplitude * (2.0 * blend - 1.0);
+            let (axis, anchor) = (Self::v3(d.xaxis(), leg.hip_joint), Self::v3(d.xanchor(), leg.hip_joint));
+            let to_touchdown =
+                Rotation3::from_axis_angle(&Unit::new_normalize(axis), leg.forward_sign * amplitude - hq);
+            let landing = anchor + to_touchdown * (Self::v3(d.site_xpos(), leg.foot_site) - anchor);
+            self.foot_targets[k] = [landing.x, landing.y, 0.0];
             let ankle_target = leg.ankle_sign * p.swing_ankle;
             ctrl[leg.hip_act] = (p.joint_kp * (hip_target - hq) - p.joint_kd * hv) / 150.0;
             ctrl[leg.ankle_act] = (p.joint_kp * (ankle_target - aq) - p.joint_kd * av) / 150.0;
@@ -210,5 +228,8 @@ impl Policy for AntController {
     }
     fn diagnostics(&self) -> Vec<(&'static str, f64)> {
         vec![("qp_failures", self.qp_failures as f64)]
+    }
+    fn telemetry(&self) -> Telemetry {
+        super::gait::gait_telemetry(&self.last_phase, |leg| self.foot_targets[leg])
     }
 }

@@ -17,6 +17,16 @@ pub fn baseline_env(env: &str) -> Result<EnvConfig> {
     })
 }
 
+/// The env a trained policy ran in, switched to what the baseline needs (Minitaur's torque
+/// action mode), keeping its reward, episode length and randomisation.
+pub fn baseline_env_like(cfg: &EnvConfig) -> Result<EnvConfig> {
+    let mut out = cfg.clone();
+    for (k, v) in baseline_env(&cfg.name)?.options {
+        out.options.insert(k, v);
+    }
+    Ok(out)
+}
+
 /// A controller for `env` tracking `speed`; `gait` overrides Minitaur's default bound.
 pub fn baseline_controller(env: &str, speed: f64, gait: Option<GaitKind>) -> Result<Box<dyn Policy>> {
     anyhow::ensure!(speed.is_finite() && speed >= 0.0, "speed must be a finite number >= 0");

@@ -1,8 +1,12 @@
 //! Gait scheduling: each leg has a phase in [0, 1) over one gait cycle; it is in stance for the
 //! first `duty_factor` of its cycle and in swing for the rest.
 
+use crate::policy::Telemetry;
+
 /// Legs in the Minitaur order: front-left, back-left, front-right, back-right.
 pub const LEGS: usize = 4;
+/// Leg names in the scheduler's order.
+pub const LEG_NAMES: [&str; LEGS] = ["fl", "bl", "fr", "br"];
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum GaitKind {
@@ -76,6 +80,20 @@ impl GaitScheduler {
             }
         })
     }
+}
+
+/// Stance (1) or swing (0) and phase progress per leg; the foot target of each swing leg.
+pub fn gait_telemetry(phases: &[(bool, f64); LEGS], target: impl Fn(usize) -> [f64; 3]) -> Telemetry {
+    let mut t = Telemetry::default();
+    for (leg, &(stance, progress)) in phases.iter().enumerate() {
+        let name = LEG_NAMES[leg];
+        t.scalars.push((format!("stance/{name}"), stance as u8 as f64));
+        t.scalars.push((format!("phase/{name}"), progress));
+        if !stance {
+            t.points.push((format!("foot_target/{name}"), target(leg)));
+        }
+    }
+    t
 }
 
 #[cfg(test)]

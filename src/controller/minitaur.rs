@@ -19,13 +19,11 @@ use nalgebra::{Matrix3, Vector3};
 
 use super::force_qp::{Dimension, ForceQp};
 use super::fourbar;
-use super::gait::{GaitKind, GaitScheduler, LEGS};
+use super::gait::{gait_telemetry, GaitKind, GaitScheduler, LEGS, LEG_NAMES};
 use super::raibert_foothold;
 use crate::envs::Env;
 use crate::mujoco::Data;
-use crate::policy::Policy;
-
-const LEG_NAMES: [&str; LEGS] = ["fl", "bl", "fr", "br"];
+use crate::policy::{Policy, Telemetry};
 
 #[derive(Debug, Clone)]
 pub struct MinitaurGaitParams {
@@ -98,6 +96,8 @@ pub struct MinitaurController {
     pub stats: ControllerStats,
     /// The latest swing targets (world), for recorders.
     pub foot_targets: [Vector3<f64>; LEGS],
+    /// Stance flags and phase progress each leg had during the latest tick.
+    last_phase: [(bool, f64); LEGS],
 }
 
 impl MinitaurController {
@@ -113,6 +113,7 @@ impl MinitaurController {
             liftoff: [Vector3::zeros(); LEGS],
             stats: ControllerStats::default(),
             foot_targets: [Vector3::zeros(); LEGS],
+            last_phase: [(true, 0.0); LEGS],
         })
     }
 
@@ -155,6 +156,7 @@ impl MinitaurController {
         let v_des = p.speed * ramp;
 
         let legs = self.gait.legs();
+        self.last_phase = legs.map(|l| (l.in_stance, l.progress));
         let angles: [f64; 8] = std::array::from_fn(|i| obs[i]);
         let speeds: [f64; 8] = std::array::from_fn(|i| obs[8 + i]);
         let mut tau = [0.0; 8];
@@ -247,5 +249,11 @@ impl Policy for MinitaurController {
     }
     fn diagnostics(&self) -> Vec<(&'static str, f64)> {
         vec![("ticks", self.stats.ticks as f64), ("qp_failures", self.stats.qp_failures as f64)]
+    }
+    fn telemetry(&self) -> Telemetry {
+        gait_telemetry(&self.last_phase, |leg| {
+            let t = self.foot_targets[leg];
+            [t.x, t.y, t.z]
+        })
     }
 }

@@ -7,8 +7,8 @@ pub mod baseline;
 pub mod force_qp;
 pub mod fourbar;
 pub mod gait;
+pub mod measure;
 pub mod minitaur;
-pub mod report;
 
 /// Raibert's foothold relative to the hip: p_f = (T_st / 2) v + k (v - v_des), per horizontal
 /// axis; add the hip position for a world target.

@@ -264,6 +264,64 @@ impl Model {
         self.slice_f64(self.raw().jnt_range, 2 * self.njnt())
     }
 
+    /// Geom position relative to its body (ngeom x 3).
+    pub fn geom_pos(&self) -> &[f64] {
+        self.slice_f64(self.raw().geom_pos, 3 * self.ngeom())
+    }
+    /// Geom orientation relative to its body, w x y z (ngeom x 4).
+    pub fn geom_quat(&self) -> &[f64] {
+        self.slice_f64(self.raw().geom_quat, 4 * self.ngeom())
+    }
+    /// Material of each geom, -1 for none.
+    pub fn geom_matid(&self) -> &[i32] {
+        self.slice_i32(self.raw().geom_matid, self.ngeom())
+    }
+    /// Mesh (or height field) of each geom, -1 for none.
+    pub fn geom_dataid(&self) -> &[i32] {
+        self.slice_i32(self.raw().geom_dataid, self.ngeom())
+    }
+    pub fn mat_rgba(&self) -> &[f32] {
+        let n = 4 * self.raw().nmat.max(0) as usize;
+        if n == 0 {
+            return &[];
+        }
+        unsafe { std::slice::from_raw_parts(self.raw().mat_rgba, n) }
+    }
+    /// The colour a geom is drawn with: its material's when it has one, else its own.
+    pub fn geom_color(&self, geom: usize) -> [f32; 4] {
+        let mat = self.geom_matid()[geom];
+        let rgba = if mat >= 0 { &self.mat_rgba()[4 * mat as usize..] } else { &self.geom_rgba()[4 * geom..] };
+        [rgba[0], rgba[1], rgba[2], rgba[3]]
+    }
+    pub fn nmesh(&self) -> usize {
+        self.raw().nmesh.max(0) as usize
+    }
+    /// Vertices (x y z each) and triangles (three vertex indices each) of mesh `mesh`.
+    pub fn mesh(&self, mesh: usize) -> MjResult<(Vec<[f32; 3]>, Vec<[u32; 3]>)> {
+        let count = self.nmesh();
+        if mesh >= count {
+            return Err(MjError::BadIndex { kind: "mesh", index: mesh, count });
+        }
+        let r = self.raw();
+        let at = |p: *const i32| unsafe { *p.add(mesh) }.max(0) as usize;
+        let (vadr, vnum) = (at(r.mesh_vertadr), at(r.mesh_vertnum));
+        let (fadr, fnum) = (at(r.mesh_faceadr), at(r.mesh_facenum));
+        let verts = if vnum == 0 {
+            &[][..]
+        } else {
+            unsafe { std::slice::from_raw_parts(r.mesh_vert.add(3 * vadr), 3 * vnum) }
+        };
+        let faces = if fnum == 0 {
+            &[][..]
+        } else {
+            unsafe { std::slice::from_raw_parts(r.mesh_face.add(3 * fadr), 3 * fnum) }
+        };
+        Ok((
+            verts.chunks_exact(3).map(|v| [v[0], v[1], v[2]]).collect(),
+            faces.chunks_exact(3).map(|f| [f[0] as u32, f[1] as u32, f[2] as u32]).collect(),
+        ))
+    }
+
     /// Mutable parameters for domain randomisation. Needs exclusive access (a fresh
     /// [`Model::try_clone`]), so shared models can never change under a running simulation.
     pub fn body_mass_mut(&mut self) -> &mut [f64] {

@@ -23,6 +23,8 @@ use serde::{Deserialize, Serialize};
 use crate::agents::{make_agent, Agent, Batch, Losses, ReplayBuffer, TrainConfig};
 use crate::envs::{make, Env, EnvConfig};
 use crate::io::write_bytes_atomic;
+use crate::policy::AgentPolicy;
+use crate::record::{Recording, RolloutRecorder};
 use checkpoint::TrainState;
 use evaluate::{evaluate, to_env_action, Evaluation};
 use metrics::MetricsRow;
@@ -66,6 +68,9 @@ pub struct RunControl {
     pub stop_after: Option<u64>,
     /// Finish early once an evaluation's mean return reaches this ("solved").
     pub target_return: Option<f64>,
+    /// Write a rerun recording here: learning curves, and one evaluation episode (the first
+    /// evaluation seed, acted deterministically) at every evaluation.
+    pub record: Option<PathBuf>,
 }
 
 /// The process-wide Ctrl-C flag (the handler is installed once, on first use).
@@ -184,6 +189,7 @@ pub fn load_policy(checkpoint: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
 
 struct Trainer {
     run_dir: PathBuf,
+    env_config: EnvConfig,
     cfg: TrainConfig,
     seed: u64,
     env: Box<dyn Env>,
@@ -206,6 +212,7 @@ impl Trainer {
         let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
         Ok(Trainer {
             run_dir: run_dir.to_path_buf(),
+            env_config: run.env.clone(),
             cfg: run.train.clone(),
             seed: run.seed,
             buffer: ReplayBuffer::new(run.train.buffer_capacity, obs_dim, act_dim),
@@ -243,6 +250,12 @@ impl Trainer {
         let (mut ep_return, mut ep_len) = (0.0, 0u64);
         let wall = |offset: f64| offset + started.elapsed().as_secs_f64();
         let rate = |step: u64| (step - start_step) as f64 / started.elapsed().as_secs_f64().max(1e-9);
+
+        let recording = control.record.as_deref().map(Recording::create).transpose()?;
+        let mut recorder = match &recording {
+            Some(r) => Some(TrainingRecorder::new(r.stream(), &self.env_config)?),
+            None => None,
+        };
 
         let outcome = loop {
             let solved = control.target_return.is_some_and(|t| last_eval.as_ref().is_some_and(|e| e.mean() >= t));
@@ -288,6 +301,9 @@ impl Trainer {
                         episode_length: Some(ep_len),
                         ..MetricsRow::progress("episode", self.step, losses, rate(self.step), wall(self.wall_offset))
                     });
+                    if let Some(r) = &recorder {
+                        r.curves(self.metrics.last().unwrap())?;
+                    }
                     need_reset = true;
                 } else {
                     obs = s.observation;
@@ -316,6 +332,10 @@ impl Trainer {
                     ..MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset))
                 });
                 metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
+                if let Some(r) = &mut recorder {
+                    r.curves(self.metrics.last().unwrap())?;
+                    r.evaluation_rollout(self.agent.as_ref(), self.step, self.seed)?;
+                }
                 last_eval = Some(e);
             }
             bar.set_position(self.step);
@@ -329,6 +349,10 @@ impl Trainer {
         bar.finish_and_clear();
         let checkpoint = self.save(need_reset, wall(self.wall_offset))?;
         metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
+        drop(recorder);
+        if let Some(r) = recording {
+            r.finish()?;
+        }
         Ok(RunSummary {
             run_dir: self.run_dir.clone(),
             outcome,
@@ -350,5 +374,33 @@ impl Trainer {
             counters: Default::default(),
         };
         checkpoint::save(&self.run_dir, self.agent.as_mut(), &self.buffer, &state)
+    }
+}
+
+/// The training run's recording: curves, and the first evaluation episode at every evaluation
+/// (on an environment of its own, so the run's numbers do not depend on recording).
+struct TrainingRecorder<'a> {
+    rollouts: RolloutRecorder<'a>,
+    env: Box<dyn Env>,
+    stream: &'a rerun::RecordingStream,
+}
+
+impl<'a> TrainingRecorder<'a> {
+    fn new(stream: &'a rerun::RecordingStream, env: &EnvConfig) -> Result<TrainingRecorder<'a>> {
+        let env = make(env)?;
+        Ok(TrainingRecorder { rollouts: RolloutRecorder::new(stream, env.data().model())?, env, stream })
+    }
+
+    fn curves(&self, row: &MetricsRow) -> Result<()> {
+        crate::record::log_training_row(self.stream, row)
+    }
+
+    fn evaluation_rollout(&mut self, agent: &dyn Agent, step: u64, run_seed: u64) -> Result<()> {
+        self.rollouts.set_train_step(Some(step));
+        let seed = seeds::eval_episode_seed(run_seed, 0);
+        let mut policy = AgentPolicy { agent, label: agent.algo().name().to_string() };
+        crate::rollout::run_episode(self.env.as_mut(), &mut policy, 0, Some(seed), &mut self.rollouts)?;
+        self.rollouts.set_train_step(None);
+        Ok(())
     }
 }

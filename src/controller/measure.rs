@@ -3,7 +3,7 @@ use anyhow::Result;
 
 use crate::envs::Env;
 use crate::policy::Policy;
-use crate::rollout::run_episode;
+use crate::rollout::{run_episode, StepView};
 
 /// Locomotion measures of one episode.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -42,7 +42,8 @@ pub fn measure(
         let mut e = GaitEpisode::default();
         let (mut start_x, mut end_x) = (0.0, 0.0);
         let reset_seed = if episode == 0 { Some(seed) } else { None };
-        let summary = run_episode(env, policy, episode, reset_seed, |t, _, step| {
+        let summary = run_episode(env, policy, episode, reset_seed, &mut |v: &StepView| {
+            let (t, step) = (v.t, v.step);
             let x = step.info.metric("x_position").unwrap_or(0.0);
             let vx = step.info.metric("x_velocity").unwrap_or(0.0);
             if t == 0 {

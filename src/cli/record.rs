@@ -1,0 +1,93 @@
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use locobench::controller::baseline::{baseline_controller, baseline_env, parse_gait};
+use locobench::envs::make;
+use locobench::policy::{AgentPolicy, Policy};
+use locobench::record::{spawn_viewer, Recording, RolloutRecorder};
+use locobench::rollout::run_episodes;
+use locobench::train::load_policy;
+
+use super::rollout::simple_policy;
+
+#[derive(clap::Args, Debug)]
+pub struct RecordArgs {
+    /// Environment name (see `locobench envs`); optional with a checkpoint (its run's env).
+    #[arg(long)]
+    pub env: Option<String>,
+    /// A checkpoint (or run directory), `raibert`, `random`, `zero`, or `actions:FILE.csv`.
+    #[arg(long)]
+    pub policy: String,
+    #[arg(long, default_value_t = 1)]
+    pub episodes: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Speed set-point of the Raibert controller (m/s).
+    #[arg(long, default_value_t = 0.35)]
+    pub speed: f64,
+    /// Gait of the Raibert controller (trot, bound, pace).
+    #[arg(long)]
+    pub gait: Option<String>,
+    /// Environment option overrides, e.g. `--option max_episode_steps=200`.
+    #[arg(long = "option", value_name = "KEY=VALUE,...")]
+    pub options: Vec<String>,
+    /// The recording to write.
+    #[arg(long, default_value = "rollout.rrd")]
+    pub out: PathBuf,
+    /// Open the recording in the rerun viewer (needs `rerun` on the PATH).
+    #[arg(long)]
+    pub spawn: bool,
+}
+
+pub fn run(args: RecordArgs) -> Result<()> {
+    let agent_holder;
+    let (cfg, mut policy): (_, Box<dyn Policy>) = match args.policy.as_str() {
+        "raibert" => {
+            let env = args.env.as_deref().context("--policy raibert needs --env minitaur or --env ant")?;
+            let gait = args.gait.as_deref().map(parse_gait).transpose()?;
+            (baseline_env(env)?, baseline_controller(env, args.speed, gait)?)
+        }
+        "random" | "zero" => {
+            let env = args.env.as_deref().context("--policy random/zero needs --env")?;
+            (locobench::envs::EnvConfig::new(env), simple_policy(&args.policy, args.seed)?)
+        }
+        p if p.starts_with("actions:") => {
+            let env = args.env.as_deref().context("--policy actions:FILE needs --env")?;
+            (locobench::envs::EnvConfig::new(env), simple_policy(p, args.seed)?)
+        }
+        checkpoint => {
+            let (run, agent) = load_policy(std::path::Path::new(checkpoint)).with_context(|| {
+                format!("--policy '{checkpoint}' is not raibert, random, zero, actions:FILE.csv or a checkpoint")
+            })?;
+            if let Some(env) = &args.env {
+                anyhow::ensure!(*env == run.env.name, "the checkpoint was trained on {}, not {env}", run.env.name);
+            }
+            agent_holder = agent;
+            let label = format!("{} ({checkpoint})", run.train.algo.name());
+            (run.env, Box::new(AgentPolicy { agent: agent_holder.as_ref(), label }) as Box<dyn Policy>)
+        }
+    };
+    let cfg = super::apply_options(cfg, &args.options)?;
+    let mut env = make(&cfg)?;
+    let recording = Recording::create(&args.out)?;
+    let mut recorder = RolloutRecorder::new(recording.stream(), env.data().model())?;
+    let summaries = run_episodes(env.as_mut(), policy.as_mut(), args.episodes, args.seed, &mut recorder)?;
+    let frames = recorder.frames();
+    drop(recorder);
+    let path = recording.finish()?;
+    for s in &summaries {
+        println!(
+            "{} with {}: episode {} return {:.3} over {} steps",
+            cfg.name,
+            policy.name(),
+            s.episode,
+            s.episode_return,
+            s.length
+        );
+    }
+    println!("wrote {} ({frames} frames); view it with `rerun {}`", path.display(), path.display());
+    if args.spawn {
+        spawn_viewer(&path)?;
+    }
+    Ok(())
+}

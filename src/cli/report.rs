@@ -1,0 +1,47 @@
+use std::path::PathBuf;
+
+use anyhow::Result;
+use locobench::report::{write_report, ReportOptions};
+
+#[derive(clap::Args, Debug)]
+pub struct ReportArgs {
+    /// Run directories, or directories holding them (e.g. a sweep).
+    #[arg(long, num_args = 1.., required = true)]
+    pub runs: Vec<PathBuf>,
+    #[arg(long, default_value = "report")]
+    pub out: PathBuf,
+    /// Episodes per policy, seed and reward in the baseline-vs-RL comparison (0 skips it).
+    #[arg(long, default_value_t = 5)]
+    pub episodes: usize,
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Baseline speed set-point on Minitaur (m/s).
+    #[arg(long, default_value_t = 0.35)]
+    pub minitaur_speed: f64,
+    /// Baseline speed set-point on Ant (m/s).
+    #[arg(long, default_value_t = 0.5)]
+    pub ant_speed: f64,
+}
+
+pub fn run(args: ReportArgs) -> Result<()> {
+    let mut opts = ReportOptions { compare_episodes: args.episodes, seed: args.seed, ..Default::default() };
+    opts.baseline_speed.insert("minitaur".into(), args.minitaur_speed);
+    opts.baseline_speed.insert("ant".into(), args.ant_speed);
+    let report = write_report(&args.runs, &args.out, &opts)?;
+    for g in &report.groups {
+        println!(
+            "{:<12} {:<28} seeds {:>2}  final eval {:>9.1} ± {:<7.1} AUC {:>9.1}",
+            g.group.env,
+            g.group.label(),
+            g.seeds,
+            g.final_mean,
+            g.final_std,
+            g.auc
+        );
+    }
+    for (env, rows) in &report.comparisons {
+        println!("{env}: baseline vs RL over {} rows (see the report)", rows.len());
+    }
+    println!("wrote {} and {}", report.index.display(), report.readme.display());
+    Ok(())
+}

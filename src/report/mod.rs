@@ -1,0 +1,289 @@
+//! `locobench report`: learning curves across seeds, training-return curves, and the baseline
+//! controller against trained agents, as `index.html` (self-contained, no network) and
+//! `README.md` with SVG charts beside them.
+pub mod anchors;
+pub mod compare;
+pub mod curves;
+pub mod plots;
+pub mod runs;
+
+use std::collections::BTreeMap;
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+
+use crate::io::write_bytes_atomic;
+use compare::{compare, ComparisonRow};
+use curves::{eval_curve, mean_std, rolling, EvalCurve};
+use plots::{bands_svg, Band};
+use runs::{find_runs, Group, Run};
+
+/// Episodes per seed of the training-return rolling statistics.
+pub const ROLLING_WINDOW: usize = 50;
+
+#[derive(Debug, Clone)]
+pub struct ReportOptions {
+    /// Episodes per policy and reward in the baseline comparison (0 skips it).
+    pub compare_episodes: usize,
+    pub seed: u64,
+    /// Speed set-point of the baseline controller per env (m/s).
+    pub baseline_speed: BTreeMap<String, f64>,
+}
+
+impl Default for ReportOptions {
+    fn default() -> Self {
+        ReportOptions {
+            compare_episodes: 5,
+            seed: 0,
+            baseline_speed: [("minitaur".to_string(), 0.35), ("ant".to_string(), 0.5)].into_iter().collect(),
+        }
+    }
+}
+
+/// One group of seeds' summary line.
+#[derive(Debug, Clone)]
+pub struct GroupSummary {
+    pub group: Group,
+    pub curve: EvalCurve,
+    pub seeds: usize,
+    pub final_mean: f64,
+    pub final_std: f64,
+    pub auc: f64,
+    pub wall_time: f64,
+    pub steps: u64,
+}
+
+pub struct Report {
+    pub index: PathBuf,
+    pub readme: PathBuf,
+    pub groups: Vec<GroupSummary>,
+    pub comparisons: BTreeMap<String, Vec<ComparisonRow>>,
+}
+
+/// Returns span from about 0.01 (Minitaur per second) to 10,000 (HalfCheetah): keep three
+/// significant figures at small magnitudes.
+fn fmt_return(v: f64) -> String {
+    match v.abs() {
+        a if !a.is_finite() => "–".into(),
+        a if a < 10.0 => format!("{v:.3}"),
+        a if a < 1000.0 => format!("{v:.1}"),
+        _ => format!("{v:.0}"),
+    }
+}
+
+fn fmt(v: f64, digits: usize) -> String {
+    if v.is_finite() {
+        format!("{v:.digits$}")
+    } else {
+        "–".into()
+    }
+}
+
+/// Groups runs by (env, algorithm, reward), sorted.
+pub fn group_runs(runs: &[Run]) -> BTreeMap<Group, Vec<&Run>> {
+    let mut groups: BTreeMap<Group, Vec<&Run>> = BTreeMap::new();
+    for r in runs {
+        groups.entry(r.group()).or_default().push(r);
+    }
+    groups
+}
+
+pub fn summarise(group: &Group, runs: &[&Run]) -> GroupSummary {
+    let curve = eval_curve(&runs.iter().map(|r| r.evals().collect()).collect::<Vec<_>>());
+    let (_, final_mean, final_std) = curve.last().unwrap_or((0, f64::NAN, f64::NAN));
+    GroupSummary {
+        group: group.clone(),
+        seeds: runs.len(),
+        final_mean,
+        final_std,
+        auc: curve.normalised_auc().unwrap_or(f64::NAN),
+        wall_time: mean_std(&runs.iter().map(|r| r.wall_time()).collect::<Vec<_>>()).0,
+        steps: runs.iter().map(|r| r.steps()).max().unwrap_or(0),
+        curve,
+    }
+}
+
+/// Writes the report for the runs found under `paths` into `out`.
+pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Result<Report> {
+    let runs = find_runs(paths)?;
+    std::fs::create_dir_all(out)?;
+    let groups = group_runs(&runs);
+    let mut envs: BTreeMap<String, Vec<(&Group, &Vec<&Run>)>> = BTreeMap::new();
+    for (g, rs) in &groups {
+        envs.entry(g.env.clone()).or_default().push((g, rs));
+    }
+
+    let mut html = String::new();
+    let mut md = String::new();
+    let mut summaries = Vec::new();
+    let mut comparisons = BTreeMap::new();
+    let _ = writeln!(md, "# locobench report\n\n{} runs from {}.\n", runs.len(), paths_list(paths));
+    let _ = writeln!(html, "<h1>locobench report</h1><p>{} runs from {}.</p>", runs.len(), escape(&paths_list(paths)));
+
+    for (env, env_groups) in &envs {
+        let _ = writeln!(md, "## {env}\n");
+        let _ = writeln!(html, "<h2>{}</h2>", escape(env));
+
+        // Evaluation curves: mean ± std across seeds per group.
+        let env_summaries: Vec<GroupSummary> = env_groups.iter().map(|(g, rs)| summarise(g, rs)).collect();
+        let bands: Vec<Band> = env_summaries
+            .iter()
+            .map(|s| Band {
+                label: format!("{} (n={})", s.group.label(), s.seeds),
+                x: s.curve.steps.iter().map(|&x| x as f64).collect(),
+                mean: s.curve.mean.clone(),
+                std: s.curve.std.clone(),
+            })
+            .collect();
+        let eval_svg = format!("{env}_evaluation.svg");
+        let svg = bands_svg(
+            &format!("{env}: evaluation return, mean ± std over seeds"),
+            "environment steps",
+            "return",
+            &bands,
+        )?;
+        write_bytes_atomic(&out.join(&eval_svg), svg.as_bytes())?;
+        let _ = writeln!(md, "![evaluation curves]({eval_svg})\n");
+        let _ = writeln!(html, "<figure>{svg}</figure>");
+
+        md.push_str("| algorithm | reward | seeds | steps | final eval (mean ± std over seeds) | normalised AUC | wall time (min) |\n|---|---|---|---|---|---|---|\n");
+        html.push_str("<table><tr><th>algorithm</th><th>reward</th><th>seeds</th><th>steps</th><th>final eval</th><th>normalised AUC</th><th>wall time (min)</th></tr>");
+        for s in &env_summaries {
+            let cells = [
+                s.group.algo.clone(),
+                s.group.reward.clone(),
+                s.seeds.to_string(),
+                s.steps.to_string(),
+                format!("{} ± {}", fmt_return(s.final_mean), fmt_return(s.final_std)),
+                fmt_return(s.auc),
+                fmt(s.wall_time / 60.0, 1),
+            ];
+            table_row(&mut md, &mut html, &cells);
+        }
+        html.push_str("</table>");
+        md.push('\n');
+
+        // Training returns per episode: 50-episode rolling mean and std, one chart per group.
+        for (g, rs) in env_groups {
+            let bands: Vec<Band> = rs
+                .iter()
+                .map(|r| {
+                    let (x, y): (Vec<f64>, Vec<f64>) = r.episodes().map(|(s, v)| (s as f64, v)).unzip();
+                    let (mean, std) = rolling(&y, ROLLING_WINDOW);
+                    Band { label: format!("seed {}", r.config.seed), x, mean, std }
+                })
+                .collect();
+            let file = format!("{env}_{}_{}_training.svg", g.algo, slug(&g.reward));
+            let title = format!("{env} {}: training return, {ROLLING_WINDOW}-episode rolling mean ± std", g.label());
+            let svg = bands_svg(&title, "environment steps", "episode return", &bands)?;
+            write_bytes_atomic(&out.join(&file), svg.as_bytes())?;
+            let _ = writeln!(md, "![training returns]({file})\n");
+            let _ = writeln!(html, "<figure>{svg}</figure>");
+        }
+
+        // Baseline against RL.
+        let speed = opts.baseline_speed.get(env.as_str()).copied();
+        if let (Some(speed), true) = (speed, opts.compare_episodes > 0) {
+            let gs: Vec<Vec<&Run>> = env_groups.iter().map(|(_, rs)| (*rs).clone()).collect();
+            let rows = compare(env, &gs, opts.compare_episodes, opts.seed, speed)?;
+            let _ = writeln!(
+                md,
+                "### Baseline vs RL\n\n{} episodes per policy and seed; baseline set-point {speed} m/s. Speed error is \
+                 measured against the baseline's set-point for every policy. The baseline runs in the runs' env \
+                 options with its own action mode.\n",
+                opts.compare_episodes
+            );
+            let _ = writeln!(
+                html,
+                "<h3>Baseline vs RL</h3><p>{} episodes per policy and seed; baseline set-point {speed} m/s. \
+                 Speed error is measured against the baseline's set-point for every policy.</p>",
+                opts.compare_episodes
+            );
+            let header = [
+                "reward",
+                "policy",
+                "return",
+                "speed m/s",
+                "speed error m/s",
+                "energy J",
+                "CoT",
+                "drift m",
+                "shake m",
+                "falls",
+                "length",
+            ];
+            md.push_str(&format!("| {} |\n|{}\n", header.join(" | "), "---|".repeat(header.len())));
+            html.push_str("<table><tr>");
+            for h in header {
+                let _ = write!(html, "<th>{h}</th>");
+            }
+            html.push_str("</tr>");
+            for row in &rows {
+                let (ret, ret_sd) = row.stat(|e| e.episode_return);
+                let cells = [
+                    row.reward.clone(),
+                    row.policy.clone(),
+                    format!("{} ± {}", fmt_return(ret), fmt_return(ret_sd)),
+                    fmt(row.stat(|e| e.mean_speed).0, 3),
+                    fmt(row.stat(|e| e.speed_error).0, 3),
+                    fmt(row.stat(|e| e.energy).0, 1),
+                    fmt(row.cost_of_transport(), 2),
+                    fmt(row.stat(|e| e.drift).0, 3),
+                    fmt(row.stat(|e| e.shake).0, 3),
+                    format!("{}/{}", row.falls(), row.episodes.len()),
+                    fmt(row.stat(|e| e.length as f64).0, 0),
+                ];
+                table_row(&mut md, &mut html, &cells);
+            }
+            html.push_str("</table>");
+            md.push('\n');
+            comparisons.insert(env.clone(), rows);
+        }
+        summaries.extend(env_summaries);
+    }
+
+    let runs_list: String = runs
+        .iter()
+        .map(|r| format!("- `{}`: {} seed {}\n", r.dir.display(), r.group().label(), r.config.seed))
+        .collect();
+    let _ = writeln!(md, "## Runs\n\n{runs_list}");
+    let page = format!(
+        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>locobench report</title><style>\
+         body{{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}}\
+         table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}\
+         th{{background:#eee}}figure{{margin:1em 0}}</style></head><body>\n{html}\n<h2>Runs</h2><pre>{}</pre></body></html>\n",
+        escape(&runs_list)
+    );
+    let index = out.join("index.html");
+    let readme = out.join("README.md");
+    write_bytes_atomic(&index, page.as_bytes())?;
+    write_bytes_atomic(&readme, md.as_bytes())?;
+    Ok(Report { index, readme, groups: summaries, comparisons })
+}
+
+fn table_row(md: &mut String, html: &mut String, cells: &[String]) {
+    let _ = writeln!(md, "| {} |", cells.join(" | "));
+    html.push_str("<tr>");
+    for c in cells {
+        let _ = write!(html, "<td>{}</td>", escape(c));
+    }
+    html.push_str("</tr>");
+}
+
+fn paths_list(paths: &[PathBuf]) -> String {
+    paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+}
+
+fn slug(s: &str) -> String {
+    s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '.' { c } else { '-' }).collect()
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+/// Mean and std of the final evaluation across seeds, as printed in tables.
+pub fn final_eval(runs: &[&Run]) -> (f64, f64) {
+    mean_std(&runs.iter().filter_map(|r| r.evals().last().map(|(_, v)| v)).collect::<Vec<_>>())
+}

@@ -1,0 +1,137 @@
+//! Finding and reading training run directories (`config.toml` + `metrics.csv`).
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+
+use crate::envs::EnvConfig;
+use crate::train::metrics::{self, MetricsRow};
+use crate::train::{read_run_config, RunConfig};
+
+/// Option keys that weight reward terms (what a reward sweep varies).
+fn is_reward_weight(key: &str) -> bool {
+    key.ends_with("_weight") || key == "healthy_reward"
+}
+
+#[derive(Debug, Clone)]
+pub struct Run {
+    pub dir: PathBuf,
+    pub config: RunConfig,
+    pub metrics: Vec<MetricsRow>,
+}
+
+impl Run {
+    pub fn load(dir: &Path) -> Result<Run> {
+        let config = read_run_config(dir)?;
+        let path = dir.join("metrics.csv");
+        let metrics = if path.exists() {
+            metrics::read(&path).with_context(|| format!("reading {}", path.display()))?
+        } else {
+            Vec::new()
+        };
+        Ok(Run { dir: dir.to_path_buf(), config, metrics })
+    }
+
+    pub fn env(&self) -> &str {
+        &self.config.env.name
+    }
+
+    pub fn algo(&self) -> &'static str {
+        self.config.train.algo.name()
+    }
+
+    /// Reward weights that differ from the environment's defaults, e.g. `drift=0.25`, or
+    /// `default reward`.
+    pub fn reward_label(&self) -> String {
+        let defaults = EnvConfig::new(self.env()).resolved_options().unwrap_or_default();
+        let mut changed: Vec<String> = self
+            .config
+            .env
+            .options
+            .iter()
+            .filter(|(k, v)| is_reward_weight(k) && defaults.get(*k) != Some(*v))
+            .map(|(k, v)| format!("{}={}", k.trim_end_matches("_weight"), v))
+            .collect();
+        changed.sort();
+        if changed.is_empty() {
+            "default reward".into()
+        } else {
+            changed.join(",")
+        }
+    }
+
+    /// Runs that differ only in their seed share a group.
+    pub fn group(&self) -> Group {
+        Group { env: self.env().to_string(), algo: self.algo().to_string(), reward: self.reward_label() }
+    }
+
+    pub fn evals(&self) -> impl Iterator<Item = (u64, f64)> + '_ {
+        self.metrics.iter().filter(|r| r.kind == "eval").filter_map(|r| r.eval_mean.map(|m| (r.step, m)))
+    }
+
+    pub fn episodes(&self) -> impl Iterator<Item = (u64, f64)> + '_ {
+        self.metrics.iter().filter(|r| r.kind == "episode").filter_map(|r| r.episode_return.map(|m| (r.step, m)))
+    }
+
+    pub fn wall_time(&self) -> f64 {
+        self.metrics.last().map_or(0.0, |r| r.wall_time)
+    }
+
+    pub fn steps(&self) -> u64 {
+        self.metrics.last().map_or(0, |r| r.step)
+    }
+}
+
+#[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub struct Group {
+    pub env: String,
+    pub algo: String,
+    pub reward: String,
+}
+
+impl Group {
+    pub fn label(&self) -> String {
+        if self.reward == "default reward" {
+            self.algo.clone()
+        } else {
+            format!("{} ({})", self.algo, self.reward)
+        }
+    }
+}
+
+/// Every run directory in `paths`: each path is a run directory itself or is searched
+/// (a few levels deep) for them, e.g. a sweep directory.
+pub fn find_runs(paths: &[PathBuf]) -> Result<Vec<Run>> {
+    fn walk(dir: &Path, depth: usize, out: &mut Vec<PathBuf>) -> Result<()> {
+        if dir.join("config.toml").is_file() && dir.join("checkpoints").exists() {
+            out.push(dir.to_path_buf());
+            return Ok(());
+        }
+        if depth == 0 {
+            return Ok(());
+        }
+        let mut entries: Vec<PathBuf> = std::fs::read_dir(dir)
+            .with_context(|| format!("reading {}", dir.display()))?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.is_dir())
+            .collect();
+        entries.sort();
+        for e in entries {
+            walk(&e, depth - 1, out)?;
+        }
+        Ok(())
+    }
+    let mut dirs = Vec::new();
+    for p in paths {
+        if !p.is_dir() {
+            bail!("{} is not a directory", p.display());
+        }
+        let before = dirs.len();
+        walk(p, 4, &mut dirs)?;
+        if dirs.len() == before {
+            bail!("no run directories (with config.toml and checkpoints/) under {}", p.display());
+        }
+    }
+    dirs.sort();
+    dirs.dedup();
+    dirs.iter().map(|d| Run::load(d)).collect()
+}
