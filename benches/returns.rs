@@ -9,7 +9,8 @@
 //! published settings untouched. Other knobs (environment variables):
 //!   LOCOBENCH_RETURNS_STEPS, LOCOBENCH_RETURNS_SEEDS, LOCOBENCH_RETURNS_ENVS (comma list),
 //!   LOCOBENCH_RETURNS_ALGOS, LOCOBENCH_RETURNS_JOBS, LOCOBENCH_RETURNS_OUT (default
-//!   target/bench-returns; the runs stay there for `locobench report`).
+//!   target/bench-returns; the runs stay there for `locobench report`), LOCOBENCH_RETURNS_KEEP=1
+//!   (keep the runs already there: finished ones are not trained again, only tabulated).
 use std::fmt::Write as _;
 use std::path::PathBuf;
 use std::time::Instant;
@@ -22,7 +23,7 @@ use locobench::io::write_bytes_atomic;
 use locobench::report::anchors::bundled_anchors;
 use locobench::report::curves::mean_std;
 use locobench::report::runs::find_runs;
-use locobench::report::{group_runs, summarise};
+use locobench::report::{fmt_return, group_runs, summarise};
 use locobench::sweep::{jobs, run_jobs, write_plan, SweepSpec};
 
 fn var<T: std::str::FromStr>(name: &str) -> Option<T> {
@@ -62,7 +63,8 @@ fn main() -> Result<()> {
         let eval_every = (steps / 5).max(1);
         set.push(format!("warmup_steps={start},learning_starts={start},eval_every={eval_every},eval_episodes=5"));
     }
-    if out.exists() {
+    let keep = std::env::var("LOCOBENCH_RETURNS_KEEP").is_ok_and(|v| v == "1");
+    if out.exists() && !keep {
         std::fs::remove_dir_all(&out).with_context(|| format!("clearing {}", out.display()))?;
     }
     println!(
@@ -71,7 +73,6 @@ fn main() -> Result<()> {
         algos.len(),
         out.display()
     );
-    let started = Instant::now();
     for env in &envs {
         let spec = SweepSpec {
             env: env.clone(),
@@ -98,15 +99,9 @@ fn main() -> Result<()> {
     let mut csv = String::from(
         "env,policy,seeds,steps,final_mean,final_std,return_at_25pct,return_at_50pct,return_at_100pct,normalised_auc,wall_time_s,steps_per_s\n",
     );
-    let _ = writeln!(
-        md,
-        "# Returns bench\n\n{steps} steps per run, {seeds} seeds{}; {} min in all. Evaluation: mean return of the \
-         deterministic policy over the evaluation episodes; mean ± std over seeds.\n",
-        if full { " (published settings)" } else { ", warm-up and learning start shortened to 1,000 steps" },
-        (started.elapsed().as_secs_f64() / 60.0).round()
-    );
     let marks = [steps / 4, steps / 2, steps];
-    let fmt = |v: Option<f64>| v.filter(|x| x.is_finite()).map_or("–".to_string(), |x| format!("{x:.1}"));
+    let mut total_wall = 0.0;
+    let fmt = |v: Option<f64>| v.map_or("–".to_string(), fmt_return);
     for env in &envs {
         let runs = match find_runs(&[out.join(env)]) {
             Ok(r) => r,
@@ -121,6 +116,7 @@ fn main() -> Result<()> {
         );
         let _ = writeln!(md, "## {env}\n\n{header}\n|---|---|---|---|---|---|---|---|---|---|");
         println!("\n{env}\n{header}");
+        total_wall += runs.iter().map(|r| r.wall_time()).sum::<f64>();
         for (group, rs) in group_runs(&runs) {
             let s = summarise(&group, &rs);
             let wall = s.wall_time;
@@ -130,7 +126,8 @@ fn main() -> Result<()> {
                 .filter(|a| a.env == *env && a.algo == group.algo)
                 .map(|a| {
                     let sd = a.std.map_or(String::new(), |s| format!(" ± {s}"));
-                    format!("{}{sd} @{}k ({})", a.value, a.steps / 1000, a.source.split(':').next().unwrap_or(""))
+                    let source = a.source.split([',', '(']).next().unwrap_or("").trim();
+                    format!("{}{sd} @{}k ({source})", a.value, a.steps / 1000)
                 })
                 .collect();
             let at: Vec<Option<f64>> = marks.iter().map(|&m| s.curve.at(m)).collect();
@@ -176,7 +173,9 @@ fn main() -> Result<()> {
             let falls = eps.iter().filter(|x| x.fell).count();
             let v = mean_std(&eps.iter().map(|x| x.mean_speed).collect::<Vec<_>>()).0;
             let row = format!(
-                "| raibert @{speed} m/s | 5 episodes | {m:.1} ± {sd:.1} | – | – | – | – | {:.1} | – | mean speed {v:.2} m/s, falls {falls}/5 |",
+                "| raibert @{speed} m/s | 5 episodes | {} ± {} | – | – | – | – | {:.1} | – | mean speed {v:.2} m/s, falls {falls}/5 |",
+                fmt_return(m),
+                fmt_return(sd),
                 t.elapsed().as_secs_f64() / 60.0
             );
             println!("{row}");
@@ -185,6 +184,14 @@ fn main() -> Result<()> {
         }
         md.push('\n');
     }
+    let header = format!(
+        "# Returns bench\n\n{steps} steps per run, {seeds} seeds{}, {parallel} runs at a time; the runs' wall times add \
+         up to {:.0} min. Evaluation: mean return of the deterministic policy over the evaluation episodes; mean ± std \
+         over seeds.\n\n",
+        if full { " (published settings)" } else { ", warm-up and learning start shortened to 1,000 steps" },
+        total_wall / 60.0
+    );
+    let md = header + &md;
     write_bytes_atomic(&out.join("returns.md"), md.as_bytes())?;
     write_bytes_atomic(&out.join("returns.csv"), csv.as_bytes())?;
     println!(

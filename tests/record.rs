@@ -269,3 +269,94 @@ fn record_errors_are_clear() {
     assert!(!ok && err.contains("pip install rerun-sdk==0.36.3"), "{err}");
     assert!(out.exists());
 }
+
+#[test]
+fn every_geom_type_becomes_its_rerun_primitive() {
+    let xml = r#"<mujoco>
+      <asset><mesh name="tetra" vertex="0 0 0  0.1 0 0  0 0.1 0  0 0 0.1"/></asset>
+      <worldbody>
+        <geom name="ground" type="plane" size="2 3 0.1" rgba="0.5 0.5 0.5 1"/>
+        <body name="thing" pos="0 0 1">
+          <freejoint/>
+          <geom name="ball" type="sphere" size="0.1" rgba="1 0 0 1"/>
+          <geom name="pill" type="capsule" size="0.05 0.2" pos="0.3 0 0" euler="30 60 0"/>
+          <geom name="egg" type="ellipsoid" size="0.1 0.2 0.3" pos="0 0.3 0"/>
+          <geom name="can" type="cylinder" size="0.1 0.2" pos="0 0 0.3"/>
+          <geom name="crate" type="box" size="0.1 0.2 0.3" pos="0 -0.3 0" euler="0 0 45"/>
+          <geom name="rock" type="mesh" mesh="tetra" pos="-0.3 0 0"/>
+        </body>
+      </worldbody>
+    </mujoco>"#;
+    let model = locobench::mujoco::Model::from_xml_str(xml).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("shapes.rrd");
+    let recording = Recording::create(&path).unwrap();
+    let written = locobench::record::log_scene(recording.stream(), &model).unwrap();
+    recording.finish().unwrap();
+    assert_eq!(written.len(), 7);
+
+    let chunks = read_chunks(&path);
+    // The archetype each entity was logged with, by its components' archetype names.
+    let archetype_of = |entity: &str| -> BTreeSet<String> {
+        chunks
+            .iter()
+            .filter(|c| c.entity_path().to_string().trim_start_matches('/') == entity)
+            .flat_map(|c| {
+                c.component_descriptors()
+                    .filter_map(|d| d.archetype.map(|a| a.short_name().to_string()))
+                    .collect::<Vec<_>>()
+            })
+            .collect()
+    };
+    for (entity, archetype) in [
+        ("world/ground", "Mesh3D"),
+        ("world/thing/ball", "Ellipsoids3D"),
+        ("world/thing/pill", "Capsules3D"),
+        ("world/thing/egg", "Ellipsoids3D"),
+        ("world/thing/can", "Cylinders3D"),
+        ("world/thing/crate", "Boxes3D"),
+        ("world/thing/rock", "Mesh3D"),
+    ] {
+        let found = archetype_of(entity);
+        assert!(found.contains(archetype), "{entity}: {found:?}");
+        assert!(chunks
+            .iter()
+            .filter(|c| c.entity_path().to_string().trim_start_matches('/') == entity)
+            .all(|c| c.is_static()));
+    }
+
+    // The capsule's end caps, rebuilt from what was logged (rerun: from the translation along
+    // +z for `length`), sit where MuJoCo puts them (centre +- half-length along the geom's z).
+    let pill =
+        chunks.iter().find(|c| c.entity_path().to_string().trim_start_matches('/') == "world/thing/pill").unwrap();
+    let first = |d: rerun::ComponentDescriptor| d.component;
+    let t: [f32; 3] = pill
+        .iter_component::<rerun::components::Translation3D>(first(rerun::Capsules3D::descriptor_translations()))
+        .next()
+        .unwrap()[0]
+        .0
+        .into();
+    let q: [f32; 4] = pill
+        .iter_component::<rerun::components::RotationQuat>(first(rerun::Capsules3D::descriptor_quaternions()))
+        .next()
+        .unwrap()[0]
+        .0
+        .into();
+    let len: f32 = pill
+        .iter_component::<rerun::components::Length>(first(rerun::Capsules3D::descriptor_lengths()))
+        .next()
+        .unwrap()[0]
+        .0
+         .0;
+    let rot = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[3], q[0], q[1], q[2]));
+    let start = nalgebra::Vector3::new(t[0], t[1], t[2]);
+    let end = start + rot * nalgebra::Vector3::new(0.0, 0.0, len);
+    let g = model.geom_id("pill").unwrap();
+    let (p, gq) = (&model.geom_pos()[3 * g..3 * g + 3], &model.geom_quat()[4 * g..4 * g + 4]);
+    let grot = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(gq[0], gq[1], gq[2], gq[3]));
+    let axis = grot * nalgebra::Vector3::new(0.0, 0.0, 0.2);
+    let centre = nalgebra::Vector3::new(p[0], p[1], p[2]);
+    for (logged, expected) in [(start, centre - axis), (end, centre + axis)] {
+        assert!((logged.cast::<f64>() - expected).norm() < 1e-6, "{logged:?} vs {expected:?}");
+    }
+}

@@ -1,7 +1,7 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
-use locobench::report::{write_report, ReportOptions};
+use locobench::report::{fmt_return, write_report, ReportOptions};
 
 #[derive(clap::Args, Debug)]
 pub struct ReportArgs {
@@ -30,13 +30,13 @@ pub fn run(args: ReportArgs) -> Result<()> {
     let report = write_report(&args.runs, &args.out, &opts)?;
     for g in &report.groups {
         println!(
-            "{:<12} {:<28} seeds {:>2}  final eval {:>9.1} ± {:<7.1} AUC {:>9.1}",
+            "{:<18} {:<28} seeds {:>2}  final eval {:>9} ± {:<7} AUC {:>9}",
             g.group.env,
             g.group.label(),
             g.seeds,
-            g.final_mean,
-            g.final_std,
-            g.auc
+            fmt_return(g.final_mean),
+            fmt_return(g.final_std),
+            fmt_return(g.auc)
         );
     }
     for (env, rows) in &report.comparisons {

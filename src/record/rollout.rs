@@ -154,6 +154,8 @@ impl<'a> RolloutRecorder<'a> {
         for (name, v) in &telemetry.scalars {
             self.scalar(&format!("plots/controller/{name}"), *v)?;
         }
+        // A controller with gait telemetry logs its targets every step, even none (all legs in
+        // stance), so stale targets do not linger in the viewer.
         if !telemetry.points.is_empty() || !telemetry.scalars.is_empty() {
             let targets: Vec<[f32; 3]> = telemetry.points.iter().map(|(_, p)| p.map(|v| v as f32)).collect();
             let labels: Vec<String> = telemetry.points.iter().map(|(n, _)| n.clone()).collect();

@@ -61,12 +61,12 @@ pub struct Report {
     pub comparisons: BTreeMap<String, Vec<ComparisonRow>>,
 }
 
-/// Returns span from about 0.01 (Minitaur per second) to 10,000 (HalfCheetah): keep three
-/// significant figures at small magnitudes.
-fn fmt_return(v: f64) -> String {
+/// Returns span from about 0.01 (short Minitaur episodes) to 10,000 (HalfCheetah): more
+/// decimals below 1.
+pub fn fmt_return(v: f64) -> String {
     match v.abs() {
         a if !a.is_finite() => "–".into(),
-        a if a < 10.0 => format!("{v:.3}"),
+        a if a < 1.0 => format!("{v:.3}"),
         a if a < 1000.0 => format!("{v:.1}"),
         _ => format!("{v:.0}"),
     }
@@ -281,9 +281,4 @@ fn slug(s: &str) -> String {
 
 fn escape(s: &str) -> String {
     s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
-}
-
-/// Mean and std of the final evaluation across seeds, as printed in tables.
-pub fn final_eval(runs: &[&Run]) -> (f64, f64) {
-    mean_std(&runs.iter().filter_map(|r| r.evals().last().map(|(_, v)| v)).collect::<Vec<_>>())
 }

@@ -11,6 +11,18 @@ pub struct Band {
     pub std: Vec<f64>,
 }
 
+/// Distinct, readable line colours (the common "tab10" set), cycled.
+const COLORS: [(u8, u8, u8); 8] = [
+    (31, 119, 180),
+    (255, 127, 14),
+    (44, 160, 44),
+    (214, 39, 40),
+    (148, 103, 189),
+    (140, 86, 75),
+    (227, 119, 194),
+    (127, 127, 127),
+];
+
 fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
     anyhow!("plotting: {e:?}")
 }
@@ -44,7 +56,8 @@ pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band]) -> R
             .map_err(err)?;
         chart.configure_mesh().x_desc(x_label).y_desc(y_label).x_labels(8).y_labels(8).draw().map_err(err)?;
         for (i, b) in bands.iter().enumerate() {
-            let color = Palette99::pick(i).to_rgba();
+            let (red, green, blue) = COLORS[i % COLORS.len()];
+            let color = RGBColor(red, green, blue).to_rgba();
             let upper = b.x.iter().zip(b.mean.iter().zip(&b.std)).map(|(&x, (&m, &s))| (x, m + s));
             let lower = b.x.iter().zip(b.mean.iter().zip(&b.std)).rev().map(|(&x, (&m, &s))| (x, m - s));
             let outline: Vec<(f64, f64)> = upper.chain(lower).collect();
