@@ -46,6 +46,9 @@ pub struct TrainArgs {
     /// evaluation), e.g. `--record training.rrd`.
     #[arg(long, value_name = "FILE.rrd")]
     pub record: Option<PathBuf>,
+    /// With --record: a rollout at every N-th evaluation only (the curves are always complete).
+    #[arg(long, default_value_t = 1, value_name = "N")]
+    pub record_every: u64,
 }
 
 /// Env config from `--option` and `--reward`.
@@ -61,7 +64,12 @@ pub fn env_config(env: &str, options: &[String], reward: Option<&str>) -> Result
 }
 
 pub fn run(args: TrainArgs) -> Result<()> {
-    let control = RunControl { show_progress: !args.quiet, record: args.record.clone(), ..Default::default() };
+    let control = RunControl {
+        show_progress: !args.quiet,
+        record: args.record.clone(),
+        record_every: args.record_every,
+        ..Default::default()
+    };
     let summary = if let Some(dir) = &args.resume {
         println!("resuming {}", dir.display());
         train::resume(dir, &control)?

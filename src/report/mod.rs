@@ -134,6 +134,7 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
                 x: s.curve.steps.iter().map(|&x| x as f64).collect(),
                 mean: s.curve.mean.clone(),
                 std: s.curve.std.clone(),
+                raw: vec![],
             })
             .collect();
         let eval_svg = format!("{env}_evaluation.svg");
@@ -171,11 +172,12 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
                 .map(|r| {
                     let (x, y): (Vec<f64>, Vec<f64>) = r.episodes().map(|(s, v)| (s as f64, v)).unzip();
                     let (mean, std) = rolling(&y, ROLLING_WINDOW);
-                    Band { label: format!("seed {}", r.config.seed), x, mean, std }
+                    Band { label: format!("seed {}", r.config.seed), x, mean, std, raw: y }
                 })
                 .collect();
             let file = format!("{env}_{}_{}_training.svg", g.algo, slug(&g.reward));
-            let title = format!("{env} {}: training return, {ROLLING_WINDOW}-episode rolling mean ± std", g.label());
+            let title =
+                format!("{env} {}: episode returns (faint), {ROLLING_WINDOW}-episode rolling mean ± std", g.label());
             let svg = bands_svg(&title, "environment steps", "episode return", &bands)?;
             write_bytes_atomic(&out.join(&file), svg.as_bytes())?;
             let _ = writeln!(md, "![training returns]({file})\n");

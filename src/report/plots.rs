@@ -2,13 +2,16 @@
 use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 
-/// One series: a mean line and a shaded band of ±std around it.
-#[derive(Debug, Clone)]
+/// One series: a mean line and a shaded band of ±std around it, optionally over the raw
+/// values it summarises (drawn faint).
+#[derive(Debug, Clone, Default)]
 pub struct Band {
     pub label: String,
     pub x: Vec<f64>,
     pub mean: Vec<f64>,
     pub std: Vec<f64>,
+    /// Raw values at the same x (empty: none).
+    pub raw: Vec<f64>,
 }
 
 /// Distinct, readable line colours (the common "tab10" set), cycled.
@@ -34,7 +37,8 @@ pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band]) -> R
         let root = SVGBackend::with_string(&mut svg, (760, 420)).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
         let points = bands.iter().flat_map(|b| {
-            b.x.iter().zip(b.mean.iter().zip(&b.std)).flat_map(|(&x, (&m, &s))| [(x, m - s), (x, m + s)])
+            let band = b.x.iter().zip(b.mean.iter().zip(&b.std)).flat_map(|(&x, (&m, &s))| [(x, m - s), (x, m + s)]);
+            band.chain(b.x.iter().copied().zip(b.raw.iter().copied()))
         });
         let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
         for (x, y) in points.filter(|(x, y)| x.is_finite() && y.is_finite()) {
@@ -61,6 +65,10 @@ pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band]) -> R
             let upper = b.x.iter().zip(b.mean.iter().zip(&b.std)).map(|(&x, (&m, &s))| (x, m + s));
             let lower = b.x.iter().zip(b.mean.iter().zip(&b.std)).rev().map(|(&x, (&m, &s))| (x, m - s));
             let outline: Vec<(f64, f64)> = upper.chain(lower).collect();
+            if !b.raw.is_empty() {
+                let raw = b.x.iter().copied().zip(b.raw.iter().copied());
+                chart.draw_series(LineSeries::new(raw, color.mix(0.3).stroke_width(1))).map_err(err)?;
+            }
             if b.std.iter().any(|&s| s > 0.0) {
                 chart.draw_series(std::iter::once(Polygon::new(outline, color.mix(0.18).filled()))).map_err(err)?;
             }
@@ -93,6 +101,7 @@ mod tests {
             x: vec![0.0, 1.0, 2.0],
             mean: vec![0.0, k, 2.0 * k],
             std: vec![0.1, 0.2, 0.3],
+            raw: vec![],
         };
         let svg = bands_svg("returns", "step", "return", &[band("td3", 1.0), band("sac", 2.0)]).unwrap();
         assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));

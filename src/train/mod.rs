@@ -71,6 +71,9 @@ pub struct RunControl {
     /// Write a rerun recording here: learning curves, and one evaluation episode (the first
     /// evaluation seed, acted deterministically) at every evaluation.
     pub record: Option<PathBuf>,
+    /// Record a rollout at every this many evaluations (0 or 1: every one). A 1000-step Ant
+    /// rollout takes about 3 MB.
+    pub record_every: u64,
 }
 
 /// The process-wide Ctrl-C flag (the handler is installed once, on first use).
@@ -334,7 +337,10 @@ impl Trainer {
                 metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
                 if let Some(r) = &mut recorder {
                     r.curves(self.metrics.last().unwrap())?;
-                    r.evaluation_rollout(self.agent.as_ref(), self.step, self.seed)?;
+                    let evaluations = self.metrics.iter().filter(|m| m.kind == "eval").count() as u64;
+                    if (evaluations - 1) % control.record_every.max(1) == 0 {
+                        r.evaluation_rollout(self.agent.as_ref(), self.step, self.seed)?;
+                    }
                 }
                 last_eval = Some(e);
             }
