@@ -133,6 +133,18 @@ impl<'a> RolloutRecorder<'a> {
         self.set_frame_time(env);
         self.log_state(env)?;
         let step = view.step;
+        if step.info.unstable {
+            self.rec.log(
+                "events",
+                &rerun::TextLog::new(format!(
+                    "episode {}: physics unstable at step {} ({})",
+                    view.episode,
+                    view.t,
+                    step.info.warnings.join("; ")
+                ))
+                .with_level(rerun::TextLogLevel::WARN),
+            )?;
+        }
         self.scalar("plots/reward", step.reward)?;
         for (term, v) in &step.info.reward_terms {
             self.scalar(&format!("plots/reward_terms/{term}"), *v)?;
