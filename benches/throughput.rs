@@ -1,0 +1,93 @@
+//! Training throughput of one algorithm at HalfCheetah sizes, printed as one JSON line:
+//! gradient updates/s (batch 256, one update after another) and environment steps/s while
+//! training (one update per step, the real `locobench train` loop, after the warm-up).
+//!
+//! `cargo bench --bench throughput -- --algo td3 [--updates 300] [--steps 1000]`; used by
+//! `benches/sb3/compare.sh`, which alternates it with Stable-Baselines3 in one run. Networks:
+//! TD3 and DDPG 400-300, SAC 256-256; candle on one thread.
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use locobench::agents::{make_agent, Algo, Batch, ReplayBuffer, TrainConfig};
+use locobench::envs::EnvConfig;
+use locobench::train::{metrics, train, RunControl};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+const OBS: usize = 17;
+const ACT: usize = 6;
+const BATCH: usize = 256;
+const WARMUP: u64 = 1000;
+
+fn arg(name: &str) -> Option<String> {
+    let args: Vec<String> = std::env::args().collect();
+    args.iter().position(|a| a == name).and_then(|i| args.get(i + 1).cloned())
+}
+
+fn config(algo: Algo) -> TrainConfig {
+    let mut cfg = TrainConfig::defaults(algo);
+    cfg.hidden = if algo == Algo::Sac { vec![256, 256] } else { vec![400, 300] };
+    cfg.batch_size = BATCH;
+    cfg
+}
+
+fn updates_per_second(algo: Algo, updates: usize) -> Result<f64> {
+    let mut rng = ChaCha8Rng::seed_from_u64(0);
+    let mut buf = ReplayBuffer::new(50_000, OBS, ACT);
+    let mut obs: Vec<f32> = (0..OBS).map(|_| rng.random_range(-1.0..1.0)).collect();
+    for t in 0..20_000 {
+        let next: Vec<f32> = (0..OBS).map(|_| rng.random_range(-1.0..1.0)).collect();
+        let act: Vec<f32> = (0..ACT).map(|_| rng.random_range(-1.0..1.0)).collect();
+        buf.add(&obs, &act, rng.random_range(-1.0..1.0), &next, false, t % 1000 == 999);
+        obs = next;
+    }
+    let mut agent = make_agent(&config(algo), OBS, ACT, &mut rng)?;
+    let mut batch = Batch::new(BATCH, OBS, ACT);
+    for _ in 0..10 {
+        buf.sample_into(&mut batch, &mut rng);
+        agent.update(&batch, &mut rng)?;
+    }
+    let started = Instant::now();
+    for _ in 0..updates {
+        buf.sample_into(&mut batch, &mut rng);
+        agent.update(&batch, &mut rng)?;
+    }
+    Ok(updates as f64 / started.elapsed().as_secs_f64())
+}
+
+/// Steps/s of a real training run between the end of warm-up and the end of the run, from the
+/// wall times `metrics.csv` records at episode ends (HalfCheetah episodes are 1000 steps).
+fn training_steps_per_second(algo: Algo, steps: u64) -> Result<f64> {
+    let dir = tempfile::tempdir()?;
+    let mut cfg = config(algo);
+    cfg.total_steps = WARMUP + steps;
+    cfg.warmup_steps = WARMUP;
+    cfg.learning_starts = WARMUP;
+    cfg.buffer_capacity = (WARMUP + steps) as usize;
+    cfg.eval_every = 1 << 40;
+    cfg.eval_episodes = 1;
+    cfg.checkpoint_every = 1 << 40;
+    let run = dir.path().join("run");
+    train(EnvConfig::new("half-cheetah"), cfg, 0, &run, None, false, &RunControl::default())?;
+    let rows = metrics::read(&run.join("metrics.csv"))?;
+    let at = |step: u64| rows.iter().find(|r| r.kind == "episode" && r.step == step).map(|r| r.wall_time);
+    let (t0, t1) =
+        (at(WARMUP).context("no episode end at warm-up")?, at(WARMUP + steps).context("no final episode end")?);
+    Ok(steps as f64 / (t1 - t0))
+}
+
+fn main() -> Result<()> {
+    let smoke = !std::env::args().any(|a| a == "--bench");
+    let algo = Algo::parse(&arg("--algo").unwrap_or_else(|| "td3".into()))?;
+    let updates: usize = arg("--updates").map(|v| v.parse()).transpose()?.unwrap_or(if smoke { 5 } else { 300 });
+    let steps: u64 = arg("--steps").map(|v| v.parse()).transpose()?.unwrap_or(1000);
+    anyhow::ensure!(steps % 1000 == 0, "--steps must be a multiple of the 1000-step episode");
+    let ups = updates_per_second(algo, updates)?;
+    let sps = if smoke { f64::NAN } else { training_steps_per_second(algo, steps)? };
+    println!(
+        "{{\"library\": \"locobench\", \"algo\": \"{}\", \"updates_per_s\": {ups:.2}, \"train_steps_per_s\": {}}}",
+        algo.name(),
+        if sps.is_finite() { format!("{sps:.2}") } else { "null".into() }
+    );
+    Ok(())
+}
