@@ -17,6 +17,21 @@ pub struct EpisodeSummary {
     pub term_totals: Vec<(&'static str, f64)>,
 }
 
+impl EpisodeSummary {
+    /// Why the episode ended, in words.
+    pub fn end_reason(&self) -> &'static str {
+        if self.unstable {
+            "physics unstable"
+        } else if self.terminated {
+            "terminated"
+        } else if self.truncated {
+            "truncated"
+        } else {
+            "actions ran out"
+        }
+    }
+}
+
 /// Everything an observer may look at after one step.
 pub struct StepView<'a> {
     pub episode: usize,

@@ -1,7 +1,8 @@
 use anyhow::Result;
 use locobench::controller::baseline::{baseline_controller, baseline_env, parse_gait};
-use locobench::controller::measure::measure;
+use locobench::controller::measure::{mean_cost_of_transport, measure};
 use locobench::envs::make;
+use locobench::report::curves::mean_std;
 
 #[derive(clap::Args, Debug)]
 pub struct BaselineArgs {
@@ -26,11 +27,6 @@ pub struct BaselineArgs {
     pub verbose: bool,
 }
 
-fn mean_std(xs: &[f64]) -> (f64, f64) {
-    let m = xs.iter().sum::<f64>() / xs.len() as f64;
-    (m, (xs.iter().map(|x| (x - m).powi(2)).sum::<f64>() / xs.len() as f64).sqrt())
-}
-
 pub fn run(args: BaselineArgs) -> Result<()> {
     let gait = args.gait.as_deref().map(parse_gait).transpose()?;
     let cfg = super::apply_options(baseline_env(&args.env)?, &args.options)?;
@@ -46,8 +42,7 @@ pub fn run(args: BaselineArgs) -> Result<()> {
             mean_std(&eps.iter().map(f).collect::<Vec<_>>())
         };
         let (ret, ret_std) = col(|e| e.episode_return);
-        let finite_cot: Vec<f64> = eps.iter().map(|e| e.cost_of_transport).filter(|c| c.is_finite()).collect();
-        let cot = if finite_cot.is_empty() { f64::INFINITY } else { mean_std(&finite_cot).0 };
+        let cot = mean_cost_of_transport(&eps);
         println!(
             "{:>6.2} {:>9.2} ± {:>5.2} {:>8.3} {:>9.3} {:>9.1} {:>7.2} {:>8.3} {:>8.3} {:>3}/{:<2} {:>7.1} {:>8}",
             speed,

@@ -47,12 +47,8 @@ pub fn run(args: RecordArgs) -> Result<()> {
             let gait = args.gait.as_deref().map(parse_gait).transpose()?;
             (baseline_env(env)?, baseline_controller(env, args.speed, gait)?)
         }
-        "random" | "zero" => {
-            let env = args.env.as_deref().context("--policy random/zero needs --env")?;
-            (locobench::envs::EnvConfig::new(env), simple_policy(&args.policy, args.seed)?)
-        }
-        p if p.starts_with("actions:") => {
-            let env = args.env.as_deref().context("--policy actions:FILE needs --env")?;
+        p if p == "random" || p == "zero" || p.starts_with("actions:") => {
+            let env = args.env.as_deref().with_context(|| format!("--policy {p} needs --env"))?;
             (locobench::envs::EnvConfig::new(env), simple_policy(p, args.seed)?)
         }
         checkpoint => {

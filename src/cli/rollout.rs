@@ -76,15 +76,7 @@ pub fn run(args: RolloutArgs) -> Result<()> {
     })?;
     for s in &summaries {
         let terms: Vec<String> = s.term_totals.iter().map(|(n, v)| format!("{n} {v:.3}")).collect();
-        let end = if s.unstable {
-            "physics unstable"
-        } else if s.terminated {
-            "terminated"
-        } else if s.truncated {
-            "truncated"
-        } else {
-            "actions ran out"
-        };
+        let end = s.end_reason();
         println!(
             "{} episode {}: return {:.3} over {} steps ({end}); {}",
             spec.name,

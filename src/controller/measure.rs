@@ -25,6 +25,16 @@ pub struct GaitEpisode {
     pub qp_failures: f64,
 }
 
+/// Mean cost of transport over the episodes that moved forward (infinite if none did).
+pub fn mean_cost_of_transport(episodes: &[GaitEpisode]) -> f64 {
+    let finite: Vec<f64> = episodes.iter().map(|e| e.cost_of_transport).filter(|c| c.is_finite()).collect();
+    if finite.is_empty() {
+        f64::INFINITY
+    } else {
+        finite.iter().sum::<f64>() / finite.len() as f64
+    }
+}
+
 /// Runs `episodes` episodes (the first reset seeded with `seed`) and measures each against
 /// the speed set-point.
 pub fn measure(

@@ -183,15 +183,7 @@ impl<'a> RolloutRecorder<'a> {
     }
 
     pub fn log_end(&mut self, summary: &EpisodeSummary) -> Result<()> {
-        let end = if summary.unstable {
-            "physics unstable"
-        } else if summary.terminated {
-            "terminated"
-        } else if summary.truncated {
-            "truncated"
-        } else {
-            "stopped"
-        };
+        let end = summary.end_reason();
         self.rec.log(
             "events",
             &rerun::TextLog::new(format!(

@@ -4,9 +4,9 @@
 use anyhow::Result;
 
 use super::curves::mean_std;
-use super::runs::Run;
+use super::runs::{is_reward_weight, Run};
 use crate::controller::baseline::{baseline_controller, baseline_env_like};
-use crate::controller::measure::{measure, GaitEpisode};
+use crate::controller::measure::{mean_cost_of_transport, measure, GaitEpisode};
 use crate::envs::{make, EnvConfig};
 use crate::policy::AgentPolicy;
 use crate::train::load_policy;
@@ -48,14 +48,8 @@ impl ComparisonRow {
     pub fn falls(&self) -> usize {
         self.episodes.iter().filter(|e| e.fell).count()
     }
-    /// Mean cost of transport over the episodes that moved forward.
     pub fn cost_of_transport(&self) -> f64 {
-        let finite: Vec<f64> = self.episodes.iter().map(|e| e.cost_of_transport).filter(|c| c.is_finite()).collect();
-        if finite.is_empty() {
-            f64::INFINITY
-        } else {
-            mean_std(&finite).0
-        }
+        mean_cost_of_transport(&self.episodes)
     }
 }
 
@@ -72,7 +66,7 @@ fn training_weights(run: &Run) -> Vec<(String, f64)> {
         .env
         .options
         .iter()
-        .filter(|(k, _)| k.ends_with("_weight") || *k == "healthy_reward")
+        .filter(|(k, _)| is_reward_weight(k))
         .filter_map(|(k, v)| v.as_float().or(v.as_integer().map(|i| i as f64)).map(|f| (k.clone(), f)))
         .collect()
 }

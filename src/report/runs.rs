@@ -8,7 +8,7 @@ use crate::train::metrics::{self, MetricsRow};
 use crate::train::{read_run_config, RunConfig};
 
 /// Option keys that weight reward terms (what a reward sweep varies).
-fn is_reward_weight(key: &str) -> bool {
+pub(crate) fn is_reward_weight(key: &str) -> bool {
     key.ends_with("_weight") || key == "healthy_reward"
 }
 
