@@ -266,47 +266,26 @@ fn fine_tuning_starts_from_the_checkpoint_weights() {
     assert!(config.contains("init_from") && config.contains("max_pole_angle = 0.3"), "{config}");
 }
 
+/// A 600-step pendulum run with tiny networks and the given extra settings.
+fn tiny_pendulum_run(algo: Algo, extra: &str, dir: &std::path::Path) -> train::RunSummary {
+    let settings = format!(
+        "{extra},total_steps=600,warmup_steps=200,learning_starts=200,eval_every=600,eval_episodes=1,hidden=[16,16],batch_size=32"
+    );
+    let cfg = build_config("inverted-pendulum", algo, &split_pairs(&settings).unwrap()).unwrap();
+    train::train(EnvConfig::new("inverted-pendulum"), cfg, 0, dir, None, false, &RunControl::default()).unwrap()
+}
+
 #[test]
 fn sac_v1_and_ddpg_with_ou_noise_train_and_checkpoint() {
     let dir = tempfile::tempdir().unwrap();
-    let v1 = build_config(
-        "inverted-pendulum",
-        Algo::Sac,
-        &split_pairs("sac_version=\"v1\",total_steps=600,warmup_steps=200,learning_starts=200,eval_every=600,eval_episodes=1,hidden=[16,16],batch_size=32").unwrap(),
-    )
-    .unwrap();
-    let s = train::train(
-        EnvConfig::new("inverted-pendulum"),
-        v1,
-        0,
-        &dir.path().join("v1"),
-        None,
-        false,
-        &RunControl::default(),
-    )
-    .unwrap();
+    let s = tiny_pendulum_run(Algo::Sac, "sac_version=\"v1\"", &dir.path().join("v1"));
     let names: Vec<String> = tensors(&s.checkpoint).into_iter().map(|(n, _)| n).collect();
     assert!(names.iter().any(|n| n.starts_with("value.")) && names.iter().any(|n| n.starts_with("value_target.")));
     let metrics = std::fs::read_to_string(dir.path().join("v1/metrics.csv")).unwrap();
     let last = metrics.lines().last().unwrap();
     assert!(last.starts_with("eval,600"), "{last}");
 
-    let ou = build_config(
-        "inverted-pendulum",
-        Algo::Ddpg,
-        &split_pairs("noise=\"ornstein_uhlenbeck\",ou_decay_steps=1000,total_steps=600,warmup_steps=200,learning_starts=200,eval_every=600,eval_episodes=1,hidden=[16,16],batch_size=32").unwrap(),
-    )
-    .unwrap();
-    let s = train::train(
-        EnvConfig::new("inverted-pendulum"),
-        ou,
-        0,
-        &dir.path().join("ou"),
-        None,
-        false,
-        &RunControl::default(),
-    )
-    .unwrap();
+    let s = tiny_pendulum_run(Algo::Ddpg, "noise=\"ornstein_uhlenbeck\",ou_decay_steps=1000", &dir.path().join("ou"));
     let state = train::checkpoint::load_state(&s.checkpoint).unwrap();
     assert_eq!(state.counters["noise_steps"], 400, "OU noise advanced once per exploratory step");
     assert!(!names.is_empty());

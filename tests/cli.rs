@@ -1,10 +1,9 @@
 //! The `locobench` binary: envs listing, rollouts to CSV, exact replays, clear errors.
+mod common;
+
 use std::process::Command;
 
-fn locobench(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_locobench")).args(args).output().unwrap();
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
-}
+use common::locobench;
 
 #[test]
 fn envs_lists_every_environment_with_sizes() {

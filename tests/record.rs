@@ -10,6 +10,9 @@ use locobench::record::{Recording, RolloutRecorder};
 use locobench::rollout::{run_episodes, EpisodeSummary, Observer, StepView};
 use rerun::log::{Chunk, LogMsg};
 
+mod common;
+use common::locobench_with_path;
+
 fn read_chunks(path: &Path) -> Vec<Chunk> {
     let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
     re_log_encoding::DecoderApp::decode_lazy(file)
@@ -160,23 +163,13 @@ fn unfinished_recording_leaves_no_file() {
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "the partial file is removed");
 }
 
-fn locobench(args: &[&str], path_var: Option<&str>) -> (bool, String, String) {
-    let mut cmd = std::process::Command::new(env!("CARGO_BIN_EXE_locobench"));
-    cmd.args(args);
-    if let Some(p) = path_var {
-        cmd.env("PATH", p);
-    }
-    let out = cmd.output().unwrap();
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
-}
-
 #[test]
 fn baseline_recording_carries_gait_phases_and_foot_targets() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("minitaur.rrd");
     let o = out.to_str().unwrap();
     let args = ["record", "--env", "minitaur", "--policy", "raibert", "--option", "max_episode_steps=60", "--out", o];
-    let (ok, stdout, err) = locobench(&args, None);
+    let (ok, stdout, err) = locobench_with_path(&args, None);
     assert!(ok, "{err}");
     assert!(stdout.contains("61 frames"), "{stdout}");
     let chunks = read_chunks(&out);
@@ -201,7 +194,7 @@ fn training_recording_has_curves_and_evaluation_rollouts_and_record_accepts_the_
     let run = dir.path().join("run");
     let rrd = dir.path().join("training.rrd");
     let set = "warmup_steps=100,learning_starts=100,eval_every=150,eval_episodes=2,hidden=[16,16],batch_size=32";
-    let (ok, _, err) = locobench(
+    let (ok, _, err) = locobench_with_path(
         &[
             "train",
             "--env",
@@ -243,7 +236,7 @@ fn training_recording_has_curves_and_evaluation_rollouts_and_record_accepts_the_
     assert_eq!(rollout_steps, BTreeSet::from([150, 300]));
 
     let again = dir.path().join("policy.rrd");
-    let (ok, stdout, err) = locobench(
+    let (ok, stdout, err) = locobench_with_path(
         &["record", "--policy", run.to_str().unwrap(), "--out", again.to_str().unwrap(), "--episodes", "2"],
         None,
     );
@@ -257,15 +250,16 @@ fn record_errors_are_clear() {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("x.rrd");
     let o = out.to_str().unwrap();
-    let (ok, _, err) = locobench(&["record", "--env", "ant", "--policy", "no-such-thing", "--out", o], None);
+    let (ok, _, err) = locobench_with_path(&["record", "--env", "ant", "--policy", "no-such-thing", "--out", o], None);
     assert!(!ok && err.contains("not raibert, random, zero"), "{err}");
-    let (ok, _, err) = locobench(&["record", "--env", "half-cheetah", "--policy", "raibert", "--out", o], None);
+    let (ok, _, err) =
+        locobench_with_path(&["record", "--env", "half-cheetah", "--policy", "raibert", "--out", o], None);
     assert!(!ok && err.contains("minitaur and ant"), "{err}");
     assert!(!out.exists());
 
     // --spawn without a viewer: the recording is still written, and the message says how to get one.
     let args = ["record", "--env", "inverted-pendulum", "--policy", "zero", "--out", o, "--spawn"];
-    let (ok, _, err) = locobench(&args, Some(""));
+    let (ok, _, err) = locobench_with_path(&args, Some(""));
     assert!(!ok && err.contains("pip install rerun-sdk==0.36.3"), "{err}");
     assert!(out.exists());
 }

@@ -1,10 +1,7 @@
 //! `locobench sweep` and `locobench report` end to end on tiny Minitaur runs.
-use std::process::Command;
+mod common;
 
-fn locobench(args: &[&str]) -> (bool, String, String) {
-    let out = Command::new(env!("CARGO_BIN_EXE_locobench")).args(args).output().unwrap();
-    (out.status.success(), String::from_utf8_lossy(&out.stdout).into(), String::from_utf8_lossy(&out.stderr).into())
-}
+use common::locobench;
 
 #[test]
 fn sweep_then_report_with_baseline_comparison_under_three_rewards() {
