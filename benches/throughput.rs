@@ -32,6 +32,7 @@ fn config(algo: Algo) -> TrainConfig {
 }
 
 fn updates_per_second(algo: Algo, updates: usize) -> Result<f64> {
+    locobench::agents::flush_denormals_to_zero();
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut buf = ReplayBuffer::new(50_000, OBS, ACT);
     let mut obs: Vec<f32> = (0..OBS).map(|_| rng.random_range(-1.0..1.0)).collect();
@@ -81,9 +82,9 @@ fn main() -> Result<()> {
     let algo = Algo::parse(&arg("--algo").unwrap_or_else(|| "td3".into()))?;
     let updates: usize = arg("--updates").map(|v| v.parse()).transpose()?.unwrap_or(if smoke { 5 } else { 300 });
     let steps: u64 = arg("--steps").map(|v| v.parse()).transpose()?.unwrap_or(1000);
-    anyhow::ensure!(steps % 1000 == 0, "--steps must be a multiple of the 1000-step episode");
+    anyhow::ensure!(steps % 1000 == 0, "--steps must be a multiple of the 1000-step episode (0 skips it)");
     let ups = updates_per_second(algo, updates)?;
-    let sps = if smoke { f64::NAN } else { training_steps_per_second(algo, steps)? };
+    let sps = if smoke || steps == 0 { f64::NAN } else { training_steps_per_second(algo, steps)? };
     println!(
         "{{\"library\": \"locobench\", \"algo\": \"{}\", \"updates_per_s\": {ups:.2}, \"train_steps_per_s\": {}}}",
         algo.name(),

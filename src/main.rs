@@ -8,6 +8,8 @@ fn main() {
             std::env::set_var(var, "1");
         }
     }
+    // Subnormal floats take a slow path on x86; see agents::denormals.
+    locobench::agents::flush_denormals_to_zero();
     if let Err(e) = cli::run() {
         eprintln!("error: {e:#}");
         std::process::exit(1);

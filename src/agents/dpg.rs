@@ -7,6 +7,7 @@ use rand_distr::{Distribution, Normal};
 
 use super::buffer::Batch;
 use super::config::{Algo, TrainConfig};
+use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, Mlp, Output};
 use super::noise::{Noise, NoiseKind};
 use super::optim::Adam;
@@ -23,8 +24,8 @@ pub struct DeterministicAgent {
     policy_delay: u64,
     actor: Mlp,
     actor_target: Mlp,
-    critics: Vec<Mlp>,
-    critic_targets: Vec<Mlp>,
+    critics: Critics,
+    critic_targets: Critics,
     actor_opt: Adam,
     critic_opt: Adam,
     noise: Noise,
@@ -35,13 +36,11 @@ impl DeterministicAgent {
     pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
         let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), Output::Tanh, rng)?;
         let n_critics = if cfg.twin_critics { 2 } else { 1 };
-        let critics = (0..n_critics)
-            .map(|_| Mlp::new(&layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), Output::Linear, rng))
-            .collect::<Result<Vec<_>>>()?;
+        let critics = Critics::new(n_critics, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), rng)?;
         let actor_target = actor.deep_copy()?;
-        let critic_targets = critics.iter().map(|c| c.deep_copy()).collect::<Result<Vec<_>>>()?;
+        let critic_targets = critics.deep_copy()?;
         let actor_opt = Adam::new(actor.vars(), cfg.actor_lr);
-        let critic_opt = Adam::new(critics.iter().flat_map(|c| c.vars()).collect(), cfg.critic_lr);
+        let critic_opt = Adam::new(critics.vars(), cfg.critic_lr);
         let noise = match cfg.noise {
             NoiseKind::Gaussian => Noise::Gaussian { sigma: cfg.exploration_noise },
             NoiseKind::OrnsteinUhlenbeck => Noise::ornstein_uhlenbeck(
@@ -73,19 +72,15 @@ impl DeterministicAgent {
         })
     }
 
-    fn q(critic: &Mlp, obs: &Tensor, action: &Tensor) -> Result<Tensor> {
-        critic.forward(&Tensor::cat(&[obs, action], 1)?)
+    fn critic_input(obs: &Tensor, action: &Tensor) -> Result<Tensor> {
+        Tensor::cat(&[obs, action], 1)
     }
 
     /// min_i Q'_i(s, a) over the target critics, one value per row (diagnostics and tests).
     pub fn target_q_min(&self, obs: &[f32], actions: &[f32]) -> Result<Vec<f32>> {
         let n = obs.len() / self.obs_dim;
         let (o, a) = (batch_tensor(obs, n, self.obs_dim)?, batch_tensor(actions, n, self.act_dim)?);
-        let mut q = Self::q(&self.critic_targets[0], &o, &a)?;
-        for t in &self.critic_targets[1..] {
-            q = q.minimum(&Self::q(t, &o, &a)?)?;
-        }
-        q.flatten_all()?.to_vec1::<f32>()
+        self.critic_targets.min(&Self::critic_input(&o, &a)?)?.flatten_all()?.to_vec1::<f32>()
     }
 
     /// The target actor's action for each row.
@@ -107,10 +102,7 @@ impl DeterministicAgent {
             next_action =
                 (next_action + Tensor::from_vec(eps, (n, self.act_dim), &Device::Cpu)?)?.clamp(-1f32, 1f32)?;
         }
-        let mut q_next = Self::q(&self.critic_targets[0], &next_obs, &next_action)?;
-        for t in &self.critic_targets[1..] {
-            q_next = q_next.minimum(&Self::q(t, &next_obs, &next_action)?)?;
-        }
+        let q_next = self.critic_targets.min(&Self::critic_input(&next_obs, &next_action)?)?;
         let rewards = batch_tensor(&batch.rewards, n, 1)?;
         let not_done = batch_tensor(&batch.terminated, n, 1)?.affine(-1.0, 1.0)?;
         Ok((rewards + (not_done * q_next)?.affine(self.gamma, 0.0)?)?.detach())
@@ -143,23 +135,19 @@ impl Agent for DeterministicAgent {
         let actions = batch_tensor(&batch.actions, n, self.act_dim)?;
         let y = self.td_targets(batch, rng)?;
 
-        let mut critic_loss = Self::q(&self.critics[0], &obs, &actions)?.sub(&y)?.sqr()?.mean_all()?;
-        for c in &self.critics[1..] {
-            critic_loss = (critic_loss + Self::q(c, &obs, &actions)?.sub(&y)?.sqr()?.mean_all()?)?;
-        }
+        let critic_loss = self.critics.mse_sum(&Self::critic_input(&obs, &actions)?, &y)?;
         let grads = critic_loss.backward()?;
         self.critic_opt.step(&grads)?;
         self.updates += 1;
 
         let mut losses = Losses { critic: critic_loss.to_scalar::<f32>()? as f64, ..Default::default() };
         if self.updates % self.policy_delay == 0 {
-            let actor_loss = Self::q(&self.critics[0], &obs, &self.actor.forward(&obs)?)?.mean_all()?.neg()?;
+            let pi = self.actor.forward(&obs)?;
+            let actor_loss = self.critics.first_frozen(&Self::critic_input(&obs, &pi)?)?.mean_all()?.neg()?;
             let grads = actor_loss.backward()?;
             self.actor_opt.step(&grads)?;
             polyak_update(&self.actor, &self.actor_target, self.tau)?;
-            for (c, t) in self.critics.iter().zip(&self.critic_targets) {
-                polyak_update(c, t, self.tau)?;
-            }
+            polyak_update_critics(&self.critics, &self.critic_targets, self.tau)?;
             losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
         }
         Ok(losses)
@@ -168,10 +156,8 @@ impl Agent for DeterministicAgent {
     fn parameters(&self) -> Vec<(String, Var)> {
         let mut out = self.actor.named_vars("actor");
         out.extend(self.actor_target.named_vars("actor_target"));
-        for (i, (c, t)) in self.critics.iter().zip(&self.critic_targets).enumerate() {
-            out.extend(c.named_vars(&format!("critic{i}")));
-            out.extend(t.named_vars(&format!("critic{i}_target")));
-        }
+        out.extend(self.critics.named_vars("critics"));
+        out.extend(self.critic_targets.named_vars("critics_target"));
         out
     }
 

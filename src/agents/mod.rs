@@ -5,7 +5,10 @@
 //! sampling) comes from RNGs the caller seeds, never from a library's global RNG.
 pub mod buffer;
 pub mod config;
+mod critics;
+mod denormals;
 mod dpg;
+mod kernels;
 pub mod nets;
 pub mod noise;
 pub mod optim;
@@ -16,6 +19,7 @@ use rand_chacha::ChaCha8Rng;
 
 pub use buffer::{Batch, ReplayBuffer};
 pub use config::{Algo, SacVersion, TrainConfig};
+pub use denormals::flush_denormals_to_zero;
 pub use dpg::DeterministicAgent;
 pub use sac::SacAgent;
 

@@ -1,8 +1,10 @@
 //! Multi-layer perceptrons on candle-nn, initialised from the run's own seeded RNG.
 use candle_core::{DType, Device, Result, Tensor, Var};
-use candle_nn::{Linear, Module};
+use candle_nn::Linear;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
+
+use super::kernels::{bias_act, Activation, Polyak};
 
 /// What follows the last layer.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -53,17 +55,33 @@ impl Mlp {
     }
 
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        self.run(x, self.layers.iter().cloned())
+    }
+
+    /// The same function with the weights treated as constants: gradients flow to `x` only.
+    /// The actor's loss goes through the critic this way, so its backward pass skips the
+    /// critic's weight gradients (which its optimiser never uses).
+    pub fn forward_frozen(&self, x: &Tensor) -> Result<Tensor> {
+        let frozen = self.params.iter().map(|(w, b)| Linear::new(w.as_tensor().detach(), Some(b.as_tensor().detach())));
+        self.run(x, frozen)
+    }
+
+    fn run(&self, x: &Tensor, layers: impl ExactSizeIterator<Item = Linear>) -> Result<Tensor> {
+        let n = layers.len();
         let mut h = x.clone();
-        for (i, layer) in self.layers.iter().enumerate() {
-            h = layer.forward(&h)?;
-            if i + 1 < self.layers.len() {
-                h = h.relu()?;
-            }
+        for (i, layer) in layers.enumerate() {
+            let act = if i + 1 < n { Activation::Relu } else { Activation::Identity };
+            h = bias_act(&h.matmul(&layer.weight().t()?)?, layer.bias().expect("layers have biases"), act)?;
         }
         match self.output {
             Output::Linear => Ok(h),
             Output::Tanh => h.tanh(),
         }
+    }
+
+    /// (weight `out x in`, bias `out`) of layer `i`.
+    pub fn layer(&self, i: usize) -> &(Var, Var) {
+        &self.params[i]
     }
 
     pub fn vars(&self) -> Vec<Var> {
@@ -92,9 +110,10 @@ impl Mlp {
 
 /// target <- tau * online + (1 - tau) * target, parameter by parameter.
 pub fn polyak_update(online: &Mlp, target: &Mlp, tau: f64) -> Result<()> {
-    for (o, t) in online.vars().iter().zip(target.vars()) {
-        let mixed = ((o.as_tensor() * tau)? + (t.as_tensor() * (1.0 - tau))?)?;
-        t.set(&mixed)?;
+    let kernel = Polyak { tau: tau as f32 };
+    for ((o_w, o_b), (t_w, t_b)) in online.params.iter().zip(&target.params) {
+        t_w.as_tensor().inplace_op2(o_w.as_tensor(), &kernel)?;
+        t_b.as_tensor().inplace_op2(o_b.as_tensor(), &kernel)?;
     }
     Ok(())
 }
@@ -137,5 +156,22 @@ mod tests {
         let x = Tensor::new(&[[0.5f32, -1.0, 2.0]], &Device::Cpu).unwrap();
         let y = a.forward(&x).unwrap().to_vec2::<f32>().unwrap();
         assert!(y[0].iter().all(|v| v.abs() < 1.0));
+    }
+
+    #[test]
+    fn frozen_forward_gives_the_same_values_and_input_gradient_but_no_weight_gradients() {
+        let net = Mlp::new(&[3, 8, 1], Output::Linear, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
+        let x =
+            Var::from_tensor(&Tensor::new(&[[0.5f32, -1.0, 2.0], [0.1, 0.2, -0.3]], &Device::Cpu).unwrap()).unwrap();
+        let live = net.forward(x.as_tensor()).unwrap().sum_all().unwrap();
+        let frozen = net.forward_frozen(x.as_tensor()).unwrap().sum_all().unwrap();
+        assert_eq!(live.to_scalar::<f32>().unwrap(), frozen.to_scalar::<f32>().unwrap());
+        let (g_live, g_frozen) = (live.backward().unwrap(), frozen.backward().unwrap());
+        let dx = |g: &candle_core::backprop::GradStore| g.get(x.as_tensor()).unwrap().to_vec2::<f32>().unwrap();
+        assert_eq!(dx(&g_live), dx(&g_frozen));
+        for w in net.vars() {
+            assert!(g_live.get(w.as_tensor()).is_some());
+            assert!(g_frozen.get(w.as_tensor()).is_none());
+        }
     }
 }

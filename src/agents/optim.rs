@@ -1,8 +1,13 @@
 //! Adam whose state (moments and step count) can be saved and restored, so that a resumed run
 //! continues with exactly the optimiser it stopped with. candle-nn's `AdamW` keeps its moments
-//! private; this one computes the same update (tested against it) in one pass per parameter.
+//! private; this one computes the same update (tested against it) in one pass per parameter,
+//! in place (`kernels::AdamStep`).
+use std::cell::RefCell;
+
 use candle_core::backprop::GradStore;
 use candle_core::{Device, Result, Tensor, Var};
+
+use super::kernels::AdamStep;
 
 pub struct Adam {
     pub lr: f64,
@@ -28,24 +33,23 @@ impl Adam {
 
     pub fn step(&mut self, grads: &GradStore) -> Result<()> {
         self.step += 1;
-        let (b1, b2) = (self.beta1 as f32, self.beta2 as f32);
-        let scale_m = 1.0 / (1.0 - self.beta1.powi(self.step as i32));
-        let scale_v = 1.0 / (1.0 - self.beta2.powi(self.step as i32));
-        let (lr, eps) = (self.lr, self.eps);
+        let bias_correction1 = (1.0 - self.beta1.powi(self.step as i32)) as f32;
+        let bias_correction2 = (1.0 - self.beta2.powi(self.step as i32)) as f32;
         for ((p, m), v) in self.params.iter().zip(&mut self.m).zip(&mut self.v) {
             let Some(g) = grads.get(p.as_tensor()) else {
                 continue;
             };
-            let g = g.flatten_all()?.to_vec1::<f32>()?;
-            let mut theta = p.as_tensor().flatten_all()?.to_vec1::<f32>()?;
-            for i in 0..theta.len() {
-                m[i] = b1 * m[i] + (1.0 - b1) * g[i];
-                v[i] = b2 * v[i] + (1.0 - b2) * g[i] * g[i];
-                let m_hat = m[i] as f64 * scale_m;
-                let v_hat = v[i] as f64 * scale_v;
-                theta[i] = (theta[i] as f64 - lr * m_hat / (v_hat.sqrt() + eps)) as f32;
-            }
-            p.set(&Tensor::from_vec(theta, p.shape(), &Device::Cpu)?)?;
+            let kernel = AdamStep {
+                lr: self.lr as f32,
+                beta1: self.beta1 as f32,
+                beta2: self.beta2 as f32,
+                eps: self.eps as f32,
+                bias_correction1,
+                bias_correction2,
+                m: RefCell::new(m.as_mut_slice()),
+                v: RefCell::new(v.as_mut_slice()),
+            };
+            p.as_tensor().inplace_op2(&g.contiguous()?, &kernel)?;
         }
         Ok(())
     }

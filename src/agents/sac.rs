@@ -7,6 +7,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::buffer::Batch;
 use super::config::{Algo, SacVersion, TrainConfig};
+use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
 use super::optim::Adam;
 use super::{layer_sizes, Agent, Losses};
@@ -26,8 +27,8 @@ pub struct SacAgent {
     gamma: f64,
     tau: f64,
     actor: Mlp,
-    critics: [Mlp; 2],
-    critic_targets: [Mlp; 2],
+    critics: Critics,
+    critic_targets: Critics,
     value: Option<ValueNet>,
     log_alpha: Var,
     target_entropy: f64,
@@ -55,10 +56,8 @@ pub fn squashed_gaussian_log_prob(u: &Tensor, eps: &Tensor, log_std: &Tensor) ->
 impl SacAgent {
     pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
         let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 2 * act_dim), Output::Linear, rng)?;
-        let critic =
-            |rng: &mut ChaCha8Rng| Mlp::new(&layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), Output::Linear, rng);
-        let critics = [critic(rng)?, critic(rng)?];
-        let critic_targets = [critics[0].deep_copy()?, critics[1].deep_copy()?];
+        let critics = Critics::new(2, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), rng)?;
+        let critic_targets = critics.deep_copy()?;
         let value = match cfg.sac_version {
             SacVersion::V2 => None,
             SacVersion::V1 => {
@@ -76,7 +75,7 @@ impl SacAgent {
             gamma: cfg.gamma,
             tau: cfg.tau,
             actor_opt: Adam::new(actor.vars(), cfg.actor_lr),
-            critic_opt: Adam::new(critics.iter().flat_map(|c| c.vars()).collect(), cfg.critic_lr),
+            critic_opt: Adam::new(critics.vars(), cfg.critic_lr),
             alpha_opt: autotune.then(|| Adam::new(vec![log_alpha.clone()], cfg.alpha_lr)),
             actor,
             critics,
@@ -110,9 +109,8 @@ impl SacAgent {
         Ok((u.tanh()?, log_prob))
     }
 
-    fn min_q(critics: &[Mlp; 2], obs: &Tensor, action: &Tensor) -> Result<Tensor> {
-        let x = Tensor::cat(&[obs, action], 1)?;
-        critics[0].forward(&x)?.minimum(&critics[1].forward(&x)?)
+    fn critic_input(obs: &Tensor, action: &Tensor) -> Result<Tensor> {
+        Tensor::cat(&[obs, action], 1)
     }
 }
 
@@ -146,19 +144,17 @@ impl Agent for SacAgent {
         let next_value = match &self.value {
             None => {
                 let (next_a, next_logp) = self.sample(&next_obs, rng)?;
-                (Self::min_q(&self.critic_targets, &next_obs, &next_a)? - next_logp.affine(alpha, 0.0)?)?
+                (self.critic_targets.min(&Self::critic_input(&next_obs, &next_a)?)? - next_logp.affine(alpha, 0.0)?)?
             }
             Some(v) => v.target.forward(&next_obs)?,
         };
         let y = (rewards + (not_done * next_value)?.affine(self.gamma, 0.0)?)?.detach();
-        let x = Tensor::cat(&[&obs, &actions], 1)?;
-        let critic_loss = (self.critics[0].forward(&x)?.sub(&y)?.sqr()?.mean_all()?
-            + self.critics[1].forward(&x)?.sub(&y)?.sqr()?.mean_all()?)?;
+        let critic_loss = self.critics.mse_sum(&Self::critic_input(&obs, &actions)?, &y)?;
         self.critic_opt.step(&critic_loss.backward()?)?;
         losses.critic = critic_loss.to_scalar::<f32>()? as f64;
 
         let (pi_a, logp) = self.sample(&obs, rng)?;
-        let q_pi = Self::min_q(&self.critics, &obs, &pi_a)?;
+        let q_pi = self.critics.min_frozen(&Self::critic_input(&obs, &pi_a)?)?;
         if let Some(v) = &mut self.value {
             let v_target = (&q_pi - logp.affine(alpha, 0.0)?)?.detach();
             let value_loss = v.net.forward(&obs)?.sub(&v_target)?.sqr()?.mean_all()?;
@@ -179,9 +175,7 @@ impl Agent for SacAgent {
 
         match &self.value {
             None => {
-                for (c, t) in self.critics.iter().zip(&self.critic_targets) {
-                    polyak_update(c, t, self.tau)?;
-                }
+                polyak_update_critics(&self.critics, &self.critic_targets, self.tau)?;
             }
             Some(v) => polyak_update(&v.net, &v.target, self.tau)?,
         }
@@ -191,10 +185,8 @@ impl Agent for SacAgent {
 
     fn parameters(&self) -> Vec<(String, Var)> {
         let mut out = self.actor.named_vars("actor");
-        for i in 0..2 {
-            out.extend(self.critics[i].named_vars(&format!("critic{i}")));
-            out.extend(self.critic_targets[i].named_vars(&format!("critic{i}_target")));
-        }
+        out.extend(self.critics.named_vars("critics"));
+        out.extend(self.critic_targets.named_vars("critics_target"));
         if let Some(v) = &self.value {
             out.extend(v.net.named_vars("value"));
             out.extend(v.target.named_vars("value_target"));

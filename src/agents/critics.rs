@@ -1,0 +1,176 @@
+//! K Q-networks of one shape evaluated together: each layer's weights are stacked into one
+//! `[k, out, in]` tensor, so the twin critics of TD3 and SAC cost one batched matmul, one bias
+//! add and one ReLU per layer instead of two of each, forward and backward.
+use candle_core::{Result, Tensor, Var, D};
+use rand_chacha::ChaCha8Rng;
+
+use super::kernels::{bias_act, Activation, Polyak};
+use super::nets::{Mlp, Output};
+
+pub struct Critics {
+    k: usize,
+    /// (weight `[k, out, in]`, bias `[k, 1, out]`) per layer.
+    params: Vec<(Var, Var)>,
+}
+
+impl Critics {
+    /// `k` networks `sizes[0] -> ... -> 1`, initialised exactly as `k` consecutive `Mlp::new`
+    /// calls on `rng` would (same draws, same order), so a seed gives the same critics either way.
+    pub fn new(k: usize, sizes: &[usize], rng: &mut ChaCha8Rng) -> Result<Critics> {
+        let members = (0..k).map(|_| Mlp::new(sizes, Output::Linear, rng)).collect::<Result<Vec<_>>>()?;
+        let layers = sizes.len() - 1;
+        let mut params = Vec::with_capacity(layers);
+        for l in 0..layers {
+            let stack = |pick: fn(&Mlp, usize) -> Tensor| {
+                Tensor::stack(&members.iter().map(|m| pick(m, l)).collect::<Vec<_>>(), 0)
+            };
+            let w = stack(|m, l| m.layer(l).0.as_tensor().clone())?;
+            let b = stack(|m, l| m.layer(l).1.as_tensor().clone())?.unsqueeze(1)?;
+            params.push((Var::from_tensor(&w)?, Var::from_tensor(&b)?));
+        }
+        Ok(Critics { k, params })
+    }
+
+    /// An independent copy with equal weights (for target networks).
+    pub fn deep_copy(&self) -> Result<Critics> {
+        let params = self
+            .params
+            .iter()
+            .map(|(w, b)| Ok((Var::from_tensor(&w.as_tensor().copy()?)?, Var::from_tensor(&b.as_tensor().copy()?)?)))
+            .collect::<Result<Vec<_>>>()?;
+        Ok(Critics { k: self.k, params })
+    }
+
+    /// Q values `[k, n, 1]` of every member for inputs `x` `[n, in]`.
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        self.run(x, self.params.iter().map(|(w, b)| (w.as_tensor().clone(), b.as_tensor().clone())))
+    }
+
+    /// Member 0 alone (`[n, 1]`) with the weights held constant: gradients reach `x` only.
+    /// TD3's and DDPG's actor loss.
+    pub fn first_frozen(&self, x: &Tensor) -> Result<Tensor> {
+        let first = self
+            .params
+            .iter()
+            .map(|(w, b)| Ok((w.as_tensor().narrow(0, 0, 1)?.detach(), b.as_tensor().narrow(0, 0, 1)?.detach())));
+        self.run(x, first.collect::<Result<Vec<_>>>()?.into_iter())?.squeeze(0)
+    }
+
+    /// min over members (`[n, 1]`) with the weights held constant. SAC's actor loss.
+    pub fn min_frozen(&self, x: &Tensor) -> Result<Tensor> {
+        let frozen = self.params.iter().map(|(w, b)| (w.as_tensor().detach(), b.as_tensor().detach()));
+        self.run(x, frozen)?.min(0)
+    }
+
+    /// min over members, `[n, 1]`.
+    pub fn min(&self, x: &Tensor) -> Result<Tensor> {
+        self.forward(x)?.min(0)
+    }
+
+    /// sum over members of the mean squared error against `y` `[n, 1]`.
+    pub fn mse_sum(&self, x: &Tensor, y: &Tensor) -> Result<Tensor> {
+        let q = self.forward(x)?;
+        q.broadcast_sub(y)?.sqr()?.mean_all()? * self.k as f64
+    }
+
+    fn run(&self, x: &Tensor, layers: impl ExactSizeIterator<Item = (Tensor, Tensor)>) -> Result<Tensor> {
+        let n_layers = layers.len();
+        let mut h: Option<Tensor> = None;
+        for (i, (w, b)) in layers.enumerate() {
+            let members = w.dims()[0];
+            let input = match &h {
+                Some(h) => h.clone(),
+                // every member sees the same input
+                None => x.unsqueeze(0)?.broadcast_as((members, x.dims()[0], x.dims()[1]))?.contiguous()?,
+            };
+            let pre = input.matmul(&w.transpose(D::Minus1, D::Minus2)?)?;
+            let act = if i + 1 < n_layers { Activation::Relu } else { Activation::Identity };
+            h = Some(bias_act(&pre, &b, act)?);
+        }
+        Ok(h.expect("at least one layer"))
+    }
+
+    pub fn vars(&self) -> Vec<Var> {
+        self.params.iter().flat_map(|(w, b)| [w.clone(), b.clone()]).collect()
+    }
+
+    /// Parameters named `<prefix>.<layer>.weight` (`[k, out, in]`) / `.bias` (`[k, 1, out]`).
+    pub fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
+        self.params
+            .iter()
+            .enumerate()
+            .flat_map(|(i, (w, b))| {
+                [(format!("{prefix}.{i}.weight"), w.clone()), (format!("{prefix}.{i}.bias"), b.clone())]
+            })
+            .collect()
+    }
+}
+
+/// target <- tau * online + (1 - tau) * target.
+pub fn polyak_update_critics(online: &Critics, target: &Critics, tau: f64) -> Result<()> {
+    let kernel = Polyak { tau: tau as f32 };
+    for (o, t) in online.vars().iter().zip(target.vars()) {
+        t.as_tensor().inplace_op2(o.as_tensor(), &kernel)?;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use candle_core::Device;
+    use rand::SeedableRng;
+
+    #[test]
+    fn stacked_critics_equal_separate_networks_in_value_and_gradient() {
+        let sizes = [5, 16, 8, 1];
+        let critics = Critics::new(2, &sizes, &mut ChaCha8Rng::seed_from_u64(4)).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let separate =
+            [Mlp::new(&sizes, Output::Linear, &mut rng).unwrap(), Mlp::new(&sizes, Output::Linear, &mut rng).unwrap()];
+        let x = Tensor::new(
+            &[[0.1f32, -0.4, 0.3, 2.0, -1.0], [1.0, 0.5, -0.5, 0.0, 0.2], [0.0, 0.0, 1.0, -2.0, 0.7]],
+            &Device::Cpu,
+        )
+        .unwrap();
+        let y = Tensor::new(&[[1.0f32], [-0.5], [0.25]], &Device::Cpu).unwrap();
+        let q = critics.forward(&x).unwrap();
+        assert_eq!(q.dims(), &[2, 3, 1]);
+        for (i, net) in separate.iter().enumerate() {
+            let expected = net.forward(&x).unwrap().to_vec2::<f32>().unwrap();
+            let got = q.get(i).unwrap().to_vec2::<f32>().unwrap();
+            for (a, b) in got.iter().flatten().zip(expected.iter().flatten()) {
+                assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+            }
+        }
+        let min = critics.min(&x).unwrap().to_vec2::<f32>().unwrap();
+        let frozen_min = critics.min_frozen(&x).unwrap().to_vec2::<f32>().unwrap();
+        assert_eq!(min, frozen_min);
+        let first = critics.first_frozen(&x).unwrap().to_vec2::<f32>().unwrap();
+        assert_eq!(first, q.get(0).unwrap().to_vec2::<f32>().unwrap());
+
+        // the summed loss gives each member the gradient its own loss gives it
+        let grads = critics.mse_sum(&x, &y).unwrap().backward().unwrap();
+        let w1 = grads.get(critics.vars()[2].as_tensor()).unwrap();
+        for (i, net) in separate.iter().enumerate() {
+            let own = net.forward(&x).unwrap().sub(&y).unwrap().sqr().unwrap().mean_all().unwrap();
+            let g = own.backward().unwrap();
+            let expected = g.get(net.vars()[2].as_tensor()).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+            let got = w1.get(i).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+            for (a, b) in got.iter().zip(&expected) {
+                assert!((a - b).abs() < 1e-5, "{a} vs {b}");
+            }
+        }
+        // frozen evaluation leaves the weights without gradients
+        let g = critics.min_frozen(&x).unwrap().sum_all().unwrap().backward().unwrap();
+        assert!(critics.vars().iter().all(|v| g.get(v.as_tensor()).is_none()));
+
+        let target = Critics::new(2, &sizes, &mut ChaCha8Rng::seed_from_u64(9)).unwrap();
+        assert_ne!(target.forward(&x).unwrap().to_vec3::<f32>().unwrap(), q.to_vec3::<f32>().unwrap());
+        polyak_update_critics(&critics, &target, 1.0).unwrap();
+        assert_eq!(
+            target.forward(&x).unwrap().to_vec3::<f32>().unwrap(),
+            critics.forward(&x).unwrap().to_vec3::<f32>().unwrap()
+        );
+    }
+}
