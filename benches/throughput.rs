@@ -2,6 +2,9 @@
 //! gradient updates/s (batch 256, one update after another) and environment steps/s while
 //! training (one update per step, the real `locobench train` loop, after the warm-up).
 //!
+//! `cargo bench --bench throughput -- --roofline` instead prints the TD3 update's matmul GFLOP/s
+//! against one core's measured matmul peak.
+//!
 //! `cargo bench --bench throughput -- --algo td3 [--updates 300] [--steps 1000]`; used by
 //! `benches/sb3/compare.sh`, which alternates it with Stable-Baselines3 in one run. Networks:
 //! TD3 and DDPG 400-300, SAC 256-256; candle on one thread.
@@ -33,6 +36,7 @@ fn config(algo: Algo) -> TrainConfig {
 
 fn updates_per_second(algo: Algo, updates: usize) -> Result<f64> {
     locobench::agents::flush_denormals_to_zero();
+    locobench::agents::keep_freed_memory();
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut buf = ReplayBuffer::new(50_000, OBS, ACT);
     let mut obs: Vec<f32> = (0..OBS).map(|_| rng.random_range(-1.0..1.0)).collect();
@@ -77,7 +81,57 @@ fn training_steps_per_second(algo: Algo, steps: u64) -> Result<f64> {
     Ok(steps as f64 / (t1 - t0))
 }
 
+/// Matmul FLOPs of one forward pass of an MLP over `batch` rows; `skip_first` leaves out the
+/// first layer (a backward pass needs no input gradient for the network's input).
+fn mlp_flops(sizes: &[usize], batch: usize, skip_first: bool) -> f64 {
+    let layers = sizes.windows(2).skip(skip_first as usize);
+    layers.map(|w| 2.0 * (batch * w[0] * w[1]) as f64).sum()
+}
+
+/// Matmul FLOPs of one TD3 update at these sizes (REFERENCE §6 rounds it to 0.8 GFLOP): target
+/// actor + two target critics forward; two critics forward and backward (weight gradients, and
+/// input gradients past the first layer); every second update the actor step (actor forward,
+/// critic 0 forward and its input gradients down to the action, actor backward).
+fn td3_update_flops() -> f64 {
+    let actor = [OBS, 400, 300, ACT];
+    let critic = [OBS + ACT, 400, 300, 1];
+    let (a, c) = (mlp_flops(&actor, BATCH, false), mlp_flops(&critic, BATCH, false));
+    let targets = a + 2.0 * c;
+    let critic_step = 2.0 * (c + c + mlp_flops(&critic, BATCH, true));
+    let actor_step = a + c + c + a + mlp_flops(&actor, BATCH, true);
+    targets + critic_step + actor_step / 2.0
+}
+
+/// Single-thread f32 matmul rate of the gemm library candle uses, on a large square product:
+/// the practical peak of one core, the roofline the TD3 update is measured against.
+fn matmul_peak_gflops() -> Result<f64> {
+    use candle_core::{Device, Tensor};
+    let n = 1024;
+    let a = Tensor::rand(-1f32, 1f32, (n, n), &Device::Cpu)?;
+    let b = Tensor::rand(-1f32, 1f32, (n, n), &Device::Cpu)?;
+    let _ = a.matmul(&b)?;
+    let reps = 10;
+    let started = Instant::now();
+    for _ in 0..reps {
+        std::hint::black_box(a.matmul(&b)?);
+    }
+    Ok(reps as f64 * 2.0 * (n * n * n) as f64 / started.elapsed().as_secs_f64() / 1e9)
+}
+
 fn main() -> Result<()> {
+    if std::env::args().any(|a| a == "--roofline") {
+        locobench::agents::flush_denormals_to_zero();
+        locobench::agents::keep_freed_memory();
+        let peak = matmul_peak_gflops()?;
+        let flops = td3_update_flops() / 1e9;
+        let ups = updates_per_second(Algo::Td3, arg("--updates").map(|v| v.parse()).transpose()?.unwrap_or(300))?;
+        println!(
+            "{{\"matmul_peak_gflops\": {peak:.1}, \"td3_gflop_per_update\": {flops:.3}, \"td3_updates_per_s\": {ups:.1}, \"td3_gflops\": {:.1}, \"fraction_of_peak\": {:.2}}}",
+            ups * flops,
+            ups * flops / peak
+        );
+        return Ok(());
+    }
     let smoke = !std::env::args().any(|a| a == "--bench");
     let algo = Algo::parse(&arg("--algo").unwrap_or_else(|| "td3".into()))?;
     let updates: usize = arg("--updates").map(|v| v.parse()).transpose()?.unwrap_or(if smoke { 5 } else { 300 });

@@ -10,6 +10,7 @@ fn main() {
     }
     // Subnormal floats take a slow path on x86; see agents::denormals.
     locobench::agents::flush_denormals_to_zero();
+    locobench::agents::keep_freed_memory();
     if let Err(e) = cli::run() {
         eprintln!("error: {e:#}");
         std::process::exit(1);

@@ -1,10 +1,11 @@
 //! K Q-networks of one shape evaluated together: each layer's weights are stacked into one
 //! `[k, out, in]` tensor, so the twin critics of TD3 and SAC cost one batched matmul, one bias
 //! add and one ReLU per layer instead of two of each, forward and backward.
-use candle_core::{Result, Tensor, Var, D};
+use candle_core::{Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 
-use super::kernels::{bias_act, Activation, Polyak};
+use super::dense::dense;
+use super::kernels::{Activation, Polyak};
 use super::nets::{Mlp, Output};
 
 pub struct Critics {
@@ -75,19 +76,13 @@ impl Critics {
 
     fn run(&self, x: &Tensor, layers: impl ExactSizeIterator<Item = (Tensor, Tensor)>) -> Result<Tensor> {
         let n_layers = layers.len();
-        let mut h: Option<Tensor> = None;
+        // every member sees the same input x, then its own activations
+        let mut h = x.clone();
         for (i, (w, b)) in layers.enumerate() {
-            let members = w.dims()[0];
-            let input = match &h {
-                Some(h) => h.clone(),
-                // every member sees the same input
-                None => x.unsqueeze(0)?.broadcast_as((members, x.dims()[0], x.dims()[1]))?.contiguous()?,
-            };
-            let pre = input.matmul(&w.transpose(D::Minus1, D::Minus2)?)?;
             let act = if i + 1 < n_layers { Activation::Relu } else { Activation::Identity };
-            h = Some(bias_act(&pre, &b, act)?);
+            h = dense(&h, &w, &b, act)?;
         }
-        Ok(h.expect("at least one layer"))
+        Ok(h)
     }
 
     pub fn vars(&self) -> Vec<Var> {

@@ -1,5 +1,6 @@
 //! CPU kernels for the per-update hot path: in place, an Adam step and a Polyak average (one pass
-//! over the parameter, no temporary tensors); as autograd nodes, bias + activation.
+//! over the parameter, no temporary tensors); for the dense layer's backward pass, a ReLU mask
+//! and a row sum.
 //! candle's tensor expressions allocate a new tensor per operation, and `Var::set` copies once
 //! more; the throughput bench measured those as the biggest cost outside the matmuls
 //! (README, "Training throughput"). Each kernel is tested against the tensor expression it
@@ -16,7 +17,7 @@ fn contiguous_mut<'a>(storage: &'a mut CpuStorage, layout: &Layout, what: &str) 
     }
 }
 
-fn contiguous<'a>(storage: &'a CpuStorage, layout: &Layout, what: &str) -> Result<&'a [f32]> {
+pub(super) fn contiguous<'a>(storage: &'a CpuStorage, layout: &Layout, what: &str) -> Result<&'a [f32]> {
     let Some((start, end)) = layout.contiguous_offsets() else { bail!("{what}: source tensor is not contiguous") };
     match storage {
         CpuStorage::F32(data) => Ok(&data[start..end]),
@@ -115,53 +116,11 @@ pub enum Activation {
     Relu,
 }
 
-/// `act(x + b)` as one autograd node. `x` is `[.., rows, out]` (a matmul's output), `b` holds
-/// `groups * out` values (`[out]` for one network, `[k, 1, out]` for k stacked networks), group g's
-/// bias going to the g-th block of rows. candle builds the same thing from a broadcast add and a
-/// ReLU, whose backward passes allocate and sweep the activations about eight times and reduce
-/// the bias gradient with a per-element index division; here the backward is one mask pass and
-/// one row sum.
-pub struct BiasAct(pub Activation);
-
 fn groups(x_len: usize, b_len: usize, out: usize, what: &str) -> Result<(usize, usize)> {
     if out == 0 || b_len % out != 0 || x_len % b_len != 0 {
-        bail!("{what}: {x_len} activations do not split into rows of {out} for {b_len} bias values");
+        bail!("{what}: {x_len} values do not split into rows of {out} for {b_len} group values");
     }
-    let groups = b_len / out;
-    Ok((groups, x_len / b_len))
-}
-
-impl candle_core::CustomOp2 for BiasAct {
-    fn name(&self) -> &'static str {
-        "bias-act"
-    }
-
-    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        let (x, b) = (contiguous(s1, l1, "bias-act")?, contiguous(s2, l2, "bias-act")?);
-        let out = *l1.dims().last().unwrap_or(&0);
-        let (groups, rows) = groups(x.len(), b.len(), out, "bias-act")?;
-        let mut y = Vec::with_capacity(x.len());
-        for g in 0..groups {
-            let bias = &b[g * out..(g + 1) * out];
-            for row in x[g * rows * out..(g + 1) * rows * out].chunks_exact(out) {
-                match self.0 {
-                    Activation::Identity => y.extend(row.iter().zip(bias).map(|(x, b)| x + b)),
-                    Activation::Relu => y.extend(row.iter().zip(bias).map(|(x, b)| (x + b).max(0.0))),
-                }
-            }
-        }
-        Ok((CpuStorage::F32(y), l1.shape().clone()))
-    }
-
-    fn bwd(&self, _x: &Tensor, b: &Tensor, y: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
-        let grad_pre = match self.0 {
-            Activation::Identity => grad.clone(),
-            Activation::Relu => grad.contiguous()?.apply_op2_no_bwd(y, &ReluMask)?,
-        };
-        let groups = b.elem_count() / y.dims().last().copied().unwrap_or(1).max(1);
-        let grad_b = grad_pre.contiguous()?.apply_op1_no_bwd(&RowSum { groups })?.reshape(b.shape())?;
-        Ok((Some(grad_pre), Some(grad_b)))
-    }
+    Ok((b_len / out, x_len / b_len))
 }
 
 /// grad where the ReLU's output is positive, 0 elsewhere.
@@ -206,58 +165,33 @@ impl candle_core::CustomOp1 for RowSum {
     }
 }
 
-/// `act(x + b)` with the backward pass of `BiasAct`.
-pub fn bias_act(x: &Tensor, b: &Tensor, act: Activation) -> Result<Tensor> {
-    x.contiguous()?.apply_op2(&b.contiguous()?, BiasAct(act))
+/// `grad` where the ReLU output `y` is positive, 0 elsewhere.
+pub fn relu_mask(grad: &Tensor, y: &Tensor) -> Result<Tensor> {
+    grad.contiguous()?.apply_op2_no_bwd(&y.contiguous()?, &ReluMask)
+}
+
+/// Sums `[groups * rows, out]` (any leading shape) over the rows of each group: `[groups, out]`.
+pub fn row_sum(t: &Tensor, groups: usize) -> Result<Tensor> {
+    t.contiguous()?.apply_op1_no_bwd(&RowSum { groups })
 }
 
 #[cfg(test)]
-mod bias_act_tests {
+mod mask_and_sum_tests {
     use super::*;
-    use candle_core::{DType, Device, Var};
+    use candle_core::Device;
 
-    /// Value and gradients equal candle's broadcast add + ReLU, for one network and for two
-    /// stacked ones.
     #[test]
-    fn bias_act_matches_broadcast_add_and_relu() {
+    fn relu_mask_and_row_sum_by_hand() {
         let dev = Device::Cpu;
-        let values = |n: usize, seed: f32| (0..n).map(|i| ((i as f32 * 0.37 + seed).sin() * 2.0)).collect::<Vec<_>>();
-        for (x_shape, b_shape) in [(vec![5, 4], vec![4]), (vec![2, 5, 4], vec![2, 1, 4])] {
-            for act in [Activation::Identity, Activation::Relu] {
-                let n: usize = x_shape.iter().product();
-                let x = Var::from_tensor(&Tensor::from_vec(values(n, 0.1), x_shape.clone(), &dev).unwrap()).unwrap();
-                let b = Var::from_tensor(
-                    &Tensor::from_vec(values(b_shape.iter().product(), 0.5), b_shape.clone(), &dev).unwrap(),
-                )
-                .unwrap();
-                let w = Tensor::from_vec(values(n, 1.3), x_shape.clone(), &dev).unwrap();
-                let reference = {
-                    let pre = x.as_tensor().broadcast_add(b.as_tensor()).unwrap();
-                    if act == Activation::Relu {
-                        pre.relu().unwrap()
-                    } else {
-                        pre
-                    }
-                };
-                let ours = bias_act(x.as_tensor(), b.as_tensor(), act).unwrap();
-                let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
-                assert_eq!(flat(&ours), flat(&reference));
-                let g_ref = (reference * &w).unwrap().sum_all().unwrap().backward().unwrap();
-                let g_ours = (ours * &w).unwrap().sum_all().unwrap().backward().unwrap();
-                for v in [&x, &b] {
-                    let (a, e) = (flat(g_ours.get(v.as_tensor()).unwrap()), flat(g_ref.get(v.as_tensor()).unwrap()));
-                    assert_eq!(g_ours.get(v.as_tensor()).unwrap().dims(), v.dims());
-                    for (a, e) in a.iter().zip(&e) {
-                        assert!((a - e).abs() < 1e-5, "{act:?} {x_shape:?}: {a} vs {e}");
-                    }
-                }
-            }
-        }
-        let bad = bias_act(
-            &Tensor::zeros((3, 4), DType::F32, &dev).unwrap(),
-            &Tensor::zeros(3, DType::F32, &dev).unwrap(),
-            Activation::Relu,
+        let grad = Tensor::new(&[[1.0f32, 2.0], [3.0, 4.0], [5.0, 6.0], [7.0, 8.0]], &dev).unwrap();
+        let y = Tensor::new(&[[0.5f32, 0.0], [0.0, 1.0], [2.0, 2.0], [0.0, 0.0]], &dev).unwrap();
+        let masked = relu_mask(&grad, &y).unwrap();
+        assert_eq!(
+            masked.to_vec2::<f32>().unwrap(),
+            vec![vec![1.0, 0.0], vec![0.0, 4.0], vec![5.0, 6.0], vec![0.0, 0.0]]
         );
-        assert!(bad.is_err());
+        assert_eq!(row_sum(&grad, 1).unwrap().to_vec2::<f32>().unwrap(), vec![vec![16.0, 20.0]]);
+        assert_eq!(row_sum(&grad, 2).unwrap().to_vec2::<f32>().unwrap(), vec![vec![4.0, 6.0], vec![12.0, 14.0]]);
+        assert!(row_sum(&grad, 3).is_err());
     }
 }

@@ -3,10 +3,12 @@
 //! Agents work in the normalised action space [-1, 1]^n; the trainer maps actions to the
 //! environment's bounds. All randomness (initialisation, exploration, target smoothing, SAC's
 //! sampling) comes from RNGs the caller seeds, never from a library's global RNG.
+mod allocator;
 pub mod buffer;
 pub mod config;
 mod critics;
 mod denormals;
+mod dense;
 mod dpg;
 mod kernels;
 pub mod nets;
@@ -17,6 +19,7 @@ mod sac;
 use candle_core::{Result, Var};
 use rand_chacha::ChaCha8Rng;
 
+pub use allocator::keep_freed_memory;
 pub use buffer::{Batch, ReplayBuffer};
 pub use config::{Algo, SacVersion, TrainConfig};
 pub use denormals::flush_denormals_to_zero;

@@ -4,7 +4,8 @@ use candle_nn::Linear;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use super::kernels::{bias_act, Activation, Polyak};
+use super::dense::dense;
+use super::kernels::{Activation, Polyak};
 
 /// What follows the last layer.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -71,7 +72,7 @@ impl Mlp {
         let mut h = x.clone();
         for (i, layer) in layers.enumerate() {
             let act = if i + 1 < n { Activation::Relu } else { Activation::Identity };
-            h = bias_act(&h.matmul(&layer.weight().t()?)?, layer.bias().expect("layers have biases"), act)?;
+            h = dense(&h, layer.weight(), layer.bias().expect("layers have biases"), act)?;
         }
         match self.output {
             Output::Linear => Ok(h),

@@ -234,6 +234,7 @@ impl Trainer {
     fn run(&mut self, control: &RunControl) -> Result<RunSummary> {
         // Also set by the CLI at start-up; a library caller's training thread gets it here.
         crate::agents::flush_denormals_to_zero();
+        crate::agents::keep_freed_memory();
         let cfg = self.cfg.clone();
         let interrupted = interrupt_flag();
         let bar = if control.show_progress { ProgressBar::new(cfg.total_steps) } else { ProgressBar::hidden() };
