@@ -126,7 +126,16 @@ impl CustomOp3 for Dense {
         let grad_b = row_sum(&grad_pre, d.k)?.reshape(b.shape())?;
         let grad_x = if need_grad_x {
             let per_member = g3.matmul(&w3)?;
-            Some(if d.shared_x { per_member.sum(0)?.reshape(x.shape())? } else { per_member.reshape(x.shape())? })
+            if d.shared_x {
+                // summed member by member: candle's sum over a leading axis divides per element
+                let mut total = per_member.get(0)?;
+                for g in 1..d.k {
+                    total = (total + per_member.get(g)?)?;
+                }
+                Some(total.reshape(x.shape())?)
+            } else {
+                Some(per_member.reshape(x.shape())?)
+            }
         } else {
             None
         };
