@@ -105,6 +105,7 @@ fn td3_update_flops() -> f64 {
 /// Single-thread f32 matmul rate of the gemm library candle uses, on a large square product:
 /// the practical peak of one core, the roofline the TD3 update is measured against.
 fn matmul_peak_gflops() -> Result<f64> {
+    locobench::agents::keep_freed_memory();
     use candle_core::{Device, Tensor};
     let n = 1024;
     let a = Tensor::rand(-1f32, 1f32, (n, n), &Device::Cpu)?;
@@ -120,8 +121,6 @@ fn matmul_peak_gflops() -> Result<f64> {
 
 fn main() -> Result<()> {
     if std::env::args().any(|a| a == "--roofline") {
-        locobench::agents::flush_denormals_to_zero();
-        locobench::agents::keep_freed_memory();
         let peak = matmul_peak_gflops()?;
         let flops = td3_update_flops() / 1e9;
         let ups = updates_per_second(Algo::Td3, arg("--updates").map(|v| v.parse()).transpose()?.unwrap_or(300))?;

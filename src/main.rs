@@ -8,7 +8,8 @@ fn main() {
             std::env::set_var(var, "1");
         }
     }
-    // Subnormal floats take a slow path on x86; see agents::denormals.
+    // The training hot-path settings (agents::denormals, agents::allocator) for every command,
+    // so that `eval` and `record` compute exactly as evaluation during training did.
     locobench::agents::flush_denormals_to_zero();
     locobench::agents::keep_freed_memory();
     if let Err(e) = cli::run() {

@@ -1,17 +1,14 @@
 //! K Q-networks of one shape evaluated together: each layer's weights are stacked into one
-//! `[k, out, in]` tensor, so the twin critics of TD3 and SAC cost one batched matmul, one bias
-//! add and one ReLU per layer instead of two of each, forward and backward.
+//! `[k, out, in]` tensor, so the twin critics of TD3 and SAC cost one dense-layer op per layer
+//! instead of two, forward and backward.
 use candle_core::{Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 
-use super::dense::dense;
-use super::kernels::{Activation, Polyak};
-use super::nets::{Mlp, Output};
+use super::nets::{run_layers, DenseStack, Mlp, Output};
 
 pub struct Critics {
-    k: usize,
-    /// (weight `[k, out, in]`, bias `[k, 1, out]`) per layer.
-    params: Vec<(Var, Var)>,
+    /// weight `[k, out, in]`, bias `[k, 1, out]` per layer
+    body: DenseStack,
 }
 
 impl Critics {
@@ -29,38 +26,38 @@ impl Critics {
             let b = stack(|m, l| m.layer(l).1.as_tensor().clone())?.unsqueeze(1)?;
             params.push((Var::from_tensor(&w)?, Var::from_tensor(&b)?));
         }
-        Ok(Critics { k, params })
+        Ok(Critics { body: DenseStack::new(params) })
     }
 
     /// An independent copy with equal weights (for target networks).
     pub fn deep_copy(&self) -> Result<Critics> {
-        let params = self
-            .params
-            .iter()
-            .map(|(w, b)| Ok((Var::from_tensor(&w.as_tensor().copy()?)?, Var::from_tensor(&b.as_tensor().copy()?)?)))
-            .collect::<Result<Vec<_>>>()?;
-        Ok(Critics { k: self.k, params })
+        Ok(Critics { body: self.body.deep_copy()? })
+    }
+
+    /// Number of networks.
+    fn k(&self) -> usize {
+        self.body.layers()[0].0.dims()[0]
     }
 
     /// Q values `[k, n, 1]` of every member for inputs `x` `[n, in]`.
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        self.run(x, self.params.iter().map(|(w, b)| (w.as_tensor().clone(), b.as_tensor().clone())))
+        self.body.forward(x)
     }
 
     /// Member 0 alone (`[n, 1]`) with the weights held constant: gradients reach `x` only.
     /// TD3's and DDPG's actor loss.
     pub fn first_frozen(&self, x: &Tensor) -> Result<Tensor> {
         let first = self
-            .params
+            .body
+            .layers()
             .iter()
             .map(|(w, b)| Ok((w.as_tensor().narrow(0, 0, 1)?.detach(), b.as_tensor().narrow(0, 0, 1)?.detach())));
-        self.run(x, first.collect::<Result<Vec<_>>>()?.into_iter())?.squeeze(0)
+        run_layers(x, first.collect::<Result<Vec<_>>>()?.into_iter())?.squeeze(0)
     }
 
     /// min over members (`[n, 1]`) with the weights held constant. SAC's actor loss.
     pub fn min_frozen(&self, x: &Tensor) -> Result<Tensor> {
-        let frozen = self.params.iter().map(|(w, b)| (w.as_tensor().detach(), b.as_tensor().detach()));
-        self.run(x, frozen)?.min(0)
+        self.body.forward_frozen(x)?.min(0)
     }
 
     /// min over members, `[n, 1]`.
@@ -71,43 +68,22 @@ impl Critics {
     /// sum over members of the mean squared error against `y` `[n, 1]`.
     pub fn mse_sum(&self, x: &Tensor, y: &Tensor) -> Result<Tensor> {
         let q = self.forward(x)?;
-        q.broadcast_sub(y)?.sqr()?.mean_all()? * self.k as f64
-    }
-
-    fn run(&self, x: &Tensor, layers: impl ExactSizeIterator<Item = (Tensor, Tensor)>) -> Result<Tensor> {
-        let n_layers = layers.len();
-        // every member sees the same input x, then its own activations
-        let mut h = x.clone();
-        for (i, (w, b)) in layers.enumerate() {
-            let act = if i + 1 < n_layers { Activation::Relu } else { Activation::Identity };
-            h = dense(&h, &w, &b, act)?;
-        }
-        Ok(h)
+        q.broadcast_sub(y)?.sqr()?.mean_all()? * self.k() as f64
     }
 
     pub fn vars(&self) -> Vec<Var> {
-        self.params.iter().flat_map(|(w, b)| [w.clone(), b.clone()]).collect()
+        self.body.vars()
     }
 
     /// Parameters named `<prefix>.<layer>.weight` (`[k, out, in]`) / `.bias` (`[k, 1, out]`).
     pub fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
-        self.params
-            .iter()
-            .enumerate()
-            .flat_map(|(i, (w, b))| {
-                [(format!("{prefix}.{i}.weight"), w.clone()), (format!("{prefix}.{i}.bias"), b.clone())]
-            })
-            .collect()
+        self.body.named_vars(prefix)
     }
 }
 
 /// target <- tau * online + (1 - tau) * target.
 pub fn polyak_update_critics(online: &Critics, target: &Critics, tau: f64) -> Result<()> {
-    let kernel = Polyak { tau: tau as f32 };
-    for (o, t) in online.vars().iter().zip(target.vars()) {
-        t.as_tensor().inplace_op2(o.as_tensor(), &kernel)?;
-    }
-    Ok(())
+    online.body.polyak_into(&target.body, tau)
 }
 
 #[cfg(test)]

@@ -88,39 +88,11 @@ impl InplaceOp2 for Polyak {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-    use candle_core::Device;
-
-    #[test]
-    fn polyak_matches_the_tensor_expression_and_refuses_strided_targets() {
-        let online = Tensor::new(&[1.0f32, -2.0, 3.5], &Device::Cpu).unwrap();
-        let target = Tensor::new(&[0.5f32, 0.25, -1.0], &Device::Cpu).unwrap();
-        let expected = ((&online * 0.1).unwrap() + (&target * 0.9).unwrap()).unwrap().to_vec1::<f32>().unwrap();
-        target.inplace_op2(&online, &Polyak { tau: 0.1 }).unwrap();
-        for (a, b) in target.to_vec1::<f32>().unwrap().iter().zip(&expected) {
-            assert!((a - b).abs() < 1e-6);
-        }
-        let transposed = Tensor::zeros((3, 3), candle_core::DType::F32, &Device::Cpu).unwrap().t().unwrap();
-        assert!(transposed
-            .inplace_op2(&Tensor::zeros((3, 3), candle_core::DType::F32, &Device::Cpu).unwrap(), &Polyak { tau: 0.5 })
-            .is_err());
-    }
-}
-
 /// What a layer applies after adding its bias.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Activation {
     Identity,
     Relu,
-}
-
-fn groups(x_len: usize, b_len: usize, out: usize, what: &str) -> Result<(usize, usize)> {
-    if out == 0 || b_len % out != 0 || x_len % b_len != 0 {
-        bail!("{what}: {x_len} values do not split into rows of {out} for {b_len} group values");
-    }
-    Ok((b_len / out, x_len / b_len))
 }
 
 /// grad where the ReLU's output is positive, 0 elsewhere.
@@ -153,8 +125,11 @@ impl candle_core::CustomOp1 for RowSum {
 
     fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
         let x = contiguous(s, l, "row-sum")?;
-        let out = *l.dims().last().unwrap_or(&0);
-        let (groups, rows) = groups(x.len(), self.groups * out, out, "row-sum")?;
+        let (groups, out) = (self.groups, *l.dims().last().unwrap_or(&0));
+        if out == 0 || groups == 0 || x.len() % (groups * out) != 0 {
+            bail!("row-sum: {} values do not split into {groups} groups of rows of {out}", x.len());
+        }
+        let rows = x.len() / (groups * out);
         let mut sums = vec![0f32; groups * out];
         for (g, acc) in sums.chunks_exact_mut(out).enumerate() {
             for row in x[g * rows * out..(g + 1) * rows * out].chunks_exact(out) {
@@ -176,9 +151,24 @@ pub fn row_sum(t: &Tensor, groups: usize) -> Result<Tensor> {
 }
 
 #[cfg(test)]
-mod mask_and_sum_tests {
+mod tests {
     use super::*;
     use candle_core::Device;
+
+    #[test]
+    fn polyak_matches_the_tensor_expression_and_refuses_strided_targets() {
+        let online = Tensor::new(&[1.0f32, -2.0, 3.5], &Device::Cpu).unwrap();
+        let target = Tensor::new(&[0.5f32, 0.25, -1.0], &Device::Cpu).unwrap();
+        let expected = ((&online * 0.1).unwrap() + (&target * 0.9).unwrap()).unwrap().to_vec1::<f32>().unwrap();
+        target.inplace_op2(&online, &Polyak { tau: 0.1 }).unwrap();
+        for (a, b) in target.to_vec1::<f32>().unwrap().iter().zip(&expected) {
+            assert!((a - b).abs() < 1e-6);
+        }
+        let transposed = Tensor::zeros((3, 3), candle_core::DType::F32, &Device::Cpu).unwrap().t().unwrap();
+        assert!(transposed
+            .inplace_op2(&Tensor::zeros((3, 3), candle_core::DType::F32, &Device::Cpu).unwrap(), &Polyak { tau: 0.5 })
+            .is_err());
+    }
 
     #[test]
     fn relu_mask_and_row_sum_by_hand() {

@@ -1,6 +1,5 @@
 //! Multi-layer perceptrons on candle-nn, initialised from the run's own seeded RNG.
 use candle_core::{DType, Device, Result, Tensor, Var};
-use candle_nn::Linear;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
@@ -14,11 +13,77 @@ pub enum Output {
     Tanh,
 }
 
+/// Dense layers given as (weight, bias) variables, ReLU between them and nothing after the last:
+/// the body shared by `Mlp` (weights `out x in`) and `Critics` (k networks stacked, `[k, out, in]`).
+pub struct DenseStack(Vec<(Var, Var)>);
+
+impl DenseStack {
+    pub fn new(params: Vec<(Var, Var)>) -> DenseStack {
+        DenseStack(params)
+    }
+
+    /// An independent copy with equal weights (for target networks).
+    pub fn deep_copy(&self) -> Result<DenseStack> {
+        let copy = |v: &Var| Var::from_tensor(&v.as_tensor().copy()?);
+        Ok(DenseStack(self.0.iter().map(|(w, b)| Ok((copy(w)?, copy(b)?))).collect::<Result<_>>()?))
+    }
+
+    pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        run_layers(x, self.0.iter().map(|(w, b)| (w.as_tensor().clone(), b.as_tensor().clone())))
+    }
+
+    /// The same function with the weights treated as constants: gradients flow to `x` only.
+    /// The actors' losses go through the critics this way, so their backward pass skips the
+    /// critics' weight gradients (which the actor's optimiser never uses).
+    pub fn forward_frozen(&self, x: &Tensor) -> Result<Tensor> {
+        run_layers(x, self.0.iter().map(|(w, b)| (w.as_tensor().detach(), b.as_tensor().detach())))
+    }
+
+    /// (weight, bias) per layer.
+    pub fn layers(&self) -> &[(Var, Var)] {
+        &self.0
+    }
+
+    pub fn vars(&self) -> Vec<Var> {
+        self.0.iter().flat_map(|(w, b)| [w.clone(), b.clone()]).collect()
+    }
+
+    /// Parameters named `<prefix>.<layer>.weight` / `.bias`, for checkpoints.
+    pub fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
+        self.0
+            .iter()
+            .enumerate()
+            .flat_map(|(i, (w, b))| {
+                [(format!("{prefix}.{i}.weight"), w.clone()), (format!("{prefix}.{i}.bias"), b.clone())]
+            })
+            .collect()
+    }
+
+    /// target <- tau * self + (1 - tau) * target, parameter by parameter, in place.
+    pub fn polyak_into(&self, target: &DenseStack, tau: f64) -> Result<()> {
+        let kernel = Polyak { tau: tau as f32 };
+        for (o, t) in self.vars().iter().zip(target.vars()) {
+            t.as_tensor().inplace_op2(o.as_tensor(), &kernel)?;
+        }
+        Ok(())
+    }
+}
+
+/// Applies `(weight, bias)` layers to `x` as dense layers, ReLU after all but the last.
+pub fn run_layers(x: &Tensor, layers: impl ExactSizeIterator<Item = (Tensor, Tensor)>) -> Result<Tensor> {
+    let n = layers.len();
+    let mut h = x.clone();
+    for (i, (w, b)) in layers.enumerate() {
+        let act = if i + 1 < n { Activation::Relu } else { Activation::Identity };
+        h = dense(&h, &w, &b, act)?;
+    }
+    Ok(h)
+}
+
 /// Layers `sizes[0] -> sizes[1] -> ... -> sizes[n]` with ReLU between them.
 pub struct Mlp {
-    /// (weight `out x in`, bias `out`) per layer.
-    params: Vec<(Var, Var)>,
-    layers: Vec<Linear>,
+    /// weight `out x in`, bias `out` per layer
+    body: DenseStack,
     output: Output,
 }
 
@@ -36,44 +101,16 @@ impl Mlp {
             let bias = Var::from_tensor(&Tensor::from_vec(bias, fan_out, &Device::Cpu)?)?;
             params.push((weight, bias));
         }
-        Ok(Self::from_params(params, output))
-    }
-
-    fn from_params(params: Vec<(Var, Var)>, output: Output) -> Mlp {
-        let layers =
-            params.iter().map(|(w, b)| Linear::new(w.as_tensor().clone(), Some(b.as_tensor().clone()))).collect();
-        Mlp { params, layers, output }
+        Ok(Mlp { body: DenseStack::new(params), output })
     }
 
     /// An independent copy with equal weights (for target networks).
     pub fn deep_copy(&self) -> Result<Mlp> {
-        let params = self
-            .params
-            .iter()
-            .map(|(w, b)| Ok((Var::from_tensor(&w.as_tensor().copy()?)?, Var::from_tensor(&b.as_tensor().copy()?)?)))
-            .collect::<Result<Vec<_>>>()?;
-        Ok(Self::from_params(params, self.output))
+        Ok(Mlp { body: self.body.deep_copy()?, output: self.output })
     }
 
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        self.run(x, self.layers.iter().cloned())
-    }
-
-    /// The same function with the weights treated as constants: gradients flow to `x` only.
-    /// The actor's loss goes through the critic this way, so its backward pass skips the
-    /// critic's weight gradients (which its optimiser never uses).
-    pub fn forward_frozen(&self, x: &Tensor) -> Result<Tensor> {
-        let frozen = self.params.iter().map(|(w, b)| Linear::new(w.as_tensor().detach(), Some(b.as_tensor().detach())));
-        self.run(x, frozen)
-    }
-
-    fn run(&self, x: &Tensor, layers: impl ExactSizeIterator<Item = Linear>) -> Result<Tensor> {
-        let n = layers.len();
-        let mut h = x.clone();
-        for (i, layer) in layers.enumerate() {
-            let act = if i + 1 < n { Activation::Relu } else { Activation::Identity };
-            h = dense(&h, layer.weight(), layer.bias().expect("layers have biases"), act)?;
-        }
+        let h = self.body.forward(x)?;
         match self.output {
             Output::Linear => Ok(h),
             Output::Tanh => h.tanh(),
@@ -82,41 +119,30 @@ impl Mlp {
 
     /// (weight `out x in`, bias `out`) of layer `i`.
     pub fn layer(&self, i: usize) -> &(Var, Var) {
-        &self.params[i]
+        &self.body.layers()[i]
     }
 
     pub fn vars(&self) -> Vec<Var> {
-        self.params.iter().flat_map(|(w, b)| [w.clone(), b.clone()]).collect()
+        self.body.vars()
     }
 
     /// Parameters named `<prefix>.<layer>.weight` / `.bias`, for checkpoints.
     pub fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
-        self.params
-            .iter()
-            .enumerate()
-            .flat_map(|(i, (w, b))| {
-                [(format!("{prefix}.{i}.weight"), w.clone()), (format!("{prefix}.{i}.bias"), b.clone())]
-            })
-            .collect()
+        self.body.named_vars(prefix)
     }
 
     pub fn input_dim(&self) -> usize {
-        self.params[0].0.dims()[1]
+        self.layer(0).0.dims()[1]
     }
 
     pub fn output_dim(&self) -> usize {
-        self.params.last().unwrap().0.dims()[0]
+        self.body.layers().last().unwrap().0.dims()[0]
     }
 }
 
 /// target <- tau * online + (1 - tau) * target, parameter by parameter.
 pub fn polyak_update(online: &Mlp, target: &Mlp, tau: f64) -> Result<()> {
-    let kernel = Polyak { tau: tau as f32 };
-    for ((o_w, o_b), (t_w, t_b)) in online.params.iter().zip(&target.params) {
-        t_w.as_tensor().inplace_op2(o_w.as_tensor(), &kernel)?;
-        t_b.as_tensor().inplace_op2(o_b.as_tensor(), &kernel)?;
-    }
-    Ok(())
+    online.body.polyak_into(&target.body, tau)
 }
 
 /// A row-major batch as a tensor.
@@ -164,8 +190,8 @@ mod tests {
         let net = Mlp::new(&[3, 8, 1], Output::Linear, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
         let x =
             Var::from_tensor(&Tensor::new(&[[0.5f32, -1.0, 2.0], [0.1, 0.2, -0.3]], &Device::Cpu).unwrap()).unwrap();
-        let live = net.forward(x.as_tensor()).unwrap().sum_all().unwrap();
-        let frozen = net.forward_frozen(x.as_tensor()).unwrap().sum_all().unwrap();
+        let live = net.body.forward(x.as_tensor()).unwrap().sum_all().unwrap();
+        let frozen = net.body.forward_frozen(x.as_tensor()).unwrap().sum_all().unwrap();
         assert_eq!(live.to_scalar::<f32>().unwrap(), frozen.to_scalar::<f32>().unwrap());
         let (g_live, g_frozen) = (live.backward().unwrap(), frozen.backward().unwrap());
         let dx = |g: &candle_core::backprop::GradStore| g.get(x.as_tensor()).unwrap().to_vec2::<f32>().unwrap();
