@@ -5,9 +5,10 @@
 //! `cargo bench --bench throughput -- --roofline` instead prints the TD3 update's matmul GFLOP/s
 //! against one core's measured matmul peak.
 //!
-//! `cargo bench --bench throughput -- --algo td3 [--updates 300] [--steps 1000]`; used by
-//! `benches/sb3/compare.sh`, which alternates it with Stable-Baselines3 in one run. Networks:
-//! TD3 and DDPG 400-300, SAC 256-256; candle on one thread.
+//! `cargo bench --bench throughput -- --algo td3 [--updates 300] [--steps 1000] [--threads 1|2]`;
+//! used by `benches/sb3/compare.sh`, which alternates it with Stable-Baselines3 in one run.
+//! Networks: TD3 and DDPG 400-300, SAC 256-256; candle on one thread, plus our helper thread
+//! with `--threads 2`.
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -27,6 +28,12 @@ fn arg(name: &str) -> Option<String> {
     args.iter().position(|a| a == name).and_then(|i| args.get(i + 1).cloned())
 }
 
+/// `--threads 1|2` (default 1): whether the training thread gets a helper thread
+/// (`locobench train --threads`).
+fn threads() -> usize {
+    arg("--threads").map(|v| v.parse().expect("--threads takes 1 or 2")).unwrap_or(1)
+}
+
 fn config(algo: Algo) -> TrainConfig {
     let mut cfg = TrainConfig::defaults(algo);
     cfg.hidden = if algo == Algo::Sac { vec![256, 256] } else { vec![400, 300] };
@@ -37,6 +44,7 @@ fn config(algo: Algo) -> TrainConfig {
 fn updates_per_second(algo: Algo, updates: usize) -> Result<f64> {
     locobench::agents::flush_denormals_to_zero();
     locobench::agents::keep_freed_memory();
+    let _helper = (threads() == 2).then(locobench::agents::second_core::HelperGuard::start);
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut buf = ReplayBuffer::new(50_000, OBS, ACT);
     let mut obs: Vec<f32> = (0..OBS).map(|_| rng.random_range(-1.0..1.0)).collect();
@@ -73,7 +81,7 @@ fn training_steps_per_second(algo: Algo, steps: u64) -> Result<f64> {
     cfg.eval_episodes = 1;
     cfg.checkpoint_every = 1 << 40;
     let run = dir.path().join("run");
-    train(EnvConfig::new("half-cheetah"), cfg, 0, &run, None, false, &RunControl::default())?;
+    train(EnvConfig::new("half-cheetah"), cfg, 0, &run, None, false, &RunControl { threads: threads(), ..Default::default() })?;
     let rows = metrics::read(&run.join("metrics.csv"))?;
     let at = |step: u64| rows.iter().find(|r| r.kind == "episode" && r.step == step).map(|r| r.wall_time);
     let (t0, t1) =
@@ -125,9 +133,11 @@ fn main() -> Result<()> {
         let flops = td3_update_flops() / 1e9;
         let ups = updates_per_second(Algo::Td3, arg("--updates").map(|v| v.parse()).transpose()?.unwrap_or(300))?;
         println!(
-            "{{\"matmul_peak_gflops\": {peak:.1}, \"td3_gflop_per_update\": {flops:.3}, \"td3_updates_per_s\": {ups:.1}, \"td3_gflops\": {:.1}, \"fraction_of_peak\": {:.2}}}",
+            "{{\"matmul_peak_gflops\": {peak:.1}, \"td3_gflop_per_update\": {flops:.3}, \"threads\": {}, \"td3_updates_per_s\": {ups:.1}, \"td3_gflops\": {:.1}, \"fraction_of_one_core_peak\": {:.2}, \"fraction_of_peak_of_cores_used\": {:.2}}}",
+            threads(),
             ups * flops,
-            ups * flops / peak
+            ups * flops / peak,
+            ups * flops / (peak * threads() as f64)
         );
         return Ok(());
     }
@@ -139,8 +149,9 @@ fn main() -> Result<()> {
     let ups = updates_per_second(algo, updates)?;
     let sps = if smoke || steps == 0 { f64::NAN } else { training_steps_per_second(algo, steps)? };
     println!(
-        "{{\"library\": \"locobench\", \"algo\": \"{}\", \"updates_per_s\": {ups:.2}, \"train_steps_per_s\": {}}}",
+        "{{\"library\": \"locobench\", \"algo\": \"{}\", \"threads\": {}, \"updates_per_s\": {ups:.2}, \"train_steps_per_s\": {}}}",
         algo.name(),
+        threads(),
         if sps.is_finite() { format!("{sps:.2}") } else { "null".into() }
     );
     Ok(())

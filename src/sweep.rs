@@ -183,11 +183,15 @@ pub fn run_jobs(
                 let Some(job) = jobs.get(i) else { break };
                 let log = logs.join(format!("{}.log", job.name));
                 let started = std::time::Instant::now();
-                let args: Vec<String> = if job.run_dir.join("config.toml").exists() {
+                let mut args: Vec<String> = if job.run_dir.join("config.toml").exists() {
                     vec!["train".into(), "--resume".into(), job.run_dir.display().to_string(), "--quiet".into()]
                 } else {
                     job.args.clone()
                 };
+                if parallel > 1 {
+                    // the cores go to the parallel jobs, not to helper threads
+                    args.extend(["--threads".into(), "1".into()]);
+                }
                 let ok = std::fs::File::create(&log)
                     .and_then(|f| {
                         let err = f.try_clone()?;

@@ -100,9 +100,13 @@ fn td3_critic_target_on_a_hand_built_batch() {
 }
 
 fn small_config(overrides: &str) -> TrainConfig {
+    small_config_for(Algo::Td3, overrides)
+}
+
+fn small_config_for(algo: Algo, overrides: &str) -> TrainConfig {
     let base = "total_steps=3000,warmup_steps=300,learning_starts=300,eval_every=1000,checkpoint_every=700,eval_episodes=2,hidden=[32,32],batch_size=64";
     let all = if overrides.is_empty() { base.to_string() } else { format!("{base},{overrides}") };
-    build_config("inverted-pendulum", Algo::Td3, &split_pairs(&all).unwrap()).unwrap()
+    build_config("inverted-pendulum", algo, &split_pairs(&all).unwrap()).unwrap()
 }
 
 fn tensors(ckpt: &Path) -> Vec<(String, Vec<f32>)> {
@@ -182,6 +186,26 @@ fn same_seed_same_run() {
     .unwrap();
     assert_eq!(tensors(&a.checkpoint), tensors(&b.checkpoint));
     assert_ne!(tensors(&a.checkpoint), tensors(&c.checkpoint));
+}
+
+/// `--threads 2` splits the large layers across two cores; the run must not change by a bit.
+/// 256-unit layers at batch 64 are large enough to be split (see agents::dense).
+#[test]
+fn a_second_core_gives_the_same_run_bit_for_bit() {
+    let dir = tempfile::tempdir().unwrap();
+    for algo in [Algo::Td3, Algo::Sac] {
+        let cfg = small_config_for(algo, "total_steps=1300,hidden=[256,256],eval_every=500,checkpoint_every=1300");
+        let run = |threads: usize| {
+            let out = dir.path().join(format!("{}-{threads}", algo.name()));
+            let control = RunControl { threads, ..Default::default() };
+            let summary =
+                train::train(EnvConfig::new("inverted-pendulum"), cfg.clone(), 3, &out, None, false, &control).unwrap();
+            (tensors(&summary.checkpoint), eval_rows(&out))
+        };
+        let (one, two) = (run(1), run(2));
+        assert_eq!(one.0, two.0, "{algo:?}: weights differ between one and two threads");
+        assert_eq!(one.1, two.1, "{algo:?}: evaluations differ between one and two threads");
+    }
 }
 
 #[test]

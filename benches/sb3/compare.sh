@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # Throughput of locobench against Stable-Baselines3 on the same machine, alternating in one run:
 # gradient updates/s and training env-steps/s for TD3 (400-300), SAC (256-256) and DDPG (400-300)
-# at batch 256 on HalfCheetah, each library on one thread. Prints every measurement and the
-# ratios locobench/SB3 (median over rounds).
+# at batch 256 on HalfCheetah. Each library runs on one thread and on two (locobench
+# `--threads 2`, PyTorch `torch.set_num_threads(2)`). Prints every measurement and the ratios
+# locobench/SB3 (median over rounds): the issue's comparison is SB3 on one torch thread; the
+# two-thread columns show what each library gets from the second core.
 #
 #   bash benches/sb3/compare.sh [ROUNDS] [UPDATES] [STEPS]     (defaults 3 300 1000)
 #
@@ -26,18 +28,25 @@ echo "machine: $(nproc --all) cores, $(grep -m1 'model name' /proc/cpuinfo | cut
 "$venv/bin/python" -c "import torch, stable_baselines3, mujoco; print(f'torch {torch.__version__}, sb3 {stable_baselines3.__version__}, mujoco (python) {mujoco.__version__}')"
 for round in $(seq "$rounds"); do
   for algo in td3 sac ddpg; do
-    cargo bench --quiet --bench throughput -- --algo "$algo" --updates "$updates" --steps "$steps" | tee -a "$results"
-    "$venv/bin/python" benches/sb3/sb3_throughput.py "$algo" "$updates" "$steps" | tee -a "$results"
+    for threads in 1 2; do
+      cargo bench --quiet --bench throughput -- --algo "$algo" --updates "$updates" --steps "$steps" --threads "$threads" | tee -a "$results"
+      OMP_NUM_THREADS=$threads MKL_NUM_THREADS=$threads \
+        "$venv/bin/python" benches/sb3/sb3_throughput.py "$algo" "$updates" "$steps" "$threads" | tee -a "$results"
+    done
   done
 done
 python3 - "$results" <<'PY'
 import json, statistics, sys
 rows = [json.loads(l) for l in open(sys.argv[1]) if l.startswith("{")]
-print("\nmedian over rounds       locobench      SB3   ratio")
+def med(library, algo, threads, key):
+    return statistics.median(
+        r[key] for r in rows if r["library"] == library and r["algo"] == algo and r.get("threads", 1) == threads
+    )
+print("\nmedian over rounds; L = locobench, S = SB3; 1t/2t = threads")
+print(f"{'':24} {'L 1t':>7} {'L 2t':>7} {'S 1t':>7} {'S 2t':>7}  {'L1t/S1t':>7} {'L2t/S1t':>7} {'L2t/S2t':>7}")
 for algo in ["td3", "sac", "ddpg"]:
     for key, label in [("updates_per_s", "updates/s"), ("train_steps_per_s", "train steps/s")]:
-        ours = statistics.median(r[key] for r in rows if r["library"] == "locobench" and r["algo"] == algo)
-        theirs = statistics.median(r[key] for r in rows if r["library"] == "sb3" and r["algo"] == algo)
-        print(f"{algo:<5} {label:<18} {ours:>9.1f} {theirs:>8.1f} {ours / theirs:>7.2f}")
+        l1, l2, s1, s2 = (med(lib, algo, t, key) for lib, t in [("locobench", 1), ("locobench", 2), ("sb3", 1), ("sb3", 2)])
+        print(f"{algo:<5} {label:<18} {l1:>7.1f} {l2:>7.1f} {s1:>7.1f} {s2:>7.1f}  {l1 / s1:>7.2f} {l2 / s1:>7.2f} {l2 / s2:>7.2f}")
 PY
 rm -f "$results"

@@ -1,10 +1,10 @@
 """Stable-Baselines3 side of the throughput comparison: one JSON line with gradient updates/s
 (batch 256, one update after another) and environment steps/s while training (one update per
-step, after 1000 warm-up steps) on HalfCheetah-v5, PyTorch on one thread.
+step, after 1000 warm-up steps) on HalfCheetah-v5, PyTorch on THREADS threads (default 1).
 
 Same settings as locobench's side (benches/throughput.rs): TD3 and DDPG 400-300 with lr 1e-3
 and Gaussian exploration noise 0.1, SAC 256-256 with lr 3e-4 and automatic temperature.
-Usage: python sb3_throughput.py td3|sac|ddpg UPDATES STEPS
+Usage: python sb3_throughput.py td3|sac|ddpg UPDATES STEPS [THREADS]
 """
 import json
 import sys
@@ -17,7 +17,8 @@ from stable_baselines3 import DDPG, SAC, TD3
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.noise import NormalActionNoise
 
-torch.set_num_threads(1)
+THREADS = int(sys.argv[4]) if len(sys.argv) > 4 else 1
+torch.set_num_threads(THREADS)
 WARMUP = 1000
 
 
@@ -61,7 +62,7 @@ def main():
     clock = WarmupClock()
     model.learn(total_timesteps=WARMUP + steps, callback=clock)
     sps = steps / (time.perf_counter() - clock.start)
-    print(json.dumps({"library": "sb3", "algo": algo, "updates_per_s": round(ups, 2), "train_steps_per_s": round(sps, 2)}))
+    print(json.dumps({"library": "sb3", "algo": algo, "threads": THREADS, "updates_per_s": round(ups, 2), "train_steps_per_s": round(sps, 2)}))
 
 
 if __name__ == "__main__":

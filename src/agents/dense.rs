@@ -5,14 +5,26 @@
 //! every input of every node, including a strided add for the transposed weight. perf showed that
 //! bookkeeping at about a fifth of a TD3 update once the matmuls were fast; as one node the
 //! forward pass is a single gemm call that accumulates onto the bias, and the backward pass is
-//! two matmuls, a mask and a row sum.
-use candle_core::{bail, CpuStorage, CustomOp3, Layout, Result, Shape, Tensor, D};
+//! two gemm calls, a mask and a row sum.
+//!
+//! Large layers are cut in two independent halves (stacked networks by member, one network by
+//! rows of the batch for outputs and input gradients, by output units for weight gradients),
+//! handed to [`second_core::join`]. The cut depends only on the sizes, never on whether a helper
+//! thread exists, so results are the same with one thread or two.
+use candle_core::{bail, CpuStorage, CustomOp3, Layout, Result, Shape, Storage, Tensor};
 
-use super::kernels::{contiguous, relu_mask, row_sum, Activation};
+use super::kernels::{contiguous, Activation};
+use super::second_core;
+
+/// Layers with fewer multiply-adds (k * n * in * out) than this run as one piece (a single
+/// observation while acting, the 300 -> 1 output layer). TD3 400-300 updates/s with two
+/// threads measured the same within noise for thresholds from 1 << 17 to 1 << 22.
+const SPLIT_MACS: usize = 1 << 20;
 
 struct Dense(Activation);
 
 /// Sizes of `x [n, in] | [k, n, in]`, `w [out, in] | [k, out, in]` and `b` (k * out values).
+#[derive(Clone, Copy)]
 struct Dims {
     k: usize,
     n: usize,
@@ -20,6 +32,21 @@ struct Dims {
     out: usize,
     /// x is one `[n, in]` block used by every member.
     shared_x: bool,
+}
+
+impl Dims {
+    fn split(&self) -> bool {
+        self.k * self.n * self.inp * self.out >= SPLIT_MACS && (self.k >= 2 || self.n >= 2)
+    }
+
+    /// Where member g's input lies in x.
+    fn x_range(&self, g: usize) -> std::ops::Range<usize> {
+        if self.shared_x {
+            0..self.n * self.inp
+        } else {
+            g * self.n * self.inp..(g + 1) * self.n * self.inp
+        }
+    }
 }
 
 fn dims(x: &[usize], w: &[usize], b_len: usize) -> Result<Dims> {
@@ -39,6 +66,88 @@ fn dims(x: &[usize], w: &[usize], b_len: usize) -> Result<Dims> {
     Ok(Dims { k, n, inp, out, shared_x })
 }
 
+/// `dst (m x n, row stride dst_rs) (+)= lhs (m x k) * rhs (k x n)`, every operand given by its
+/// row and column strides. One core.
+///
+/// SAFETY (caller): each slice holds every element its strides and sizes address.
+#[allow(clippy::too_many_arguments)]
+unsafe fn gemm_into(
+    (m, n, k): (usize, usize, usize),
+    dst: &mut [f32],
+    dst_rs: usize,
+    accumulate: bool,
+    lhs: &[f32],
+    (lhs_rs, lhs_cs): (usize, usize),
+    rhs: &[f32],
+    (rhs_rs, rhs_cs): (usize, usize),
+) {
+    debug_assert!(m == 0 || dst.len() >= (m - 1) * dst_rs + n);
+    debug_assert!(m == 0 || k == 0 || lhs.len() > (m - 1) * lhs_rs + (k - 1) * lhs_cs);
+    debug_assert!(k == 0 || n == 0 || rhs.len() > (k - 1) * rhs_rs + (n - 1) * rhs_cs);
+    gemm::gemm(
+        m,
+        n,
+        k,
+        dst.as_mut_ptr(),
+        1,
+        dst_rs as isize,
+        accumulate,
+        lhs.as_ptr(),
+        lhs_cs as isize,
+        lhs_rs as isize,
+        rhs.as_ptr(),
+        rhs_cs as isize,
+        rhs_rs as isize,
+        1.0,
+        1.0,
+        false,
+        false,
+        false,
+        gemm::Parallelism::None,
+    );
+}
+
+/// `y = act(x W^T + b)` for a block of rows: x `[rows, in]`, w `[out, in]`, y `[rows, out]`.
+fn forward_block(x: &[f32], w: &[f32], b: &[f32], y: &mut [f32], inp: usize, out: usize, act: Activation) {
+    let rows = y.len() / out;
+    for row in y.chunks_exact_mut(out) {
+        row.copy_from_slice(b);
+    }
+    // SAFETY: y is rows x out, x rows x in, and W^T (in x out) is read from the out x in weight
+    // with row stride 1 and column stride in.
+    unsafe { gemm_into((rows, out, inp), y, out, true, &x[..rows * inp], (inp, 1), w, (1, inp)) };
+    if act == Activation::Relu {
+        y.iter_mut().for_each(|v| *v = v.max(0.0));
+    }
+}
+
+/// Weight and bias gradients of `units` output units: `gw [units, in] = gp^T x`, `gb = sum of gp's
+/// rows`, where `gp` starts at the first of those units, `rows` rows of stride `out`.
+fn weight_grads(gp: &[f32], out: usize, x: &[f32], gw: &mut [f32], gb: &mut [f32], rows: usize, inp: usize) {
+    let units = gb.len();
+    // SAFETY: gw is units x in; gp^T (units x rows) is read with row stride 1 and column stride
+    // out; x is rows x in.
+    unsafe { gemm_into((units, inp, rows), gw, inp, false, gp, (1, out), x, (inp, 1)) };
+    gb.fill(0.0);
+    for r in 0..rows {
+        gb.iter_mut().zip(&gp[r * out..r * out + units]).for_each(|(a, g)| *a += g);
+    }
+}
+
+/// Input gradient of a block of rows: `gx [rows, in] = gp [rows, out] W [out, in]`.
+fn input_grad(gp: &[f32], w: &[f32], gx: &mut [f32], inp: usize, out: usize) {
+    let rows = gx.len() / inp;
+    // SAFETY: gx is rows x in, gp rows x out, w out x in, all row-major.
+    unsafe { gemm_into((rows, inp, out), gx, inp, false, gp, (out, 1), w, (inp, 1)) };
+}
+
+fn f32_slice<'a>(storage: &'a Storage, layout: &Layout) -> Result<&'a [f32]> {
+    match storage {
+        Storage::Cpu(s) => contiguous(s, layout, "dense"),
+        _ => bail!("dense: only CPU tensors are supported"),
+    }
+}
+
 impl CustomOp3 for Dense {
     fn name(&self) -> &'static str {
         "dense"
@@ -55,44 +164,30 @@ impl CustomOp3 for Dense {
     ) -> Result<(CpuStorage, Shape)> {
         let (x, w, b) = (contiguous(s1, l1, "dense")?, contiguous(s2, l2, "dense")?, contiguous(s3, l3, "dense")?);
         let d = dims(l1.dims(), l2.dims(), b.len())?;
+        let act = self.0;
         let mut y = vec![0f32; d.k * d.n * d.out];
-        for g in 0..d.k {
-            let bias = &b[g * d.out..(g + 1) * d.out];
-            let dst = &mut y[g * d.n * d.out..(g + 1) * d.n * d.out];
-            for row in dst.chunks_exact_mut(d.out) {
-                row.copy_from_slice(bias);
+        let member = |g: usize, y: &mut [f32]| {
+            let w = &w[g * d.out * d.inp..(g + 1) * d.out * d.inp];
+            forward_block(&x[d.x_range(g)], w, &b[g * d.out..(g + 1) * d.out], y, d.inp, d.out, act)
+        };
+        if !d.split() {
+            for (g, y) in y.chunks_exact_mut(d.n * d.out).enumerate() {
+                member(g, y);
             }
-            let lhs = if d.shared_x { x } else { &x[g * d.n * d.inp..(g + 1) * d.n * d.inp] };
-            let rhs = &w[g * d.out * d.inp..(g + 1) * d.out * d.inp];
-            // SAFETY: dst is n x out (row stride out), lhs n x in (row stride in) and rhs = W^T,
-            // in x out read from the out x in weight (row stride 1, column stride in); all three
-            // slices hold exactly those elements.
-            unsafe {
-                gemm::gemm(
-                    d.n,
-                    d.out,
-                    d.inp,
-                    dst.as_mut_ptr(),
-                    1,
-                    d.out as isize,
-                    true,
-                    lhs.as_ptr(),
-                    1,
-                    d.inp as isize,
-                    rhs.as_ptr(),
-                    d.inp as isize,
-                    1,
-                    1.0,
-                    1.0,
-                    false,
-                    false,
-                    false,
-                    gemm::Parallelism::None,
-                );
-            }
-        }
-        if self.0 == Activation::Relu {
-            y.iter_mut().for_each(|v| *v = v.max(0.0));
+        } else if d.k == 1 {
+            let half = d.n / 2;
+            let (top, bottom) = y.split_at_mut(half * d.out);
+            second_core::join(
+                || forward_block(&x[..half * d.inp], w, b, top, d.inp, d.out, act),
+                || forward_block(&x[half * d.inp..], w, b, bottom, d.inp, d.out, act),
+            );
+        } else {
+            let first = d.k / 2;
+            let (a, z) = y.split_at_mut(first * d.n * d.out);
+            second_core::join(
+                || a.chunks_exact_mut(d.n * d.out).enumerate().for_each(|(g, y)| member(g, y)),
+                || z.chunks_exact_mut(d.n * d.out).enumerate().for_each(|(g, y)| member(first + g, y)),
+            );
         }
         let shape: Shape = if l2.dims().len() == 2 { (d.n, d.out).into() } else { (d.k, d.n, d.out).into() };
         Ok((CpuStorage::F32(y), shape))
@@ -110,36 +205,83 @@ impl CustomOp3 for Dense {
         // inputs from the replay buffer need no gradient; hidden activations and the actor's
         // action do
         let need_grad_x = x.track_op();
-        let (x, w, grad) = (x.detach(), w.detach(), grad.detach().contiguous()?);
-        let grad_pre = match self.0 {
-            Activation::Identity => grad,
-            Activation::Relu => relu_mask(&grad, &y.detach())?,
+        let grad = grad.contiguous()?;
+        let (xs, xl) = x.storage_and_layout();
+        let (ws, wl) = w.storage_and_layout();
+        let (ys, yl) = y.storage_and_layout();
+        let (gs, gl) = grad.storage_and_layout();
+        let (xv, wv, yv) = (f32_slice(&xs, xl)?, f32_slice(&ws, wl)?, f32_slice(&ys, yl)?);
+        let gv = f32_slice(&gs, gl)?;
+        // gradient before the activation (a select, not a branch, so that it vectorises)
+        let gp: Vec<f32> = match self.0 {
+            Activation::Identity => gv.to_vec(),
+            Activation::Relu => gv.iter().zip(yv).map(|(g, y)| if *y > 0.0 { *g } else { 0.0 }).collect(),
         };
-        let g3 = grad_pre.reshape((d.k, d.n, d.out))?;
-        let w3 = w.reshape((d.k, d.out, d.inp))?;
-        let x3 = if d.shared_x {
-            x.reshape((1, d.n, d.inp))?.broadcast_as((d.k, d.n, d.inp))?.contiguous()?
-        } else {
-            x.clone()
-        };
-        let grad_w = g3.transpose(D::Minus1, D::Minus2)?.matmul(&x3)?.reshape(w.shape())?;
-        let grad_b = row_sum(&grad_pre, d.k)?.reshape(b.shape())?;
-        let grad_x = if need_grad_x {
-            let per_member = g3.matmul(&w3)?;
-            if d.shared_x {
-                // summed member by member: candle's sum over a leading axis divides per element
-                let mut total = per_member.get(0)?;
-                for g in 1..d.k {
-                    total = (total + per_member.get(g)?)?;
-                }
-                Some(total.reshape(x.shape())?)
-            } else {
-                Some(per_member.reshape(x.shape())?)
+        let mut gw = vec![0f32; d.k * d.out * d.inp];
+        let mut gb = vec![0f32; d.k * d.out];
+        // per member; summed below when the members share x
+        let mut gx = vec![0f32; if need_grad_x { d.k * d.n * d.inp } else { 0 }];
+        let (n, inp, out) = (d.n, d.inp, d.out);
+        let member = |g: usize, gw: &mut [f32], gb: &mut [f32], gx: &mut [f32]| {
+            let gp = &gp[g * n * out..(g + 1) * n * out];
+            weight_grads(gp, out, &xv[d.x_range(g)], gw, gb, n, inp);
+            if need_grad_x {
+                input_grad(gp, &wv[g * out * inp..(g + 1) * out * inp], gx, inp, out);
             }
-        } else {
-            None
         };
-        Ok((grad_x, Some(grad_w), Some(grad_b)))
+        let gx_len = if need_grad_x { n * inp } else { 0 };
+        if !d.split() {
+            for g in 0..d.k {
+                member(
+                    g,
+                    &mut gw[g * out * inp..(g + 1) * out * inp],
+                    &mut gb[g * out..(g + 1) * out],
+                    &mut gx[g * gx_len..(g + 1) * gx_len],
+                );
+            }
+        } else if d.k == 1 {
+            // weight gradients split by output units, input gradients by rows
+            let (units, rows) = (out / 2, n / 2);
+            let (gw_a, gw_z) = gw.split_at_mut(units * inp);
+            let (gb_a, gb_z) = gb.split_at_mut(units);
+            let (gx_a, gx_z) = gx.split_at_mut(if need_grad_x { rows * inp } else { 0 });
+            let half = |gp_units: &[f32], gw: &mut [f32], gb: &mut [f32], gp_rows: &[f32], gx: &mut [f32]| {
+                weight_grads(gp_units, out, xv, gw, gb, n, inp);
+                if need_grad_x {
+                    input_grad(gp_rows, wv, gx, inp, out);
+                }
+            };
+            second_core::join(
+                || half(&gp, gw_a, gb_a, &gp[..rows * out], gx_a),
+                || half(&gp[units..], gw_z, gb_z, &gp[rows * out..], gx_z),
+            );
+        } else {
+            let first = d.k / 2;
+            let (gw_a, gw_z) = gw.split_at_mut(first * out * inp);
+            let (gb_a, gb_z) = gb.split_at_mut(first * out);
+            let (gx_a, gx_z) = gx.split_at_mut(first * gx_len);
+            let group = |g0: usize, gw: &mut [f32], gb: &mut [f32], gx: &mut [f32]| {
+                for (i, (gw, gb)) in gw.chunks_exact_mut(out * inp).zip(gb.chunks_exact_mut(out)).enumerate() {
+                    member(g0 + i, gw, gb, &mut gx[i * gx_len..(i + 1) * gx_len]);
+                }
+            };
+            second_core::join(|| group(0, gw_a, gb_a, gx_a), || group(first, gw_z, gb_z, gx_z));
+        }
+        drop((xs, ws, ys, gs));
+        let dev = x.device();
+        let grad_x = if !need_grad_x {
+            None
+        } else if d.shared_x && d.k > 1 {
+            let (total, rest) = gx.split_at_mut(gx_len);
+            for member in rest.chunks_exact(gx_len) {
+                total.iter_mut().zip(member).for_each(|(t, m)| *t += m);
+            }
+            gx.truncate(gx_len);
+            Some(Tensor::from_vec(gx, x.shape(), dev)?)
+        } else {
+            Some(Tensor::from_vec(gx, x.shape(), dev)?)
+        };
+        Ok((grad_x, Some(Tensor::from_vec(gw, w.shape(), dev)?), Some(Tensor::from_vec(gb, b.shape(), dev)?)))
     }
 }
 
@@ -152,27 +294,64 @@ pub fn dense(x: &Tensor, w: &Tensor, b: &Tensor, act: Activation) -> Result<Tens
 #[cfg(test)]
 mod tests {
     use super::*;
-    use candle_core::{Device, Var};
+    use candle_core::{Device, Var, D};
 
     fn values(n: usize, seed: f32) -> Vec<f32> {
         (0..n).map(|i| (i as f32 * 0.37 + seed).sin()).collect()
     }
 
+    type Case = (&'static [usize], &'static [usize], &'static [usize]);
+
+    /// x, w, b shapes: one network, k stacked with their own inputs, k sharing one input; small
+    /// (one piece) and large enough to be split in two.
+    const CASES: [Case; 6] = [
+        (&[5, 3], &[4, 3], &[4]),
+        (&[2, 5, 3], &[2, 4, 3], &[2, 1, 4]),
+        (&[5, 3], &[2, 4, 3], &[2, 1, 4]),
+        (&[65, 70], &[301, 70], &[301]),
+        (&[2, 64, 40], &[2, 300, 40], &[2, 1, 300]),
+        (&[64, 40], &[2, 300, 40], &[2, 1, 300]),
+    ];
+
+    fn var(shape: &[usize], seed: f32) -> Var {
+        let dev = Device::Cpu;
+        Var::from_tensor(&Tensor::from_vec(values(shape.iter().product(), seed), shape, &dev).unwrap()).unwrap()
+    }
+
+    fn flat(t: &Tensor) -> Vec<f32> {
+        t.flatten_all().unwrap().to_vec1::<f32>().unwrap()
+    }
+
+    fn out_shape(xs: &[usize], ws: &[usize]) -> Vec<usize> {
+        if ws.len() == 2 {
+            vec![xs[0], ws[0]]
+        } else {
+            vec![ws[0], xs[xs.len() - 2], ws[1]]
+        }
+    }
+
+    /// Output and the gradients of x, W and b of `sum(dense(x, W, b) * probe)`.
+    fn run(case: Case, act: Activation) -> Vec<Vec<f32>> {
+        let (xs, ws, bs) = case;
+        let (x, w, b) = (var(xs, 0.1), var(ws, 0.7), var(bs, 1.9));
+        let shape = out_shape(xs, ws);
+        let probe = Tensor::from_vec(values(shape.iter().product(), 2.3), shape, &Device::Cpu).unwrap();
+        let y = dense(x.as_tensor(), w.as_tensor(), b.as_tensor(), act).unwrap();
+        let grads = (&y * &probe).unwrap().sum_all().unwrap().backward().unwrap();
+        let mut out = vec![flat(&y)];
+        out.extend([&x, &w, &b].iter().map(|v| flat(grads.get(v.as_tensor()).unwrap())));
+        out
+    }
+
     /// Value and gradients of x, W and b equal candle's matmul + broadcast add + ReLU.
     #[test]
     fn dense_matches_candle_ops_for_one_and_stacked_networks() {
-        let dev = Device::Cpu;
-        let cases: [(&[usize], &[usize], &[usize]); 3] =
-            [(&[5, 3], &[4, 3], &[4]), (&[2, 5, 3], &[2, 4, 3], &[2, 1, 4]), (&[5, 3], &[2, 4, 3], &[2, 1, 4])];
-        for (xs, ws, bs) in cases {
+        for case in CASES {
+            let (xs, ws, bs) = case;
             for act in [Activation::Identity, Activation::Relu] {
-                let var = |shape: &[usize], seed| {
-                    Var::from_tensor(&Tensor::from_vec(values(shape.iter().product(), seed), shape, &dev).unwrap())
-                        .unwrap()
-                };
                 let (x, w, b) = (var(xs, 0.1), var(ws, 0.7), var(bs, 1.9));
-                let out_shape: Vec<usize> = if ws.len() == 2 { vec![xs[0], ws[0]] } else { vec![ws[0], 5, ws[1]] };
-                let probe = Tensor::from_vec(values(out_shape.iter().product(), 2.3), out_shape, &dev).unwrap();
+                let shape = out_shape(xs, ws);
+                let probe = Tensor::from_vec(values(shape.iter().product(), 2.3), shape, &Device::Cpu).unwrap();
                 let reference = {
                     let x_b = if xs.len() < ws.len() {
                         x.as_tensor().unsqueeze(0).unwrap().broadcast_as((ws[0], xs[0], xs[1])).unwrap()
@@ -187,29 +366,37 @@ mod tests {
                         pre
                     }
                 };
-                let ours = dense(x.as_tensor(), w.as_tensor(), b.as_tensor(), act).unwrap();
-                let flat = |t: &Tensor| t.flatten_all().unwrap().to_vec1::<f32>().unwrap();
-                assert_eq!(ours.dims(), reference.dims());
-                for (a, e) in flat(&ours).iter().zip(flat(&reference)) {
-                    assert!((a - e).abs() < 1e-5, "{xs:?} {act:?}: {a} vs {e}");
-                }
-                let g_ref = (reference * &probe).unwrap().sum_all().unwrap().backward().unwrap();
-                let g_ours = (ours * &probe).unwrap().sum_all().unwrap().backward().unwrap();
-                for v in [&x, &w, &b] {
-                    let (a, e) = (g_ours.get(v.as_tensor()).unwrap(), g_ref.get(v.as_tensor()).unwrap());
-                    assert_eq!(a.dims(), v.dims());
-                    for (a, e) in flat(a).iter().zip(flat(e)) {
-                        assert!((a - e).abs() < 1e-4, "{xs:?} {act:?}: {a} vs {e}");
+                let g_ref = (&reference * &probe).unwrap().sum_all().unwrap().backward().unwrap();
+                let mut expected = vec![flat(&reference)];
+                expected.extend([&x, &w, &b].iter().map(|v| flat(g_ref.get(v.as_tensor()).unwrap())));
+                let ours = run(case, act);
+                for (what, (a, e)) in ["y", "dx", "dw", "db"].iter().zip(ours.iter().zip(&expected)) {
+                    assert_eq!(a.len(), e.len(), "{xs:?} {act:?} {what}");
+                    for (a, e) in a.iter().zip(e) {
+                        assert!((a - e).abs() <= 1e-4 * (1.0 + e.abs()), "{xs:?} {act:?} {what}: {a} vs {e}");
                     }
                 }
             }
         }
-        let bad = dense(
-            &Tensor::zeros((5, 3), candle_core::DType::F32, &dev).unwrap(),
-            &Tensor::zeros((4, 2), candle_core::DType::F32, &dev).unwrap(),
-            &Tensor::zeros(4, candle_core::DType::F32, &dev).unwrap(),
-            Activation::Relu,
-        );
-        assert!(bad.is_err());
+        let zeros = |shape: &[usize]| Tensor::zeros(shape, candle_core::DType::F32, &Device::Cpu).unwrap();
+        assert!(dense(&zeros(&[5, 3]), &zeros(&[4, 2]), &zeros(&[4]), Activation::Relu).is_err());
+        assert!(dense(&zeros(&[5, 3]), &zeros(&[4, 3]), &zeros(&[3]), Activation::Relu).is_err());
+    }
+
+    /// The halves of a split layer give the same bits whichever thread runs them.
+    #[test]
+    fn a_helper_thread_changes_no_bit() {
+        let all = |helper: bool| {
+            std::thread::spawn(move || {
+                if helper {
+                    second_core::enable_on_this_thread();
+                }
+                let act = [Activation::Identity, Activation::Relu];
+                CASES.iter().flat_map(|c| act.map(|a| run(*c, a))).collect::<Vec<_>>()
+            })
+            .join()
+            .unwrap()
+        };
+        assert_eq!(all(false), all(true));
     }
 }

@@ -1,13 +1,12 @@
 //! CPU kernels for the per-update hot path: in place, an Adam step and a Polyak average (one pass
-//! over the parameter, no temporary tensors); for the dense layer's backward pass, a ReLU mask
-//! and a row sum.
+//! over the parameter, no temporary tensors).
 //! candle's tensor expressions allocate a new tensor per operation, and `Var::set` copies once
 //! more; the throughput bench measured those as the biggest cost outside the matmuls
 //! (README, "Training throughput"). Each kernel is tested against the tensor expression it
 //! replaces.
 use std::cell::RefCell;
 
-use candle_core::{bail, CpuStorage, InplaceOp2, Layout, Result, Shape, Tensor};
+use candle_core::{bail, CpuStorage, InplaceOp2, Layout, Result};
 
 fn contiguous_mut<'a>(storage: &'a mut CpuStorage, layout: &Layout, what: &str) -> Result<&'a mut [f32]> {
     let Some((start, end)) = layout.contiguous_offsets() else { bail!("{what}: destination tensor is not contiguous") };
@@ -95,65 +94,10 @@ pub enum Activation {
     Relu,
 }
 
-/// grad where the ReLU's output is positive, 0 elsewhere.
-struct ReluMask;
-
-impl candle_core::CustomOp2 for ReluMask {
-    fn name(&self) -> &'static str {
-        "relu-mask"
-    }
-
-    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        let (grad, y) = (contiguous(s1, l1, "relu-mask")?, contiguous(s2, l2, "relu-mask")?);
-        if grad.len() != y.len() {
-            bail!("relu-mask: gradient and output differ in length");
-        }
-        let masked = grad.iter().zip(y).map(|(g, y)| if *y > 0.0 { *g } else { 0.0 }).collect();
-        Ok((CpuStorage::F32(masked), l1.shape().clone()))
-    }
-}
-
-/// Sums `[groups * rows, out]` over the rows of each group: `[groups, out]`.
-struct RowSum {
-    groups: usize,
-}
-
-impl candle_core::CustomOp1 for RowSum {
-    fn name(&self) -> &'static str {
-        "row-sum"
-    }
-
-    fn cpu_fwd(&self, s: &CpuStorage, l: &Layout) -> Result<(CpuStorage, Shape)> {
-        let x = contiguous(s, l, "row-sum")?;
-        let (groups, out) = (self.groups, *l.dims().last().unwrap_or(&0));
-        if out == 0 || groups == 0 || x.len() % (groups * out) != 0 {
-            bail!("row-sum: {} values do not split into {groups} groups of rows of {out}", x.len());
-        }
-        let rows = x.len() / (groups * out);
-        let mut sums = vec![0f32; groups * out];
-        for (g, acc) in sums.chunks_exact_mut(out).enumerate() {
-            for row in x[g * rows * out..(g + 1) * rows * out].chunks_exact(out) {
-                acc.iter_mut().zip(row).for_each(|(a, x)| *a += x);
-            }
-        }
-        Ok((CpuStorage::F32(sums), Shape::from((groups, out))))
-    }
-}
-
-/// `grad` where the ReLU output `y` is positive, 0 elsewhere.
-pub fn relu_mask(grad: &Tensor, y: &Tensor) -> Result<Tensor> {
-    grad.contiguous()?.apply_op2_no_bwd(&y.contiguous()?, &ReluMask)
-}
-
-/// Sums `[groups * rows, out]` (any leading shape) over the rows of each group: `[groups, out]`.
-pub fn row_sum(t: &Tensor, groups: usize) -> Result<Tensor> {
-    t.contiguous()?.apply_op1_no_bwd(&RowSum { groups })
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-    use candle_core::Device;
+    use candle_core::{Device, Tensor};
 
     #[test]
     fn polyak_matches_the_tensor_expression_and_refuses_strided_targets() {
@@ -168,20 +112,5 @@ mod tests {
         assert!(transposed
             .inplace_op2(&Tensor::zeros((3, 3), candle_core::DType::F32, &Device::Cpu).unwrap(), &Polyak { tau: 0.5 })
             .is_err());
-    }
-
-    #[test]
-    fn relu_mask_and_row_sum_by_hand() {
-        let dev = Device::Cpu;
-        let grad = Tensor::new(&[[1.0f32, 2.0], [3.0, 4.0], [5.0, 6.0], [7.0, 8.0]], &dev).unwrap();
-        let y = Tensor::new(&[[0.5f32, 0.0], [0.0, 1.0], [2.0, 2.0], [0.0, 0.0]], &dev).unwrap();
-        let masked = relu_mask(&grad, &y).unwrap();
-        assert_eq!(
-            masked.to_vec2::<f32>().unwrap(),
-            vec![vec![1.0, 0.0], vec![0.0, 4.0], vec![5.0, 6.0], vec![0.0, 0.0]]
-        );
-        assert_eq!(row_sum(&grad, 1).unwrap().to_vec2::<f32>().unwrap(), vec![vec![16.0, 20.0]]);
-        assert_eq!(row_sum(&grad, 2).unwrap().to_vec2::<f32>().unwrap(), vec![vec![4.0, 6.0], vec![12.0, 14.0]]);
-        assert!(row_sum(&grad, 3).is_err());
     }
 }

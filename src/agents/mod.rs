@@ -15,6 +15,7 @@ pub mod nets;
 pub mod noise;
 pub mod optim;
 mod sac;
+pub mod second_core;
 
 use candle_core::{Result, Var};
 use rand_chacha::ChaCha8Rng;

@@ -49,6 +49,11 @@ pub struct TrainArgs {
     /// With --record: a rollout at every N-th evaluation only (the curves are always complete).
     #[arg(long, default_value_t = 1, value_name = "N")]
     pub record_every: u64,
+    /// 2: the large layers of each update run on two cores (same results, bit for bit); 1: one
+    /// core, for running several trainings side by side. Default: 2 on a machine with 2 or
+    /// more cores.
+    #[arg(long, value_name = "1|2", value_parser = clap::value_parser!(u8).range(1..=2))]
+    pub threads: Option<u8>,
 }
 
 /// Env config from `--option` and `--reward`.
@@ -63,11 +68,16 @@ pub fn env_config(env: &str, options: &[String], reward: Option<&str>) -> Result
     Ok(cfg)
 }
 
+fn default_threads() -> usize {
+    std::thread::available_parallelism().map_or(1, |n| n.get().min(2))
+}
+
 pub fn run(args: TrainArgs) -> Result<()> {
     let control = RunControl {
         show_progress: !args.quiet,
         record: args.record.clone(),
         record_every: args.record_every,
+        threads: args.threads.map(usize::from).unwrap_or_else(default_threads),
         ..Default::default()
     };
     let summary = if let Some(dir) = &args.resume {

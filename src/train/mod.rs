@@ -74,6 +74,10 @@ pub struct RunControl {
     /// Record a rollout at every this many evaluations (0 or 1: every one). A 1000-step Ant
     /// rollout takes about 3 MB.
     pub record_every: u64,
+    /// 2: the training thread gets a helper thread, and the large dense layers of every update
+    /// run in two halves on both cores (`agents::second_core`); results are the same bit for
+    /// bit. 0 or 1: the training thread alone (parallel runs, e.g. a sweep's jobs).
+    pub threads: usize,
 }
 
 /// The process-wide Ctrl-C flag (the handler is installed once, on first use).
@@ -235,6 +239,7 @@ impl Trainer {
         // Also set by the CLI at start-up; a library caller's training thread gets it here.
         crate::agents::flush_denormals_to_zero();
         crate::agents::keep_freed_memory();
+        let _helper = (control.threads >= 2).then(crate::agents::second_core::HelperGuard::start);
         let cfg = self.cfg.clone();
         let interrupted = interrupt_flag();
         let bar = if control.show_progress { ProgressBar::new(cfg.total_steps) } else { ProgressBar::hidden() };
