@@ -2,7 +2,9 @@
 //! each algorithm, single-observation policy inference, and replay-buffer sampling.
 //!
 //! Run: `cargo bench --bench agents`. Networks as in the throughput comparison: TD3 and DDPG
-//! 400-300, SAC 256-256. candle runs on one thread (see .cargo/config.toml).
+//! 400-300, SAC 256-256. candle runs on one thread (see .cargo/config.toml); updates are timed
+//! on that thread alone and with its helper thread (`train --threads 2`). The process uses the
+//! allocator and FPU settings `train` uses.
 use std::hint::black_box;
 use std::time::Duration;
 
@@ -29,6 +31,8 @@ fn filled_buffer(rng: &mut ChaCha8Rng) -> ReplayBuffer {
 }
 
 fn bench(c: &mut Criterion) {
+    locobench::agents::flush_denormals_to_zero();
+    locobench::agents::keep_freed_memory();
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let buf = filled_buffer(&mut rng);
     let mut group = c.benchmark_group("agents");
@@ -41,12 +45,15 @@ fn bench(c: &mut Criterion) {
         let mut batch = Batch::new(BATCH, OBS, ACT);
         let label = format!("{}-{}", hidden[0], hidden[1]);
         group.throughput(Throughput::Elements(1));
-        group.bench_function(format!("{}/update {label} batch {BATCH}", algo.name()), |b| {
-            b.iter(|| {
-                buf.sample_into(&mut batch, &mut rng);
-                black_box(agent.update(&batch, &mut rng).unwrap());
-            })
-        });
+        for threads in [1, 2] {
+            let _helper = (threads == 2).then(locobench::agents::second_core::HelperGuard::start);
+            group.bench_function(format!("{}/update {label} batch {BATCH}, {threads} thread(s)", algo.name()), |b| {
+                b.iter(|| {
+                    buf.sample_into(&mut batch, &mut rng);
+                    black_box(agent.update(&batch, &mut rng).unwrap());
+                })
+            });
+        }
         let obs: Vec<f32> = (0..OBS).map(|i| (i as f32 * 0.1).sin()).collect();
         group.bench_function(format!("{}/act one observation {label}", algo.name()), |b| {
             b.iter(|| black_box(agent.act(black_box(&obs)).unwrap()))
