@@ -206,12 +206,13 @@ fn train_rejects_bad_arguments() {
     let dir = tempfile::tempdir().unwrap();
     let o = dir.path().join("x");
     let o = o.to_str().unwrap();
-    let cases: [(&[&str], &str); 5] = [
+    let cases: [(&[&str], &str); 6] = [
         (&["train", "--env", "ant", "--algo", "ppo", "--out", o], "unknown algorithm 'ppo'"),
         (&["train", "--env", "hopper", "--algo", "td3", "--out", o], "unknown environment 'hopper'"),
         (&["train", "--env", "ant", "--algo", "td3", "--set", "tau=7", "--out", o], "tau"),
         (&["train", "--env", "ant", "--algo", "td3", "--reward", "wobble=1", "--out", o], "wobble"),
         (&["eval", "--checkpoint", "/no/such/run"], "no checkpoint"),
+        (&["train", "--env", "ant", "--algo", "td3", "--threads", "3", "--out", o], "3 is not in 1..=2"),
     ];
     for (args, expect) in cases {
         let (ok, _, err) = locobench(args);
