@@ -81,7 +81,15 @@ fn training_steps_per_second(algo: Algo, steps: u64) -> Result<f64> {
     cfg.eval_episodes = 1;
     cfg.checkpoint_every = 1 << 40;
     let run = dir.path().join("run");
-    train(EnvConfig::new("half-cheetah"), cfg, 0, &run, None, false, &RunControl { threads: threads(), ..Default::default() })?;
+    train(
+        EnvConfig::new("half-cheetah"),
+        cfg,
+        0,
+        &run,
+        None,
+        false,
+        &RunControl { threads: threads(), ..Default::default() },
+    )?;
     let rows = metrics::read(&run.join("metrics.csv"))?;
     let at = |step: u64| rows.iter().find(|r| r.kind == "episode" && r.step == step).map(|r| r.wall_time);
     let (t0, t1) =

@@ -6,15 +6,31 @@
 
 /// Sets MXCSR's FTZ (bit 15) and DAZ (bit 6) on this thread. A no-op off x86-64.
 pub fn flush_denormals_to_zero() {
+    set_float_mode(float_mode() | (1 << 15) | (1 << 6));
+}
+
+/// This thread's SSE control register (MXCSR), 0 off x86-64.
+pub(super) fn float_mode() -> u32 {
     #[cfg(target_arch = "x86_64")]
-    // SAFETY: reads and writes this thread's SSE control register only; the bits changed
-    // affect how subnormal floats are treated, nothing else.
-    unsafe {
+    {
         let mut csr: u32 = 0;
-        std::arch::asm!("stmxcsr [{}]", in(reg) &mut csr, options(nostack));
-        csr |= (1 << 15) | (1 << 6);
-        std::arch::asm!("ldmxcsr [{}]", in(reg) &csr, options(nostack, readonly));
+        // SAFETY: reads this thread's SSE control register.
+        unsafe { std::arch::asm!("stmxcsr [{}]", in(reg) &mut csr, options(nostack)) };
+        csr
     }
+    #[cfg(not(target_arch = "x86_64"))]
+    0
+}
+
+/// Sets this thread's MXCSR to a value `float_mode` returned (on this or another thread). The
+/// bits change how subnormal floats and rounding are treated, nothing else.
+pub(super) fn set_float_mode(_csr: u32) {
+    #[cfg(target_arch = "x86_64")]
+    // SAFETY: writes this thread's SSE control register with a value read from a control
+    // register, so no reserved bit is set.
+    unsafe {
+        std::arch::asm!("ldmxcsr [{}]", in(reg) &_csr, options(nostack, readonly))
+    };
 }
 
 #[cfg(test)]

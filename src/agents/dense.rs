@@ -24,7 +24,6 @@ const SPLIT_MACS: usize = 1 << 20;
 struct Dense(Activation);
 
 /// Sizes of `x [n, in] | [k, n, in]`, `w [out, in] | [k, out, in]` and `b` (k * out values).
-#[derive(Clone, Copy)]
 struct Dims {
     k: usize,
     n: usize,
@@ -166,14 +165,16 @@ impl CustomOp3 for Dense {
         let d = dims(l1.dims(), l2.dims(), b.len())?;
         let act = self.0;
         let mut y = vec![0f32; d.k * d.n * d.out];
-        let member = |g: usize, y: &mut [f32]| {
-            let w = &w[g * d.out * d.inp..(g + 1) * d.out * d.inp];
-            forward_block(&x[d.x_range(g)], w, &b[g * d.out..(g + 1) * d.out], y, d.inp, d.out, act)
+        // members g0, g0 + 1, ... into consecutive `[n, out]` blocks of y
+        let members = |g0: usize, y: &mut [f32]| {
+            for (i, y) in y.chunks_exact_mut(d.n * d.out).enumerate() {
+                let g = g0 + i;
+                let w = &w[g * d.out * d.inp..(g + 1) * d.out * d.inp];
+                forward_block(&x[d.x_range(g)], w, &b[g * d.out..(g + 1) * d.out], y, d.inp, d.out, act)
+            }
         };
         if !d.split() {
-            for (g, y) in y.chunks_exact_mut(d.n * d.out).enumerate() {
-                member(g, y);
-            }
+            members(0, &mut y);
         } else if d.k == 1 {
             let half = d.n / 2;
             let (top, bottom) = y.split_at_mut(half * d.out);
@@ -184,10 +185,7 @@ impl CustomOp3 for Dense {
         } else {
             let first = d.k / 2;
             let (a, z) = y.split_at_mut(first * d.n * d.out);
-            second_core::join(
-                || a.chunks_exact_mut(d.n * d.out).enumerate().for_each(|(g, y)| member(g, y)),
-                || z.chunks_exact_mut(d.n * d.out).enumerate().for_each(|(g, y)| member(first + g, y)),
-            );
+            second_core::join(|| members(0, a), || members(first, z));
         }
         let shape: Shape = if l2.dims().len() == 2 { (d.n, d.out).into() } else { (d.k, d.n, d.out).into() };
         Ok((CpuStorage::F32(y), shape))
@@ -222,23 +220,26 @@ impl CustomOp3 for Dense {
         // per member; summed below when the members share x
         let mut gx = vec![0f32; if need_grad_x { d.k * d.n * d.inp } else { 0 }];
         let (n, inp, out) = (d.n, d.inp, d.out);
-        let member = |g: usize, gw: &mut [f32], gb: &mut [f32], gx: &mut [f32]| {
-            let gp = &gp[g * n * out..(g + 1) * n * out];
-            weight_grads(gp, out, &xv[d.x_range(g)], gw, gb, n, inp);
-            if need_grad_x {
-                input_grad(gp, &wv[g * out * inp..(g + 1) * out * inp], gx, inp, out);
+        let gx_len = if need_grad_x { n * inp } else { 0 };
+        // members g0, g0 + 1, ... into consecutive blocks of gw, gb and gx
+        let members = |g0: usize, gw: &mut [f32], gb: &mut [f32], gx: &mut [f32]| {
+            for (i, (gw, gb)) in gw.chunks_exact_mut(out * inp).zip(gb.chunks_exact_mut(out)).enumerate() {
+                let g = g0 + i;
+                let gp = &gp[g * n * out..(g + 1) * n * out];
+                weight_grads(gp, out, &xv[d.x_range(g)], gw, gb, n, inp);
+                if need_grad_x {
+                    input_grad(
+                        gp,
+                        &wv[g * out * inp..(g + 1) * out * inp],
+                        &mut gx[i * gx_len..(i + 1) * gx_len],
+                        inp,
+                        out,
+                    );
+                }
             }
         };
-        let gx_len = if need_grad_x { n * inp } else { 0 };
         if !d.split() {
-            for g in 0..d.k {
-                member(
-                    g,
-                    &mut gw[g * out * inp..(g + 1) * out * inp],
-                    &mut gb[g * out..(g + 1) * out],
-                    &mut gx[g * gx_len..(g + 1) * gx_len],
-                );
-            }
+            members(0, &mut gw, &mut gb, &mut gx);
         } else if d.k == 1 {
             // weight gradients split by output units, input gradients by rows
             let (units, rows) = (out / 2, n / 2);
@@ -260,27 +261,18 @@ impl CustomOp3 for Dense {
             let (gw_a, gw_z) = gw.split_at_mut(first * out * inp);
             let (gb_a, gb_z) = gb.split_at_mut(first * out);
             let (gx_a, gx_z) = gx.split_at_mut(first * gx_len);
-            let group = |g0: usize, gw: &mut [f32], gb: &mut [f32], gx: &mut [f32]| {
-                for (i, (gw, gb)) in gw.chunks_exact_mut(out * inp).zip(gb.chunks_exact_mut(out)).enumerate() {
-                    member(g0 + i, gw, gb, &mut gx[i * gx_len..(i + 1) * gx_len]);
-                }
-            };
-            second_core::join(|| group(0, gw_a, gb_a, gx_a), || group(first, gw_z, gb_z, gx_z));
+            second_core::join(|| members(0, gw_a, gb_a, gx_a), || members(first, gw_z, gb_z, gx_z));
         }
         drop((xs, ws, ys, gs));
         let dev = x.device();
-        let grad_x = if !need_grad_x {
-            None
-        } else if d.shared_x && d.k > 1 {
+        if need_grad_x && d.shared_x && d.k > 1 {
             let (total, rest) = gx.split_at_mut(gx_len);
             for member in rest.chunks_exact(gx_len) {
                 total.iter_mut().zip(member).for_each(|(t, m)| *t += m);
             }
             gx.truncate(gx_len);
-            Some(Tensor::from_vec(gx, x.shape(), dev)?)
-        } else {
-            Some(Tensor::from_vec(gx, x.shape(), dev)?)
-        };
+        }
+        let grad_x = if need_grad_x { Some(Tensor::from_vec(gx, x.shape(), dev)?) } else { None };
         Ok((grad_x, Some(Tensor::from_vec(gw, w.shape(), dev)?), Some(Tensor::from_vec(gb, b.shape(), dev)?)))
     }
 }

@@ -23,6 +23,8 @@ use std::sync::Arc;
 use std::thread::{JoinHandle, Thread};
 use std::time::{Duration, Instant};
 
+use super::denormals::{float_mode, set_float_mode};
+
 /// How long a waiting side spins before it parks. Long enough to span the gaps between the
 /// split layers of one update and between updates of a training loop (an actor step or an
 /// environment step); waking a parked thread on this VM took 100-200 us, more than the half
@@ -141,26 +143,6 @@ pub fn join<A: FnOnce(), B: FnOnce() + Send>(a: A, b: B) {
     }
 }
 
-fn read_mxcsr() -> u32 {
-    #[cfg(target_arch = "x86_64")]
-    {
-        let mut csr: u32 = 0;
-        // SAFETY: reads this thread's SSE control register.
-        unsafe { std::arch::asm!("stmxcsr [{}]", in(reg) &mut csr, options(nostack)) };
-        csr
-    }
-    #[cfg(not(target_arch = "x86_64"))]
-    0
-}
-
-fn write_mxcsr(_csr: u32) {
-    #[cfg(target_arch = "x86_64")]
-    // SAFETY: sets this thread's SSE control register to a value read from another thread's.
-    unsafe {
-        std::arch::asm!("ldmxcsr [{}]", in(reg) &_csr, options(nostack, readonly))
-    };
-}
-
 /// Spins for up to SPIN, then parks, until `state` is one of `wanted`.
 fn wait_for(state: &AtomicU32, wanted: &[u32]) -> u32 {
     let started = Instant::now();
@@ -188,7 +170,7 @@ impl Helper {
         let shared = Arc::new(Shared {
             state: AtomicU32::new(IDLE),
             job: UnsafeCell::new(None),
-            mxcsr: AtomicU32::new(read_mxcsr()),
+            mxcsr: AtomicU32::new(float_mode()),
             panic: UnsafeCell::new(None),
             owner: std::thread::current(),
         });
@@ -201,7 +183,7 @@ impl Helper {
     }
 
     fn serve(shared: &Shared) {
-        let mut mxcsr = read_mxcsr();
+        let mut mxcsr = float_mode();
         loop {
             if wait_for(&shared.state, &[POSTED, SHUTDOWN]) == SHUTDOWN {
                 return;
@@ -211,7 +193,7 @@ impl Helper {
             }
             let wanted = shared.mxcsr.load(Ordering::Relaxed);
             if wanted != mxcsr {
-                write_mxcsr(wanted);
+                set_float_mode(wanted);
                 mxcsr = wanted;
             }
             // SAFETY: POSTED hands `job` to this thread; the owner keeps the closure alive until
@@ -230,7 +212,7 @@ impl Helper {
     fn post(&self, job: Job) {
         // SAFETY: the helper is IDLE, so it does not touch `job` until POSTED is stored.
         unsafe { *self.shared.job.get() = Some(job) };
-        self.shared.mxcsr.store(read_mxcsr(), Ordering::Relaxed);
+        self.shared.mxcsr.store(float_mode(), Ordering::Relaxed);
         self.shared.state.store(POSTED, Ordering::Release);
         self.thread.as_ref().expect("helper thread").thread().unpark();
     }
