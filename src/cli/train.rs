@@ -39,6 +39,11 @@ pub struct TrainArgs {
     /// Replace an existing run directory.
     #[arg(long)]
     pub force: bool,
+    /// If --out already holds this same run (same env, options, hyperparameters and seed),
+    /// continue it instead of refusing; a finished run is left as it is. What sweep jobs use,
+    /// so that a requeued or resubmitted job never starts over.
+    #[arg(long, conflicts_with = "force")]
+    pub resume_if_exists: bool,
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -103,6 +108,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
         if args.init_from.as_ref().is_some_and(|p| !p.exists()) {
             bail!("checkpoint {} does not exist", args.init_from.as_ref().unwrap().display());
         }
+        if args.resume_if_exists && out.join("config.toml").exists() {
+            same_run_or_error(&out, &env_cfg, &cfg, args.seed)?;
+            println!("{} holds this run already: resuming it", out.display());
+            let summary = train::resume(&out, &control)?;
+            return report(&args, &summary);
+        }
         println!(
             "training {} on {env}, seed {}, {} steps -> {}",
             algo.name(),
@@ -112,6 +123,40 @@ pub fn run(args: TrainArgs) -> Result<()> {
         );
         train::train(env_cfg, cfg, args.seed, &out, args.init_from.as_deref(), args.force, &control)?
     };
+    report(&args, &summary)
+}
+
+/// Refuses to continue a run directory that holds a different run than the one asked for.
+fn same_run_or_error(
+    out: &std::path::Path,
+    env: &EnvConfig,
+    cfg: &locobench::agents::TrainConfig,
+    seed: u64,
+) -> Result<()> {
+    let existing = train::read_run_config(out)?;
+    let mut env = env.clone();
+    env.options = env.resolved_options()?;
+    let mut differs = Vec::new();
+    if existing.seed != seed {
+        differs.push(format!("seed {} (asked {seed})", existing.seed));
+    }
+    if existing.env != env {
+        differs.push("environment or its options".to_string());
+    }
+    if existing.train != *cfg {
+        differs.push("hyperparameters".to_string());
+    }
+    if !differs.is_empty() {
+        bail!(
+            "{} holds a different run (it differs in: {}); choose another --out, or --force to replace it",
+            out.display(),
+            differs.join(", ")
+        );
+    }
+    Ok(())
+}
+
+fn report(args: &TrainArgs, summary: &train::RunSummary) -> Result<()> {
     if let Some(e) = &summary.last_eval {
         println!(
             "last evaluation at step {}: {:.2} ± {:.2} over {} episodes",
@@ -123,6 +168,9 @@ pub fn run(args: TrainArgs) -> Result<()> {
     }
     match summary.outcome {
         Outcome::Finished => println!("finished; checkpoint {}", summary.checkpoint.display()),
+        Outcome::AlreadyFinished => {
+            println!("already finished at step {}; checkpoint {}", summary.steps, summary.checkpoint.display())
+        }
         Outcome::Stopped => println!(
             "stopped at step {}; checkpoint {} (continue with `locobench train --resume {}`)",
             summary.steps,

@@ -7,11 +7,11 @@ pub mod checkpoint;
 pub mod config;
 pub mod evaluate;
 pub mod metrics;
+pub mod run_lock;
 pub mod seeds;
+pub mod stop;
 
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
@@ -46,8 +46,10 @@ pub struct RunConfig {
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Outcome {
     Finished,
-    /// Stopped early (Ctrl-C or `stop_after`); `resume` continues it.
+    /// Stopped early (a signal, see `stop`, or `stop_after`); `resume` continues it.
     Stopped,
+    /// `resume` found the run already finished and changed nothing.
+    AlreadyFinished,
 }
 
 #[derive(Debug)]
@@ -80,18 +82,6 @@ pub struct RunControl {
     pub threads: usize,
 }
 
-/// The process-wide Ctrl-C flag (the handler is installed once, on first use).
-pub fn interrupt_flag() -> Arc<AtomicBool> {
-    static FLAG: OnceLock<Arc<AtomicBool>> = OnceLock::new();
-    FLAG.get_or_init(|| {
-        let flag = Arc::new(AtomicBool::new(false));
-        let f = Arc::clone(&flag);
-        let _ = ctrlc::set_handler(move || f.store(true, Ordering::SeqCst));
-        flag
-    })
-    .clone()
-}
-
 fn git_commit() -> Option<String> {
     let out = std::process::Command::new("git")
         .args(["rev-parse", "HEAD"])
@@ -114,6 +104,9 @@ pub fn train(
     train.validate()?;
     let mut env = env;
     env.options = env.resolved_options()?;
+    if let Some(lock) = run_lock::read_lock(run_dir).filter(|l| l.alive() == Some(true)) {
+        bail!("{} is being trained by process {} on this host; stop it first", run_dir.display(), lock.pid);
+    }
     if run_dir.exists() && std::fs::read_dir(run_dir)?.next().is_some() {
         if !force {
             bail!(
@@ -137,6 +130,7 @@ pub fn train(
         checkpoint::load_weights(ckpt, trainer.agent.as_ref())?;
     }
     std::fs::create_dir_all(run_dir)?;
+    let _lock = run_lock::RunLock::acquire(run_dir)?;
     write_bytes_atomic(&run_dir.join("config.toml"), toml::to_string(&run)?.as_bytes())?;
     trainer.run(control)
 }
@@ -144,8 +138,20 @@ pub fn train(
 /// Continues a run from its newest checkpoint.
 pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
     let run = read_run_config(run_dir)?;
-    let mut trainer = Trainer::new(run_dir, &run)?;
     let ckpt = checkpoint::latest(run_dir)?;
+    let saved = checkpoint::load_state(&ckpt)?;
+    if saved.step >= run.train.total_steps {
+        return Ok(RunSummary {
+            run_dir: run_dir.to_path_buf(),
+            outcome: Outcome::AlreadyFinished,
+            steps: saved.step,
+            last_eval: None,
+            best_eval_mean: None,
+            checkpoint: ckpt,
+        });
+    }
+    let _lock = run_lock::RunLock::acquire(run_dir)?;
+    let mut trainer = Trainer::new(run_dir, &run)?;
     let (state, buffer) = checkpoint::load_all(&ckpt, trainer.agent.as_mut())?;
     trainer.buffer = buffer;
     trainer.rng = state.rng.restore()?;
@@ -157,6 +163,41 @@ pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
         trainer.metrics = metrics::read(&metrics_path)?.into_iter().filter(|r| r.step <= state.step).collect();
     }
     trainer.run(control)
+}
+
+/// How far a run directory has got, from its files alone (no process needed).
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunProgress {
+    pub total_steps: u64,
+    /// Steps of the newest checkpoint (what a resume starts from).
+    pub checkpoint_step: Option<u64>,
+    /// Newest step in metrics.csv (written at every evaluation, so ahead of the checkpoint
+    /// while a run trains).
+    pub metrics_step: Option<u64>,
+    pub last_eval: Option<f64>,
+}
+
+impl RunProgress {
+    pub fn finished(&self) -> bool {
+        self.checkpoint_step.is_some_and(|s| s >= self.total_steps)
+    }
+
+    pub fn step(&self) -> u64 {
+        self.checkpoint_step.max(self.metrics_step).unwrap_or(0)
+    }
+}
+
+pub fn run_progress(run_dir: &Path) -> Result<RunProgress> {
+    let run = read_run_config(run_dir)?;
+    let checkpoint_step =
+        checkpoint::latest(run_dir).ok().and_then(|c| checkpoint::load_state(&c).ok()).map(|s| s.step);
+    let rows = metrics::read(&run_dir.join("metrics.csv")).unwrap_or_default();
+    Ok(RunProgress {
+        total_steps: run.train.total_steps,
+        checkpoint_step,
+        metrics_step: rows.iter().map(|r| r.step).max(),
+        last_eval: rows.iter().rev().find_map(|r| r.eval_mean),
+    })
 }
 
 pub fn read_run_config(run_dir: &Path) -> Result<RunConfig> {
@@ -241,7 +282,7 @@ impl Trainer {
         crate::agents::keep_freed_memory();
         let _helper = (control.threads >= 2).then(crate::agents::second_core::HelperGuard::start);
         let cfg = self.cfg.clone();
-        let interrupted = interrupt_flag();
+        let signals = stop::stop_signals();
         let bar = if control.show_progress { ProgressBar::new(cfg.total_steps) } else { ProgressBar::hidden() };
         bar.set_style(
             ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} steps, {per_sec} {msg}")
@@ -273,8 +314,8 @@ impl Trainer {
             if self.step >= cfg.total_steps || solved {
                 break Outcome::Finished;
             }
-            if interrupted.load(Ordering::SeqCst) || (need_reset && control.stop_after.is_some_and(|s| self.step >= s))
-            {
+            let stop_at_boundary = signals.at_episode_end() || control.stop_after.is_some_and(|s| self.step >= s);
+            if signals.now() || (need_reset && stop_at_boundary) {
                 break Outcome::Stopped;
             }
             if need_reset {

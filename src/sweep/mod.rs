@@ -2,8 +2,14 @@
 //! each job a plain `locobench train` command line, run as separate processes a few at a time.
 //!
 //! Layout of a sweep directory: `sweep.toml` (what was asked), `jobs.txt` (one self-contained
-//! command per line, for a cluster scheduler), `runs/<job>/` (run directories), `logs/<job>.log`.
-//! Running the same sweep again resumes stopped jobs and skips finished ones.
+//! command per line, for a cluster scheduler), `runs/<job>/` (run directories), `logs/<job>.log`
+//! and `logs/<job>.exit` (the exit status of the job's last process). On Slurm (`slurm.rs`) also
+//! `slurm.sh` (the array script) and `slurm.toml` (the submissions). Every job line carries
+//! `--resume-if-exists`, so running it again (the same sweep again, a requeued array task, a
+//! resubmission) continues a stopped run and leaves a finished one alone.
+pub mod slurm;
+pub mod status;
+
 use std::path::{Path, PathBuf};
 use std::process::{Command, Stdio};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -82,7 +88,7 @@ impl Job {
     }
 }
 
-fn shell_quote(s: &str) -> String {
+pub(crate) fn shell_quote(s: &str) -> String {
     if !s.is_empty() && s.chars().all(|c| c.is_ascii_alphanumeric() || "-_./=,:+".contains(c)) {
         s.to_string()
     } else {
@@ -139,7 +145,12 @@ pub fn jobs(spec: &SweepSpec, sweep_dir: &Path) -> Result<Vec<Job>> {
                 for o in options {
                     args.extend(["--option".into(), o]);
                 }
-                args.extend(["--out".into(), run_dir.display().to_string(), "--quiet".into()]);
+                args.extend([
+                    "--out".into(),
+                    run_dir.display().to_string(),
+                    "--resume-if-exists".into(),
+                    "--quiet".into(),
+                ]);
                 out.push(Job { name, run_dir, args });
             }
         }
@@ -147,12 +158,45 @@ pub fn jobs(spec: &SweepSpec, sweep_dir: &Path) -> Result<Vec<Job>> {
     Ok(out)
 }
 
-/// Writes `sweep.toml` and `jobs.txt`.
+/// Writes `sweep.toml` and `jobs.txt`. A directory that holds another sweep is refused: its
+/// job numbers (lines of jobs.txt) would no longer mean the same runs.
 pub fn write_plan(spec: &SweepSpec, sweep_dir: &Path, jobs: &[Job]) -> Result<()> {
+    if let Ok(existing) = read_spec(sweep_dir) {
+        anyhow::ensure!(
+            existing == *spec,
+            "{} holds another sweep (its sweep.toml differs from this command's grid, algorithms, seeds, steps, \
+             --set or --option); choose another --out",
+            sweep_dir.display()
+        );
+    }
     std::fs::create_dir_all(sweep_dir).with_context(|| format!("creating {}", sweep_dir.display()))?;
     write_bytes_atomic(&sweep_dir.join("sweep.toml"), toml::to_string(spec)?.as_bytes())?;
     let lines: String = jobs.iter().map(|j| j.command_line() + "\n").collect();
     write_bytes_atomic(&sweep_dir.join("jobs.txt"), lines.as_bytes())
+}
+
+/// The `sweep.toml` of a sweep directory.
+pub fn read_spec(sweep_dir: &Path) -> Result<SweepSpec> {
+    let path = sweep_dir.join("sweep.toml");
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("{} is not a sweep directory (no sweep.toml)", sweep_dir.display()))?;
+    toml::from_str(&text).with_context(|| format!("{} is corrupt", path.display()))
+}
+
+/// The plan of an existing sweep directory: its spec and jobs, in jobs.txt order.
+pub fn read_plan(sweep_dir: &Path) -> Result<(SweepSpec, Vec<Job>)> {
+    let spec = read_spec(sweep_dir)?;
+    let jobs = jobs(&spec, sweep_dir)?;
+    Ok((spec, jobs))
+}
+
+/// Where a job writes its output and, once its process ended, its exit status.
+pub fn log_path(sweep_dir: &Path, job: &Job) -> PathBuf {
+    sweep_dir.join("logs").join(format!("{}.log", job.name))
+}
+
+pub fn exit_path(sweep_dir: &Path, job: &Job) -> PathBuf {
+    sweep_dir.join("logs").join(format!("{}.exit", job.name))
 }
 
 #[derive(Debug, Clone, PartialEq)]
@@ -164,7 +208,7 @@ pub struct JobOutcome {
 }
 
 /// Runs the jobs with `binary`, `parallel` at a time. A job whose run directory already holds
-/// a run is resumed instead (a finished run resumes as a no-op). `on_done` sees each outcome.
+/// its run continues it (a finished run is left alone). `on_done` sees each outcome.
 pub fn run_jobs(
     binary: &Path,
     jobs: &[Job],
@@ -181,24 +225,22 @@ pub fn run_jobs(
             scope.spawn(|| loop {
                 let i = next.fetch_add(1, Ordering::SeqCst);
                 let Some(job) = jobs.get(i) else { break };
-                let log = logs.join(format!("{}.log", job.name));
+                let log = log_path(sweep_dir, job);
+                let exit = exit_path(sweep_dir, job);
+                let _ = std::fs::remove_file(&exit);
                 let started = std::time::Instant::now();
-                let mut args: Vec<String> = if job.run_dir.join("config.toml").exists() {
-                    vec!["train".into(), "--resume".into(), job.run_dir.display().to_string(), "--quiet".into()]
-                } else {
-                    job.args.clone()
-                };
+                let mut args = job.args.clone();
                 if parallel > 1 {
                     // the cores go to the parallel jobs, not to helper threads
                     args.extend(["--threads".into(), "1".into()]);
                 }
-                let ok = std::fs::File::create(&log)
-                    .and_then(|f| {
-                        let err = f.try_clone()?;
-                        Command::new(binary).args(&args).stdin(Stdio::null()).stdout(f).stderr(err).status()
-                    })
-                    .map(|s| s.success())
-                    .unwrap_or(false);
+                let status = std::fs::File::create(&log).and_then(|f| {
+                    let err = f.try_clone()?;
+                    Command::new(binary).args(&args).stdin(Stdio::null()).stdout(f).stderr(err).status()
+                });
+                let code = status.as_ref().ok().and_then(|s| s.code()).unwrap_or(-1);
+                let _ = write_bytes_atomic(&exit, format!("{code}\n").as_bytes());
+                let ok = code == 0;
                 let outcome = JobOutcome { name: job.name.clone(), ok, seconds: started.elapsed().as_secs_f64(), log };
                 on_done(&outcome);
                 results.lock().unwrap()[i] = Some(outcome);
@@ -240,7 +282,7 @@ mod tests {
         assert_eq!(
             j.command_line(),
             "locobench train --env minitaur --algo sac --seed 0 --steps 1000 --reward drift=0 \
-             --set 'hidden=[64,64]' --set tau=0.01 --out sw/runs/sac-drift0-tau0.01-seed0 --quiet"
+             --set 'hidden=[64,64]' --set tau=0.01 --out sw/runs/sac-drift0-tau0.01-seed0 --resume-if-exists --quiet"
         );
         let names: std::collections::BTreeSet<_> = jobs.iter().map(|j| j.name.clone()).collect();
         assert_eq!(names.len(), jobs.len(), "names are unique");
