@@ -1,199 +1,173 @@
-//! `cargo bench --bench returns`: TD3, SAC and DDPG trained on every environment over several
-//! seeds, the Raibert baseline on Minitaur and Ant, and the published anchors, as one table per
-//! environment (printed, and written as CSV and Markdown).
+//! `cargo bench --bench returns [-- TIER]`: TD3, SAC and DDPG trained over seeds with their
+//! published settings, one table per environment: our evaluation at the published curves' step
+//! marks with the published mean ± std beside it, the final evaluation, the random policy and
+//! (Minitaur, Ant) the Raibert/QP baseline.
 //!
-//! The default budget is small enough for about half an hour on 2 cores: 5,000 steps per run,
-//! 2 seeds, 2 runs at a time, with warm-up and learning start shortened to 1,000 steps so that
-//! learning happens at all (every other hyperparameter is the published one). The full
-//! benchmark is `LOCOBENCH_RETURNS_FULL=1 cargo bench --bench returns`: 1M steps, 5 seeds, the
-//! published settings untouched. Other knobs (environment variables):
-//!   LOCOBENCH_RETURNS_STEPS, LOCOBENCH_RETURNS_SEEDS, LOCOBENCH_RETURNS_ENVS (comma list),
-//!   LOCOBENCH_RETURNS_ALGOS, LOCOBENCH_RETURNS_JOBS, LOCOBENCH_RETURNS_OUT (default
-//!   target/bench-returns; the runs stay there for `locobench report`), LOCOBENCH_RETURNS_KEEP=1
-//!   (keep the runs already there: finished ones are not trained again, only tabulated).
+//! Tiers (`LOCOBENCH_RETURNS_TIER=quick|standard|full`, or the tier's name as an argument):
+//!   quick     (default, about an hour on 2 cores) InvertedPendulum solved, HalfCheetah at 100k,
+//!             Minitaur walking with SAC at 150k; 2 seeds each;
+//!   standard  the budgets researchers quote: HalfCheetah and Ant with all three algorithms,
+//!             Humanoid and Minitaur with TD3 and SAC, 300k steps, 2 seeds (about 40 hours);
+//!   full      the published protocol: every env and algorithm, 1M steps, 5 seeds (weeks here;
+//!             meant for a cluster, see LOCOBENCH_RETURNS_SLURM).
+//! Runs live under `target/bench-returns/<tier>/<env>/runs/` and the bench resumes where it
+//! stopped: finished runs are kept and tabulated, stopped ones continue (`LOCOBENCH_RETURNS_FRESH=1`
+//! starts over). Other knobs: LOCOBENCH_RETURNS_JOBS (runs at a time, default 2),
+//! LOCOBENCH_RETURNS_OUT, LOCOBENCH_RETURNS_ENVS (restrict to these envs).
+//!
+//! On a Slurm cluster, `LOCOBENCH_RETURNS_SLURM=1` submits every run as a `locobench sweep
+//! --slurm` array instead of training here (LOCOBENCH_RETURNS_SLURM_CPUS, default 1, and
+//! LOCOBENCH_RETURNS_SBATCH, further sbatch options separated by spaces, e.g.
+//! "--partition=cpu --time=12:00:00"), returns at once and tabulates whatever has finished; run
+//! it again later to submit what is missing and tabulate more.
 use std::fmt::Write as _;
-use std::path::PathBuf;
-use std::time::Instant;
+use std::path::{Path, PathBuf};
 
-use anyhow::{Context, Result};
+use anyhow::{bail, Context, Result};
 use locobench::controller::baseline::{baseline_controller, baseline_env};
 use locobench::controller::measure::measure;
-use locobench::envs::make;
+use locobench::envs::{make, EnvConfig};
 use locobench::io::write_bytes_atomic;
-use locobench::report::anchors::bundled_anchors;
+use locobench::policy::RandomPolicy;
+use locobench::report::anchors::{bundled_anchors, published_curve};
 use locobench::report::curves::mean_std;
-use locobench::report::runs::find_runs;
+use locobench::report::runs::{find_runs, Run};
 use locobench::report::{fmt_return, group_runs, summarise};
+use locobench::rollout::{run_episodes, StepView};
+use locobench::sweep::slurm::{submit, SlurmOptions, Submitted};
 use locobench::sweep::{jobs, run_jobs, write_plan, SweepSpec};
+use locobench::train::run_progress;
+
+/// One environment's share of a tier.
+struct Block {
+    env: &'static str,
+    algos: &'static [&'static str],
+    steps: u64,
+    seeds: u64,
+    /// Extra hyperparameters (only the smoke tier shrinks networks).
+    set: &'static [&'static str],
+}
+
+const ALL: &[&str] = &["td3", "sac", "ddpg"];
+
+fn tier(name: &str) -> Result<Vec<Block>> {
+    let b = |env, algos, steps, seeds| Block { env, algos, steps, seeds, set: &[] };
+    Ok(match name {
+        // `cargo test --all-targets` runs this binary without `--bench`: the whole path on a
+        // tiny budget.
+        "smoke" => vec![Block {
+            env: "inverted-pendulum",
+            algos: &["td3"],
+            steps: 300,
+            seeds: 2,
+            set: &["hidden=[16,16],batch_size=32,warmup_steps=100,learning_starts=100,eval_every=100,eval_episodes=2"],
+        }],
+        "quick" => vec![
+            b("inverted-pendulum", ALL, 25_000, 2),
+            b("half-cheetah", ALL, 100_000, 2),
+            b("minitaur", &["sac"], 150_000, 2),
+        ],
+        "standard" => vec![
+            b("inverted-pendulum", ALL, 25_000, 2),
+            b("half-cheetah", ALL, 300_000, 2),
+            b("ant", ALL, 300_000, 2),
+            b("humanoid", &["td3", "sac"], 300_000, 2),
+            b("minitaur", &["td3", "sac"], 300_000, 2),
+        ],
+        "full" => ["inverted-pendulum", "half-cheetah", "ant", "humanoid", "minitaur"]
+            .into_iter()
+            .map(|env| b(env, ALL, if env == "inverted-pendulum" { 25_000 } else { 1_000_000 }, 5))
+            .collect(),
+        other => bail!("unknown returns tier '{other}'; tiers: quick, standard, full"),
+    })
+}
 
 fn var<T: std::str::FromStr>(name: &str) -> Option<T> {
     std::env::var(name).ok().and_then(|v| v.parse().ok())
 }
 
-fn list(name: &str, default: &str) -> Vec<String> {
-    std::env::var(name).unwrap_or_else(|_| default.to_string()).split(',').map(|s| s.trim().to_string()).collect()
-}
-
 fn main() -> Result<()> {
-    // `cargo test --all-targets` runs this binary without `--bench`: a smoke run of the whole
-    // path (jobs, tables, baseline) on a tiny budget instead of half an hour of training.
-    let smoke = !std::env::args().any(|a| a == "--bench");
-    let full = std::env::var("LOCOBENCH_RETURNS_FULL").is_ok_and(|v| v == "1");
-    let steps: u64 =
-        if smoke { 300 } else { var("LOCOBENCH_RETURNS_STEPS").unwrap_or(if full { 1_000_000 } else { 5_000 }) };
-    let seeds: u64 = if smoke { 2 } else { var("LOCOBENCH_RETURNS_SEEDS").unwrap_or(if full { 5 } else { 2 }) };
-    let parallel: usize = var("LOCOBENCH_RETURNS_JOBS").unwrap_or(2);
-    let envs = if smoke {
-        vec!["inverted-pendulum".to_string()]
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    let smoke = !args.iter().any(|a| a == "--bench");
+    let tier_name = if smoke {
+        "smoke".to_string()
     } else {
-        list("LOCOBENCH_RETURNS_ENVS", "inverted-pendulum,half-cheetah,ant,humanoid,minitaur")
+        args.iter()
+            .find(|a| !a.starts_with('-'))
+            .cloned()
+            .or_else(|| std::env::var("LOCOBENCH_RETURNS_TIER").ok())
+            .unwrap_or_else(|| "quick".into())
     };
-    let algos = if smoke { vec!["td3".to_string()] } else { list("LOCOBENCH_RETURNS_ALGOS", "td3,sac,ddpg") };
-    let default_out = if smoke { "target/bench-returns-smoke" } else { "target/bench-returns" };
-    let out = PathBuf::from(std::env::var("LOCOBENCH_RETURNS_OUT").unwrap_or_else(|_| default_out.into()));
-    let binary = PathBuf::from(env!("CARGO_BIN_EXE_locobench"));
-
-    // A short budget cannot afford 10k random steps; shorten warm-up only, and say so.
-    let mut set = vec![format!("buffer_capacity={}", steps.max(1000)), format!("checkpoint_every={steps}")];
-    if smoke {
-        set.push("hidden=[16,16],batch_size=32".into());
+    let mut blocks = tier(&tier_name)?;
+    if let Ok(only) = std::env::var("LOCOBENCH_RETURNS_ENVS") {
+        let only: Vec<&str> = only.split(',').map(str::trim).collect();
+        blocks.retain(|b| only.contains(&b.env));
     }
-    if !full {
-        let start = (steps / 5).min(1000);
-        let eval_every = (steps / 5).max(1);
-        set.push(format!("warmup_steps={start},learning_starts={start},eval_every={eval_every},eval_episodes=5"));
-    }
-    let keep = std::env::var("LOCOBENCH_RETURNS_KEEP").is_ok_and(|v| v == "1");
-    if out.exists() && !keep {
-        std::fs::remove_dir_all(&out).with_context(|| format!("clearing {}", out.display()))?;
-    }
-    println!(
-        "returns bench: {} envs x {} algorithms x {seeds} seeds, {steps} steps each, {parallel} at a time -> {}",
-        envs.len(),
-        algos.len(),
-        out.display()
+    let parallel: usize = var("LOCOBENCH_RETURNS_JOBS").unwrap_or(2);
+    let slurm = std::env::var("LOCOBENCH_RETURNS_SLURM").is_ok_and(|v| v == "1");
+    let out = PathBuf::from(
+        std::env::var("LOCOBENCH_RETURNS_OUT").unwrap_or_else(|_| format!("target/bench-returns/{tier_name}")),
     );
-    for env in &envs {
+    if std::env::var("LOCOBENCH_RETURNS_FRESH").is_ok_and(|v| v == "1") || smoke {
+        let _ = std::fs::remove_dir_all(&out);
+    }
+    let binary = PathBuf::from(env!("CARGO_BIN_EXE_locobench"));
+    println!(
+        "returns bench, tier {tier_name}: {} -> {}{}",
+        blocks
+            .iter()
+            .map(|b| format!("{} {}x{}x{}", b.env, b.algos.len(), b.seeds, b.steps))
+            .collect::<Vec<_>>()
+            .join(", "),
+        out.display(),
+        if slurm { " (through Slurm)" } else { "" }
+    );
+
+    for block in &blocks {
         let spec = SweepSpec {
-            env: env.clone(),
-            algos: algos.clone(),
+            env: block.env.to_string(),
+            algos: block.algos.iter().map(|a| a.to_string()).collect(),
             grid: vec![],
-            seeds: (0..seeds).collect(),
-            steps: Some(steps),
-            set: set.clone(),
+            seeds: (0..block.seeds).collect(),
+            steps: Some(block.steps),
+            set: block.set.iter().map(|s| s.to_string()).collect(),
             options: vec![],
         };
-        let dir = out.join(env);
+        let dir = out.join(block.env);
         let js = jobs(&spec, &dir)?;
         write_plan(&spec, &dir, &js)?;
-        let outcomes = run_jobs(&binary, &js, &dir, parallel, &|o| {
-            println!("  {env} {} {} in {:.0} s", o.name, if o.ok { "ok" } else { "FAILED" }, o.seconds)
-        })?;
-        for o in outcomes.iter().filter(|o| !o.ok) {
-            eprintln!("job {} failed; see {}", o.name, o.log.display());
-        }
-    }
-
-    let anchors = bundled_anchors();
-    let mut md = String::new();
-    let mut csv = String::from(
-        "env,policy,seeds,steps,final_mean,final_std,return_at_25pct,return_at_50pct,return_at_100pct,normalised_auc,wall_time_s,steps_per_s\n",
-    );
-    let marks = [steps / 4, steps / 2, steps];
-    let mut total_wall = 0.0;
-    let fmt = |v: Option<f64>| v.map_or("–".to_string(), fmt_return);
-    for env in &envs {
-        let runs = match find_runs(&[out.join(env)]) {
-            Ok(r) => r,
-            Err(e) => {
-                eprintln!("{env}: {e:#}");
-                continue;
+        if slurm {
+            let opts = SlurmOptions {
+                cpus_per_task: var("LOCOBENCH_RETURNS_SLURM_CPUS").unwrap_or(1),
+                extra: std::env::var("LOCOBENCH_RETURNS_SBATCH")
+                    .unwrap_or_default()
+                    .split_whitespace()
+                    .map(String::from)
+                    .collect(),
+                ..SlurmOptions::default()
+            };
+            match submit(&dir, &js, &opts, &binary, false)? {
+                Submitted::Submitted { submission, .. } => {
+                    println!("  {}: submitted Slurm job {} (tasks {})", block.env, submission.job_id, submission.tasks)
+                }
+                Submitted::Nothing { finished, queued } => {
+                    println!("  {}: {finished} runs finished, {queued} queued or running", block.env)
+                }
+                Submitted::DryRun { .. } => unreachable!("not a dry run"),
             }
-        };
-        let header = format!(
-            "| policy | seeds | final eval | @{} | @{} | @{} | norm. AUC | wall min | steps/s | published |",
-            marks[0], marks[1], marks[2]
-        );
-        let _ = writeln!(md, "## {env}\n\n{header}\n|---|---|---|---|---|---|---|---|---|---|");
-        println!("\n{env}\n{header}");
-        total_wall += runs.iter().map(|r| r.wall_time()).sum::<f64>();
-        for (group, rs) in group_runs(&runs) {
-            let s = summarise(&group, &rs);
-            let wall = s.wall_time;
-            let rate = if wall > 0.0 { s.steps as f64 / wall } else { f64::NAN };
-            let published: Vec<String> = anchors
-                .iter()
-                .filter(|a| a.env == *env && a.algo == group.algo)
-                .map(|a| {
-                    let sd = a.std.map_or(String::new(), |s| format!(" ± {s}"));
-                    let source = a.source.split([',', '(']).next().unwrap_or("").trim();
-                    format!("{}{sd} @{}k ({source})", a.value, a.steps / 1000)
-                })
-                .collect();
-            let at: Vec<Option<f64>> = marks.iter().map(|&m| s.curve.at(m)).collect();
-            let row = format!(
-                "| {} | {} | {} ± {} | {} | {} | {} | {} | {:.1} | {:.0} | {} |",
-                group.algo,
-                s.seeds,
-                fmt(Some(s.final_mean)),
-                fmt(Some(s.final_std)),
-                fmt(at[0]),
-                fmt(at[1]),
-                fmt(at[2]),
-                fmt(Some(s.auc)),
-                wall / 60.0,
-                rate,
-                if published.is_empty() { "–".into() } else { published.join("; ") }
-            );
-            println!("{row}");
-            let _ = writeln!(md, "{row}");
-            let _ = writeln!(
-                csv,
-                "{env},{},{},{},{},{},{},{},{},{},{:.1},{:.1}",
-                group.algo,
-                s.seeds,
-                s.steps,
-                s.final_mean,
-                s.final_std,
-                at[0].unwrap_or(f64::NAN),
-                at[1].unwrap_or(f64::NAN),
-                at[2].unwrap_or(f64::NAN),
-                s.auc,
-                wall,
-                rate
-            );
+        } else {
+            let outcomes = run_jobs(&binary, &js, &dir, parallel, &|o| {
+                println!("  {} {} {} in {:.0} s", block.env, o.name, if o.ok { "ok" } else { "FAILED" }, o.seconds)
+            })?;
+            for o in outcomes.iter().filter(|o| !o.ok) {
+                eprintln!("job {} failed; see {}", o.name, o.log.display());
+            }
         }
-        if env == "minitaur" || env == "ant" {
-            let speed = if env == "minitaur" { 0.35 } else { 0.5 };
-            let mut e = make(&baseline_env(env)?)?;
-            let mut c = baseline_controller(env, speed, None)?;
-            let t = Instant::now();
-            let eps = measure(e.as_mut(), c.as_mut(), 5, 0, speed)?;
-            let (m, sd) = mean_std(&eps.iter().map(|x| x.episode_return).collect::<Vec<_>>());
-            let falls = eps.iter().filter(|x| x.fell).count();
-            let v = mean_std(&eps.iter().map(|x| x.mean_speed).collect::<Vec<_>>()).0;
-            let row = format!(
-                "| raibert @{speed} m/s | 5 episodes | {} ± {} | – | – | – | – | {:.1} | – | mean speed {v:.2} m/s, falls {falls}/5 |",
-                fmt_return(m),
-                fmt_return(sd),
-                t.elapsed().as_secs_f64() / 60.0
-            );
-            println!("{row}");
-            let _ = writeln!(md, "{row}");
-            let _ = writeln!(csv, "{env},raibert,5,,{m},{sd},,,,,{:.1},", t.elapsed().as_secs_f64());
-        }
-        md.push('\n');
     }
-    let header = format!(
-        "# Returns bench\n\n{steps} steps per run, {seeds} seeds{}, {parallel} runs at a time; the runs' wall times add \
-         up to {:.0} min. Evaluation: mean return of the deterministic policy over the evaluation episodes; mean ± std \
-         over seeds.\n\n",
-        if full { " (published settings)" } else { ", warm-up and learning start shortened to 1,000 steps" },
-        total_wall / 60.0
-    );
-    let md = header + &md;
-    write_bytes_atomic(&out.join("returns.md"), md.as_bytes())?;
-    write_bytes_atomic(&out.join("returns.csv"), csv.as_bytes())?;
+    let tables = tabulate(&blocks, &out, &tier_name)?;
+    write_bytes_atomic(&out.join("returns.md"), tables.markdown.as_bytes())?;
+    write_bytes_atomic(&out.join("returns.csv"), tables.csv.as_bytes())?;
+    print!("\n{}", tables.markdown);
     println!(
         "\nwrote {} and {}; runs under {} (`locobench report --runs {}`)",
         out.join("returns.md").display(),
@@ -202,4 +176,138 @@ fn main() -> Result<()> {
         out.display()
     );
     Ok(())
+}
+
+struct Tables {
+    markdown: String,
+    csv: String,
+}
+
+/// Step marks for the columns: the published curves' marks within the budget, or quarters of
+/// the budget when it is below the first mark.
+fn marks(steps: u64) -> Vec<u64> {
+    let published: Vec<u64> =
+        [100_000, 200_000, 300_000, 500_000, 1_000_000].into_iter().filter(|&m| m <= steps).collect();
+    if published.is_empty() {
+        vec![steps / 4, steps / 2, steps]
+    } else {
+        published
+    }
+}
+
+fn k(steps: u64) -> String {
+    if steps % 1000 == 0 {
+        format!("{}k", steps / 1000)
+    } else {
+        steps.to_string()
+    }
+}
+
+/// Mean return of the uniform random policy over 10 episodes (seed 0).
+fn random_return(env: &str) -> Result<(f64, f64)> {
+    let mut e = make(&EnvConfig::new(env))?;
+    let mut policy = RandomPolicy::new(0);
+    let eps = run_episodes(e.as_mut(), &mut policy, 10, 0, &mut |_: &StepView| Ok(()))?;
+    Ok(mean_std(&eps.iter().map(|x| x.episode_return).collect::<Vec<_>>()))
+}
+
+fn tabulate(blocks: &[Block], out: &Path, tier_name: &str) -> Result<Tables> {
+    let anchors = bundled_anchors();
+    let fmt = |v: Option<f64>| v.map_or("–".to_string(), fmt_return);
+    let mut md = format!(
+        "# Returns bench, tier `{tier_name}`\n\nPublished hyperparameters (src/agents/config.rs, src/train/presets.toml). \
+         Evaluation: mean return of the deterministic policy over 10 episodes (InvertedPendulum: 5) every 5k steps \
+         (1k); each cell is the mean over seeds of that evaluation, with the published learning curve's mean ± std \
+         over seeds at the same step in brackets (baselines/published_curves.toml). Only finished runs are \
+         tabulated.\n\n"
+    );
+    let mut csv = String::from("env,policy,seeds,steps,mark,mean,std,published_mean,published_std\n");
+    let mut total_wall = 0.0;
+    for block in blocks {
+        let runs: Vec<Run> = find_runs(&[out.join(block.env)])
+            .unwrap_or_default()
+            .into_iter()
+            .filter(|r| run_progress(&r.dir).is_ok_and(|p| p.finished()))
+            .collect();
+        let marks = marks(block.steps);
+        let _ = write!(md, "## {}\n\n| policy | seeds |", block.env);
+        for m in &marks {
+            let _ = write!(md, " @{} |", k(*m));
+        }
+        let _ = writeln!(md, " final | wall min (mean) | steps/s | published at the end |");
+        let _ = writeln!(md, "|---|---|{}---|---|---|---|", "---|".repeat(marks.len()));
+        for (group, rs) in group_runs(&runs) {
+            let s = summarise(&group, &rs);
+            total_wall += rs.iter().map(|r| r.wall_time()).sum::<f64>();
+            let curve = published_curve(block.env, &group.algo);
+            let _ = write!(md, "| {} | {} |", group.algo, s.seeds);
+            for &m in &marks {
+                let ours = (s.steps >= m).then(|| s.curve.at(m)).flatten();
+                let theirs = curve.as_ref().and_then(|c| c.at(m));
+                let published = theirs.map_or(String::new(), |(pm, ps)| format!(" ({pm:.0} ± {ps:.0})"));
+                let sd = ours.and_then(|_| s.curve.steps.iter().rposition(|&t| t <= m).map(|i| s.curve.std[i]));
+                let _ = write!(md, " {}{} |", fmt(ours), published);
+                let _ = writeln!(
+                    csv,
+                    "{},{},{},{},{m},{},{},{},{}",
+                    block.env,
+                    group.algo,
+                    s.seeds,
+                    block.steps,
+                    ours.unwrap_or(f64::NAN),
+                    sd.unwrap_or(f64::NAN),
+                    theirs.map_or(f64::NAN, |t| t.0),
+                    theirs.map_or(f64::NAN, |t| t.1),
+                );
+            }
+            let end: Vec<String> = anchors
+                .iter()
+                .filter(|a| a.env == block.env && a.algo == group.algo && a.steps >= 1_000_000)
+                .map(|a| {
+                    let sd = a.std.map_or(String::new(), |s| format!(" ± {s}"));
+                    let source = a.source.split([',', '(']).next().unwrap_or("").trim();
+                    format!("{}{sd} @{} ({source})", a.value, k(a.steps))
+                })
+                .collect();
+            let rate = if s.wall_time > 0.0 { s.steps as f64 / s.wall_time } else { f64::NAN };
+            let _ = writeln!(
+                md,
+                " {} ± {} | {:.1} | {:.0} | {} |",
+                fmt(Some(s.final_mean)),
+                fmt(Some(s.final_std)),
+                s.wall_time / 60.0,
+                rate,
+                if end.is_empty() { "–".into() } else { end.join("; ") }
+            );
+        }
+        let empty = "| – ".repeat(marks.len());
+        let (rm, rsd) = random_return(block.env)?;
+        let _ = writeln!(
+            md,
+            "| random policy | 10 episodes {empty}| {} ± {} | – | – | – |",
+            fmt_return(rm),
+            fmt_return(rsd)
+        );
+        let _ = writeln!(csv, "{},random,10 episodes,0,0,{rm},{rsd},,", block.env);
+        if block.env == "minitaur" || block.env == "ant" {
+            let speed = if block.env == "minitaur" { 0.35 } else { 0.5 };
+            let mut e = make(&baseline_env(block.env)?)?;
+            let mut c = baseline_controller(block.env, speed, None)?;
+            let eps = measure(e.as_mut(), c.as_mut(), 10, 0, speed)?;
+            let (m, sd) = mean_std(&eps.iter().map(|x| x.episode_return).collect::<Vec<_>>());
+            let falls = eps.iter().filter(|x| x.fell).count();
+            let v = mean_std(&eps.iter().map(|x| x.mean_speed).collect::<Vec<_>>()).0;
+            let _ = writeln!(
+                md,
+                "| raibert @{speed} m/s | 10 episodes {empty}| {} ± {} | – | – | mean speed {v:.2} m/s, falls {falls}/10 |",
+                fmt_return(m),
+                fmt_return(sd)
+            );
+            let _ = writeln!(csv, "{},raibert,10 episodes,0,0,{m},{sd},,", block.env);
+        }
+        md.push('\n');
+    }
+    let _ = writeln!(md, "The tabulated runs' wall times add up to {:.0} min.", total_wall / 60.0);
+    let _ = std::fs::create_dir_all(out).context("creating the output directory");
+    Ok(Tables { markdown: md, csv })
 }

@@ -33,6 +33,46 @@ pub fn bundled_anchors() -> Vec<Anchor> {
         .anchor
 }
 
+/// A published learning curve: mean ± std over seeds at a few step marks.
+#[derive(Debug, Clone, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PublishedCurve {
+    pub env: String,
+    pub algo: String,
+    pub source: String,
+    pub steps: Vec<u64>,
+    pub mean: Vec<f64>,
+    pub std: Vec<f64>,
+}
+
+impl PublishedCurve {
+    /// (mean, std) at exactly `step`, if the curve has that mark.
+    pub fn at(&self, step: u64) -> Option<(f64, f64)> {
+        self.steps.iter().position(|&s| s == step).map(|i| (self.mean[i], self.std[i]))
+    }
+}
+
+#[derive(Deserialize)]
+struct CurveFile {
+    curve: Vec<PublishedCurve>,
+}
+
+/// The published learning curves bundled with the crate (`baselines/published_curves.toml`).
+pub fn bundled_curves() -> Vec<PublishedCurve> {
+    let curves = toml::from_str::<CurveFile>(include_str!("../../baselines/published_curves.toml"))
+        .expect("baselines/published_curves.toml parses")
+        .curve;
+    for c in &curves {
+        assert!(c.steps.len() == c.mean.len() && c.steps.len() == c.std.len(), "{} {}: ragged curve", c.env, c.algo);
+    }
+    curves
+}
+
+/// The published curve for an env and algorithm, if there is one.
+pub fn published_curve(env: &str, algo: &str) -> Option<PublishedCurve> {
+    bundled_curves().into_iter().find(|c| c.env == env && c.algo == algo)
+}
+
 #[cfg(test)]
 mod tests {
     #[test]
@@ -42,5 +82,19 @@ mod tests {
         assert!(a.iter().all(|x| !x.source.is_empty() && x.steps > 0 && x.value.is_finite()));
         let td3 = a.iter().find(|x| x.env == "half-cheetah" && x.algo == "td3" && x.steps == 1_000_000).unwrap();
         assert_eq!(td3.value, 9636.95);
+    }
+
+    #[test]
+    fn bundled_curves_have_the_five_marks_and_a_source() {
+        let curves = super::bundled_curves();
+        assert_eq!(curves.len(), 5);
+        for c in &curves {
+            assert_eq!(c.steps, vec![100_000, 200_000, 300_000, 500_000, 1_000_000]);
+            assert!(!c.source.is_empty());
+        }
+        let sac = super::published_curve("half-cheetah", "sac").unwrap();
+        assert_eq!(sac.at(100_000), Some((5794.0, 437.0)));
+        assert_eq!(sac.at(150_000), None);
+        assert!(super::published_curve("minitaur", "sac").is_none());
     }
 }

@@ -16,7 +16,7 @@ use anyhow::Result;
 use crate::io::write_bytes_atomic;
 use compare::{compare, ComparisonRow};
 use curves::{eval_curve, mean_std, rolling, EvalCurve};
-use plots::{bands_svg, Band};
+use plots::{bands_svg, Band, Marker};
 use runs::{find_runs, Group, Run};
 
 /// Episodes per seed of the training-return rolling statistics.
@@ -137,12 +137,29 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
                 raw: vec![],
             })
             .collect();
+        // Published learning curves at their marks, within the steps these runs reached.
+        let mut markers = Vec::new();
+        for (i, s) in env_summaries.iter().enumerate() {
+            if let Some(c) = anchors::published_curve(env, &s.group.algo) {
+                let reach = s.curve.steps.last().copied().unwrap_or(0);
+                for (j, &step) in c.steps.iter().enumerate().filter(|(_, &st)| st <= reach.max(1)) {
+                    markers.push(Marker {
+                        label: format!("{} published (mean ± std)", s.group.algo),
+                        x: step as f64,
+                        y: c.mean[j],
+                        err: c.std[j],
+                        color_of: i,
+                    });
+                }
+            }
+        }
         let eval_svg = format!("{env}_evaluation.svg");
         let svg = bands_svg(
             &format!("{env}: evaluation return, mean ± std over seeds"),
             "environment steps",
             "return",
             &bands,
+            &markers,
         )?;
         write_bytes_atomic(&out.join(&eval_svg), svg.as_bytes())?;
         let _ = writeln!(md, "![evaluation curves]({eval_svg})\n");
@@ -178,7 +195,7 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
             let file = format!("{env}_{}_{}_training.svg", g.algo, slug(&g.reward));
             let title =
                 format!("{env} {}: episode returns (faint), {ROLLING_WINDOW}-episode rolling mean ± std", g.label());
-            let svg = bands_svg(&title, "environment steps", "episode return", &bands)?;
+            let svg = bands_svg(&title, "environment steps", "episode return", &bands, &[])?;
             write_bytes_atomic(&out.join(&file), svg.as_bytes())?;
             let _ = writeln!(md, "![training returns]({file})\n");
             let _ = writeln!(html, "<figure>{svg}</figure>");

@@ -102,7 +102,9 @@ impl Group {
 /// (a few levels deep) for them, e.g. a sweep directory.
 pub fn find_runs(paths: &[PathBuf]) -> Result<Vec<Run>> {
     fn walk(dir: &Path, depth: usize, out: &mut Vec<PathBuf>) -> Result<()> {
-        if dir.join("config.toml").is_file() && dir.join("checkpoints").exists() {
+        // Results kept without checkpoints (config.toml + metrics.csv) count too.
+        if dir.join("config.toml").is_file() && (dir.join("checkpoints").exists() || dir.join("metrics.csv").is_file())
+        {
             out.push(dir.to_path_buf());
             return Ok(());
         }
@@ -128,7 +130,7 @@ pub fn find_runs(paths: &[PathBuf]) -> Result<Vec<Run>> {
         let before = dirs.len();
         walk(p, 4, &mut dirs)?;
         if dirs.len() == before {
-            bail!("no run directories (with config.toml and checkpoints/) under {}", p.display());
+            bail!("no run directories (with config.toml and checkpoints/ or metrics.csv) under {}", p.display());
         }
     }
     dirs.sort();
