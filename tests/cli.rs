@@ -255,3 +255,33 @@ fn ctrl_c_stops_training_with_a_checkpoint() {
     let latest = std::fs::read_to_string(run.join("checkpoints/latest")).unwrap();
     assert!(run.join("checkpoints").join(latest.trim()).join("model.safetensors").exists());
 }
+
+#[test]
+fn an_exported_policy_acts_exactly_as_its_checkpoint() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let (r, exported) = (run.to_str().unwrap(), dir.path().join("policy"));
+    let set = "warmup_steps=100,learning_starts=100,eval_every=300,eval_episodes=2,batch_size=32";
+    let args =
+        ["train", "--env", "inverted-pendulum", "--algo", "td3", "--steps", "300", "--set", set, "--out", r, "--quiet"];
+    let (ok, _, err) = locobench(&args);
+    assert!(ok, "{err}");
+    let (ok, out, err) = locobench(&["export", "--checkpoint", r, "--out", exported.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    assert!(out.contains("policy.safetensors"), "{out}");
+    let policy = std::fs::metadata(exported.join("policy.safetensors")).unwrap().len();
+    let latest = std::fs::read_to_string(run.join("checkpoints/latest")).unwrap();
+    let model = std::fs::metadata(run.join("checkpoints").join(latest.trim()).join("model.safetensors")).unwrap().len();
+    assert!(policy * 3 < model, "the actor alone ({policy} B) is a fraction of the checkpoint ({model} B)");
+    assert!(exported.join("config.toml").exists() && exported.join("metrics.csv").exists());
+    // Same evaluation, number for number, from the export and from the checkpoint.
+    let eval = |p: &str| {
+        let (ok, out, err) = locobench(&["eval", "--checkpoint", p, "--episodes", "3", "--seed", "7"]);
+        assert!(ok, "{err}");
+        out.split_once(": ").unwrap().1.to_string()
+    };
+    assert_eq!(eval(exported.to_str().unwrap()), eval(r));
+    // An export is not a checkpoint to resume or fine-tune from.
+    let (ok, _, err) = locobench(&["train", "--resume", exported.to_str().unwrap(), "--quiet"]);
+    assert!(!ok && err.contains("no checkpoint"), "{err}");
+}

@@ -2,6 +2,7 @@
 mod baseline;
 mod envs;
 mod eval;
+mod export;
 mod record;
 mod report;
 mod rollout;
@@ -28,6 +29,8 @@ enum Command {
     Train(train::TrainArgs),
     /// Evaluate a checkpoint: mean and std of the return and of every reward term.
     Eval(eval::EvalArgs),
+    /// Write a run's policy alone (actor weights, config, metrics) to share or ship.
+    Export(export::ExportArgs),
     /// Run the Raibert/QP baseline controller and report how it walks.
     Baseline(baseline::BaselineArgs),
     /// Write a rerun recording (.rrd) of a policy's rollouts: checkpoint, raibert, random, zero.
@@ -44,6 +47,7 @@ pub fn run() -> Result<()> {
         Command::Rollout(args) => rollout::run(args),
         Command::Train(args) => train::run(args),
         Command::Eval(args) => eval::run(args),
+        Command::Export(args) => export::run(args),
         Command::Baseline(args) => baseline::run(args),
         Command::Record(args) => record::run(args),
         Command::Report(args) => report::run(args),

@@ -9,7 +9,7 @@ use crate::controller::baseline::{baseline_controller, baseline_env_like};
 use crate::controller::measure::{mean_cost_of_transport, measure, GaitEpisode};
 use crate::envs::{make, EnvConfig};
 use crate::policy::AgentPolicy;
-use crate::train::load_policy;
+use crate::train::{has_policy, load_policy};
 
 /// A reward under which every policy is re-evaluated.
 #[derive(Debug, Clone, PartialEq)]
@@ -100,8 +100,13 @@ pub fn compare(env: &str, groups: &[Vec<&Run>], episodes: usize, seed: u64, spee
             set_point: Some(speed),
         });
         for group in groups {
+            // Results kept without weights (config and metrics only) cannot act.
+            let group: Vec<&Run> = group.iter().copied().filter(|r| has_policy(&r.dir)).collect();
+            if group.is_empty() {
+                continue;
+            }
             let mut all = Vec::new();
-            for run in group {
+            for run in &group {
                 let (run_cfg, agent) = load_policy(&run.dir)?;
                 let mut env_rl = make(&with_weights(run_cfg.env.clone(), &variant.weights))?;
                 let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.algo().into() };

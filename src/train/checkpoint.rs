@@ -29,6 +29,50 @@ pub struct TrainState {
     pub counters: HashMap<String, u64>,
 }
 
+/// An exported policy: the actor's tensors only (`train::export_policy`).
+pub const POLICY_FILE: &str = "policy.safetensors";
+
+fn is_actor(name: &str) -> bool {
+    name.starts_with("actor.")
+}
+
+/// Writes the actor's tensors (not its target) atomically.
+pub fn save_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
+    let params: HashMap<String, Tensor> =
+        agent.parameters().into_iter().filter(|(n, _)| is_actor(n)).map(|(n, v)| (n, v.as_tensor().clone())).collect();
+    anyhow::ensure!(!params.is_empty(), "this agent has no actor to export");
+    let dir = path.parent().unwrap_or(Path::new("."));
+    let tmp = tempfile::Builder::new().prefix(".policy-").suffix(".safetensors").tempfile_in(dir)?;
+    candle_core::safetensors::save(&params, tmp.path())?;
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        tmp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
+    }
+    tmp.persist(path).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+/// Loads an exported actor into `agent`, checking every actor tensor's name and shape; the
+/// agent's other networks keep their initial weights (acting does not use them).
+pub fn load_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
+    let tensors = read_tensors(path)?;
+    for (name, var) in agent.parameters().into_iter().filter(|(n, _)| is_actor(n)) {
+        let t = tensors.get(&name).with_context(|| {
+            format!("{} has no tensor '{name}': was it exported from another algorithm?", path.display())
+        })?;
+        anyhow::ensure!(
+            t.dims() == var.dims(),
+            "{} tensor '{name}' has shape {:?} but this agent needs {:?}",
+            path.display(),
+            t.dims(),
+            var.dims()
+        );
+        var.set(&t.to_dtype(DType::F32)?)?;
+    }
+    Ok(())
+}
+
 pub fn checkpoints_dir(run_dir: &Path) -> PathBuf {
     run_dir.join("checkpoints")
 }

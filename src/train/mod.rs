@@ -223,8 +223,45 @@ pub fn resolve_checkpoint(path: &Path) -> Result<PathBuf> {
     }
 }
 
-/// Builds the agent of a run and loads a checkpoint's weights into it.
+/// Writes a run's policy for sharing: `policy.safetensors` (the actor's weights only, a few
+/// hundred KB where a checkpoint with critics, targets and optimiser state is several MB, or GB
+/// with its buffer), the run's `config.toml` and `metrics.csv`. `eval`, `record` and `report`
+/// take the directory like a run directory.
+pub fn export_policy(checkpoint: &Path, out: &Path) -> Result<PathBuf> {
+    let ckpt = resolve_checkpoint(checkpoint)?;
+    let run_dir = ckpt.parent().and_then(Path::parent).context("checkpoint is not inside a run directory")?;
+    let (_, agent) = load_policy(&ckpt)?;
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    checkpoint::save_actor(&out.join(checkpoint::POLICY_FILE), agent.as_ref())?;
+    for file in ["config.toml", "metrics.csv"] {
+        let bytes =
+            std::fs::read(run_dir.join(file)).with_context(|| format!("reading {}", run_dir.join(file).display()))?;
+        write_bytes_atomic(&out.join(file), &bytes)?;
+    }
+    let state = checkpoint::load_state(&ckpt)?;
+    write_bytes_atomic(
+        &out.join("source.toml"),
+        format!("checkpoint = {:?}\nstep = {}\n", ckpt.display().to_string(), state.step).as_bytes(),
+    )?;
+    Ok(out.join(checkpoint::POLICY_FILE))
+}
+
+/// Whether a run directory (or exported policy) holds weights to act with.
+pub fn has_policy(dir: &Path) -> bool {
+    dir.join(checkpoint::POLICY_FILE).is_file() || dir.join("checkpoints").join("latest").is_file()
+}
+
+/// Builds the agent of a run and loads a checkpoint's weights into it. Also takes an exported
+/// policy directory (`export_policy`): only the actor is loaded then, which is all acting needs.
 pub fn load_policy(checkpoint: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
+    if checkpoint.join(checkpoint::POLICY_FILE).is_file() {
+        let run = read_run_config(checkpoint)?;
+        let env = make(&run.env)?;
+        let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
+        let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
+        checkpoint::load_actor(&checkpoint.join(checkpoint::POLICY_FILE), agent.as_ref())?;
+        return Ok((run, agent));
+    }
     let ckpt = resolve_checkpoint(checkpoint)?;
     let run_dir = ckpt.parent().and_then(Path::parent).context("checkpoint is not inside a run directory")?;
     let run = read_run_config(run_dir)?;
