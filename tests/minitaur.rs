@@ -167,3 +167,40 @@ fn four_bar_kinematics_match_the_simulated_legs() {
         );
     }
 }
+
+/// PyBullet's own MinitaurBulletEnv under constant leg-model actions (randomisation off), from
+/// `tests/reference/minitaur-pybullet.csv` (script beside it): the same actions fall here or
+/// stand here as they do there, at a similar time, with a similar pose. The two engines'
+/// contacts differ, so times may differ by a few control steps, not by their nature.
+#[test]
+fn constant_actions_fall_or_stand_as_in_pybullet() {
+    let text =
+        std::fs::read_to_string(concat!(env!("CARGO_MANIFEST_DIR"), "/tests/reference/minitaur-pybullet.csv")).unwrap();
+    let mut report = Vec::new();
+    let mut ok = true;
+    for line in text.lines().skip(1) {
+        let f: Vec<&str> = line.split(',').collect();
+        let action: Vec<f64> = f[1].split(' ').map(|v| v.parse().unwrap()).collect();
+        let (pb_steps, pb_fell): (usize, bool) = (f[2].parse().unwrap(), f[3] == "1");
+        let (pb_height, pb_up): (f64, f64) = (f[4].parse().unwrap(), f[5].parse().unwrap());
+        let mut e = env(MinitaurOptions { randomize_dynamics: false, ..Default::default() });
+        e.reset(Some(0)).unwrap();
+        let (mut steps, mut fell) = (0usize, false);
+        while steps < 300 && !fell {
+            fell = e.step(&action).unwrap().terminated;
+            steps += 1;
+        }
+        let (height, up) = (e.base_position()[2], e.base_up_z());
+        report.push(format!(
+            "{:24} pybullet {pb_steps:3} steps fell={pb_fell} h={pb_height:.3} up={pb_up:.3} | here {steps:3} fell={fell} \
+             h={height:.3} up={up:.3}",
+            f[0]
+        ));
+        let steps_close = steps.abs_diff(pb_steps) <= 3 + pb_steps / 4;
+        // A standing pose's height and tilt; a fallen one's end condition (tilt or height).
+        let pose_close = if pb_fell { (up < 0.85) == (pb_up < 0.85) } else { (height - pb_height).abs() < 0.03 };
+        ok &= fell == pb_fell && steps_close && pose_close;
+    }
+    eprintln!("{}", report.join("\n"));
+    assert!(ok, "differs from PyBullet (above)");
+}
