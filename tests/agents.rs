@@ -242,8 +242,11 @@ fn bad_checkpoints_are_clear_errors() {
     let dir = tempfile::tempdir().unwrap();
     let run = dir.path().join("run");
     let cfg = small_config("total_steps=700");
-    let s =
-        train::train(EnvConfig::new("inverted-pendulum"), cfg, 1, &run, None, false, &RunControl::default()).unwrap();
+    // Stopped before its budget, so that resuming it must read the checkpoint (a finished run
+    // is left alone without reading it).
+    let stop = RunControl { stop_after: Some(300), ..RunControl::default() };
+    let s = train::train(EnvConfig::new("inverted-pendulum"), cfg, 1, &run, None, false, &stop).unwrap();
+    assert_eq!(s.outcome, train::Outcome::Stopped);
 
     // Fine-tuning on an env with other observation/action sizes.
     let hc = build_config("half-cheetah", Algo::Td3, &split_pairs("hidden=[32,32],total_steps=10").unwrap()).unwrap();
