@@ -1,8 +1,10 @@
 #!/usr/bin/env bash
 # The main job, a short real demo (a few minutes on 2 cores once built):
 #   1. SAC learns to balance InvertedPendulum, recorded into a rerun file as it learns;
-#   2. a two-seed SAC sweep on Minitaur, briefly (two processes side by side);
-#   3. the Raibert/QP baseline walks Minitaur, and is recorded;
+#   2. a sweep: TD3 and DDPG learn it too, two seeds each, two processes side by side;
+#   3. a Minitaur walking policy trained with SAC (300k steps, shipped in models/policies/,
+#      retrain it with the command in its README) is evaluated and recorded, beside the
+#      Raibert/QP baseline controller at 0.35 m/s;
 #   4. a report compares everything: learning curves, baseline vs RL under three rewards.
 # Everything goes under demo/; the paths are printed at the end.
 set -euo pipefail
@@ -11,20 +13,21 @@ bash scripts/setup.sh
 cargo build --release --quiet
 bin=target/release/locobench
 out=demo
+policy=models/policies/minitaur-sac
 rm -rf "$out"
 mkdir -p "$out"
 "$bin" envs
 "$bin" train --env inverted-pendulum --algo sac --seed 0 --out "$out/run-inverted-pendulum-sac" \
   --record "$out/inverted-pendulum-training.rrd" --quiet
 "$bin" eval --checkpoint "$out/run-inverted-pendulum-sac" --episodes 10
-"$bin" sweep --env minitaur --algo sac --seeds 2 --jobs 2 --steps 6000 \
-  --set 'hidden=[64,64],warmup_steps=1000,learning_starts=1000,eval_every=1000,eval_episodes=3' \
-  --out "$out/minitaur-sweep"
+"$bin" sweep --env inverted-pendulum --algo td3,ddpg --seeds 2 --jobs 2 --steps 15000 --out "$out/pendulum-sweep"
+"$bin" sweep status "$out/pendulum-sweep"
+"$bin" eval --checkpoint "$policy" --episodes 10
 "$bin" baseline --env minitaur --speed 0.35 --episodes 3 --seed 0
 "$bin" record --env minitaur --policy raibert --speed 0.35 --out "$out/minitaur-raibert.rrd"
-"$bin" record --policy "$out/minitaur-sweep/runs/sac-seed0" --out "$out/minitaur-sac.rrd"
-"$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/minitaur-sweep" --out "$out/report" --episodes 3
+"$bin" record --policy "$policy" --out "$out/minitaur-sac.rrd"
+"$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/pendulum-sweep" "$policy" --out "$out/report" --episodes 3
 echo
 echo "Report (open in a browser):   $(pwd)/$out/report/index.html  (Markdown: $out/report/README.md)"
 echo "rerun recordings:             $(pwd)/$out/*.rrd  (viewer: pip install rerun-sdk==0.36.3; rerun FILE)"
-echo "Training runs:                $(pwd)/$out/run-inverted-pendulum-sac, $(pwd)/$out/minitaur-sweep/runs/"
+echo "Training runs:                $(pwd)/$out/run-inverted-pendulum-sac, $(pwd)/$out/pendulum-sweep/runs/"
