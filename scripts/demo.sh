@@ -20,7 +20,7 @@ mkdir -p "$out"
 "$bin" train --env inverted-pendulum --algo sac --seed 0 --out "$out/run-inverted-pendulum-sac" \
   --record "$out/inverted-pendulum-training.rrd" --quiet
 "$bin" eval --checkpoint "$out/run-inverted-pendulum-sac" --episodes 10
-"$bin" sweep --env inverted-pendulum --algo td3,ddpg --seeds 2 --jobs 2 --steps 15000 --out "$out/pendulum-sweep"
+"$bin" sweep --env inverted-pendulum --algo td3,ddpg --seeds 2 --jobs 2 --out "$out/pendulum-sweep"
 "$bin" sweep status "$out/pendulum-sweep"
 "$bin" eval --checkpoint "$policy" --episodes 10
 "$bin" baseline --env minitaur --speed 0.35 --episodes 3 --seed 0

@@ -26,12 +26,12 @@ pub struct Marker {
     pub color_of: usize,
 }
 
-/// Tick label for a step count: `250k`, `1M`, or the plain number below 10k.
+/// Tick label for a step count: `250k`, `1M`, or the plain number below 1000.
 pub fn step_label(x: f64) -> String {
     let a = x.abs();
     if a >= 1e6 {
         format!("{}M", trim(x / 1e6))
-    } else if a >= 1e4 {
+    } else if a >= 1e3 {
         format!("{}k", trim(x / 1e3))
     } else {
         trim(x)
@@ -189,6 +189,7 @@ mod tests {
         assert_eq!(step_label(1_000_000.0), "1M");
         assert_eq!(step_label(12_500.0), "12.5k");
         assert_eq!(step_label(500.0), "500");
+        assert_eq!(step_label(5000.0), "5k");
         assert_eq!(value_label(2500.0), "2500");
         assert_eq!(value_label(-2.5), "-2.5");
         assert_eq!(value_label(0.125), "0.125");
