@@ -280,30 +280,30 @@ fn tabulate(blocks: &[Block], out: &Path, tier_name: &str) -> Result<Tables> {
                 if end.is_empty() { "–".into() } else { end.join("; ") }
             );
         }
-        let empty = "| – ".repeat(marks.len());
-        let (rm, rsd) = random_return(block.env)?;
-        let _ = writeln!(
-            md,
-            "| random policy | 10 episodes {empty}| {} ± {} | – | – | – |",
-            fmt_return(rm),
-            fmt_return(rsd)
-        );
-        let _ = writeln!(csv, "{},random,10 episodes,0,0,{rm},{rsd},,", block.env);
+        // Reference rows: no learning, and the controller.
+        let mut reference = |label: &str, (m, sd): (f64, f64), note: &str| {
+            let empty = "| – ".repeat(marks.len());
+            let _ = writeln!(
+                md,
+                "| {label} | 10 episodes {empty}| {} ± {} | – | – | {note} |",
+                fmt_return(m),
+                fmt_return(sd)
+            );
+            let _ = writeln!(csv, "{},{label},10 episodes,0,0,{m},{sd},,", block.env);
+        };
+        reference("random policy", random_return(block.env)?, "–");
         if block.env == "minitaur" || block.env == "ant" {
             let speed = if block.env == "minitaur" { 0.35 } else { 0.5 };
             let mut e = make(&baseline_env(block.env)?)?;
             let mut c = baseline_controller(block.env, speed, None)?;
             let eps = measure(e.as_mut(), c.as_mut(), 10, 0, speed)?;
-            let (m, sd) = mean_std(&eps.iter().map(|x| x.episode_return).collect::<Vec<_>>());
             let falls = eps.iter().filter(|x| x.fell).count();
             let v = mean_std(&eps.iter().map(|x| x.mean_speed).collect::<Vec<_>>()).0;
-            let _ = writeln!(
-                md,
-                "| raibert @{speed} m/s | 10 episodes {empty}| {} ± {} | – | – | mean speed {v:.2} m/s, falls {falls}/10 |",
-                fmt_return(m),
-                fmt_return(sd)
+            reference(
+                &format!("raibert @{speed} m/s"),
+                mean_std(&eps.iter().map(|x| x.episode_return).collect::<Vec<_>>()),
+                &format!("mean speed {v:.2} m/s, falls {falls}/10"),
             );
-            let _ = writeln!(csv, "{},raibert,10 episodes,0,0,{m},{sd},,", block.env);
         }
         md.push('\n');
     }
