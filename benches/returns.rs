@@ -29,7 +29,7 @@ use locobench::controller::measure::measure;
 use locobench::envs::{make, EnvConfig};
 use locobench::io::write_bytes_atomic;
 use locobench::policy::RandomPolicy;
-use locobench::report::anchors::{bundled_anchors, published_curve};
+use locobench::report::anchors::{bundled_anchors, bundled_curves, published_curve};
 use locobench::report::curves::mean_std;
 use locobench::report::runs::{find_runs, Run};
 use locobench::report::{fmt_return, group_runs, summarise};
@@ -186,8 +186,9 @@ struct Tables {
 /// Step marks for the columns: the published curves' marks within the budget, or quarters of
 /// the budget when it is below the first mark.
 fn marks(steps: u64) -> Vec<u64> {
-    let published: Vec<u64> =
-        [100_000, 200_000, 300_000, 500_000, 1_000_000].into_iter().filter(|&m| m <= steps).collect();
+    let mut published: Vec<u64> = bundled_curves().into_iter().flat_map(|c| c.steps).filter(|&m| m <= steps).collect();
+    published.sort_unstable();
+    published.dedup();
     if published.is_empty() {
         vec![steps / 4, steps / 2, steps]
     } else {

@@ -270,21 +270,22 @@ fn sacct_states(job_id: &str) -> Vec<(usize, String)> {
         .collect()
 }
 
-/// Scheduler states that mean a task will still run or runs now.
+/// Scheduler states of a task that runs now.
+pub fn is_running(state: &str) -> bool {
+    matches!(state, "RUNNING" | "COMPLETING" | "CONFIGURING" | "SIGNALING" | "STAGE_OUT")
+}
+
+/// Scheduler states of a task that will still run or runs now.
 pub fn is_active(state: &str) -> bool {
+    is_running(state)
+        || matches!(state, "PENDING" | "REQUEUED" | "REQUEUE_HOLD" | "REQUEUE_FED" | "RESIZING" | "SUSPENDED")
+}
+
+/// Scheduler states that end a task without finishing its run.
+pub fn is_failure(state: &str) -> bool {
     matches!(
         state,
-        "PENDING"
-            | "RUNNING"
-            | "CONFIGURING"
-            | "COMPLETING"
-            | "REQUEUED"
-            | "REQUEUE_HOLD"
-            | "REQUEUE_FED"
-            | "RESIZING"
-            | "SUSPENDED"
-            | "STAGE_OUT"
-            | "SIGNALING"
+        "FAILED" | "TIMEOUT" | "NODE_FAIL" | "OUT_OF_MEMORY" | "CANCELLED" | "BOOT_FAIL" | "DEADLINE" | "PREEMPTED"
     )
 }
 

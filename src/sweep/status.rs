@@ -4,7 +4,7 @@ use std::path::Path;
 
 use anyhow::Result;
 
-use super::slurm::{is_active, task_states, TaskState};
+use super::slurm::{is_active, is_failure, is_running, task_states, TaskState};
 use super::{exit_path, log_path, read_plan, Job};
 use crate::train::run_lock::read_lock;
 use crate::train::{run_progress, RunProgress};
@@ -46,14 +46,6 @@ pub struct JobStatus {
     pub log_tail: Vec<String>,
 }
 
-/// Scheduler states that end a task without finishing its run.
-fn is_failure(state: &str) -> bool {
-    matches!(
-        state,
-        "FAILED" | "TIMEOUT" | "NODE_FAIL" | "OUT_OF_MEMORY" | "CANCELLED" | "BOOT_FAIL" | "DEADLINE" | "PREEMPTED"
-    )
-}
-
 /// Decides one job's state. The order matters: a finished run is finished whatever the
 /// scheduler says; the scheduler knows best what still runs or waits; then the local evidence.
 pub fn job_state(
@@ -66,7 +58,7 @@ pub fn job_state(
         return JobState::Finished;
     }
     match slurm {
-        Some("RUNNING" | "COMPLETING" | "CONFIGURING" | "SIGNALING" | "STAGE_OUT") => return JobState::Running,
+        Some(s) if is_running(s) => return JobState::Running,
         Some(s) if is_active(s) => return JobState::Pending,
         _ => {}
     }

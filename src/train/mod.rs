@@ -104,9 +104,8 @@ pub fn train(
     train.validate()?;
     let mut env = env;
     env.options = env.resolved_options()?;
-    if let Some(lock) = run_lock::read_lock(run_dir).filter(|l| l.alive() == Some(true)) {
-        bail!("{} is being trained by process {} on this host; stop it first", run_dir.display(), lock.pid);
-    }
+    // Before --force may remove the directory under a running trainer.
+    run_lock::refuse_if_running(run_dir)?;
     if run_dir.exists() && std::fs::read_dir(run_dir)?.next().is_some() {
         if !force {
             bail!(
@@ -255,20 +254,23 @@ pub fn has_policy(dir: &Path) -> bool {
 /// policy directory (`export_policy`): only the actor is loaded then, which is all acting needs.
 pub fn load_policy(checkpoint: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
     if checkpoint.join(checkpoint::POLICY_FILE).is_file() {
-        let run = read_run_config(checkpoint)?;
-        let env = make(&run.env)?;
-        let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
-        let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
+        let (run, agent) = run_agent(checkpoint)?;
         checkpoint::load_actor(&checkpoint.join(checkpoint::POLICY_FILE), agent.as_ref())?;
         return Ok((run, agent));
     }
     let ckpt = resolve_checkpoint(checkpoint)?;
     let run_dir = ckpt.parent().and_then(Path::parent).context("checkpoint is not inside a run directory")?;
-    let run = read_run_config(run_dir)?;
+    let (run, agent) = run_agent(run_dir)?;
+    checkpoint::load_weights(&ckpt, agent.as_ref())?;
+    Ok((run, agent))
+}
+
+/// The config of the run in `dir` and a freshly initialised agent of its shape.
+fn run_agent(dir: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
+    let run = read_run_config(dir)?;
     let env = make(&run.env)?;
     let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
     let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
-    checkpoint::load_weights(&ckpt, agent.as_ref())?;
     Ok((run, agent))
 }
 

@@ -48,17 +48,23 @@ pub struct RunLock {
     path: PathBuf,
 }
 
+/// An error if another live process of this host holds the run directory's lock.
+pub fn refuse_if_running(run_dir: &Path) -> Result<()> {
+    if let Some(other) = read_lock(run_dir) {
+        if other.pid != std::process::id() && other.alive() == Some(true) {
+            bail!(
+                "{} is being trained by process {} on this host; stop it first (or wait for it)",
+                run_dir.display(),
+                other.pid
+            );
+        }
+    }
+    Ok(())
+}
+
 impl RunLock {
     pub fn acquire(run_dir: &Path) -> Result<RunLock> {
-        if let Some(other) = read_lock(run_dir) {
-            if other.pid != std::process::id() && other.alive() == Some(true) {
-                bail!(
-                    "{} is being trained by process {} on this host; stop it first (or wait for it)",
-                    run_dir.display(),
-                    other.pid
-                );
-            }
-        }
+        refuse_if_running(run_dir)?;
         let path = run_dir.join(LOCK_FILE);
         let info = LockInfo { pid: std::process::id(), host: hostname() };
         write_bytes_atomic(&path, toml::to_string(&info)?.as_bytes())?;

@@ -24,11 +24,6 @@ impl StopSignals {
     pub fn at_episode_end(&self) -> bool {
         self.at_episode_end.load(Ordering::SeqCst)
     }
-
-    /// What a signal would do, for library callers that stop a run from another thread.
-    pub fn request_stop_at_episode_end(&self) {
-        self.at_episode_end.store(true, Ordering::SeqCst);
-    }
 }
 
 /// The process-wide flags; the handlers are installed on first use.
