@@ -31,6 +31,14 @@ fn bench(c: &mut Criterion) {
     let spatial = || ForceQp::new(Dimension::Spatial, 0.6, 1.0, 100.0, vec![1.0; 6], 1e-4);
     let mut qp = spatial();
     let mut k = 0;
+    let mut precise = spatial();
+    precise.precise = true;
+    group.bench_function("force QP 4 feet 3D, clarabel default settings (the reference)", |b| {
+        b.iter(|| {
+            k = (k + 1) % configs.len();
+            black_box(precise.solve(&configs[k], &wrench).unwrap())
+        })
+    });
     group.bench_function("force QP 4 feet 3D (12 vars, 24 rows), reused solver", |b| {
         b.iter(|| {
             k = (k + 1) % configs.len();
@@ -43,13 +51,13 @@ fn bench(c: &mut Criterion) {
             black_box(spatial().solve(&configs[k], &wrench).unwrap())
         })
     });
-    let mut planar = ForceQp::new(Dimension::Planar, 0.6, 1.0, 100.0, vec![1.0; 4], 1e-4);
+    let mut planar = ForceQp::new(Dimension::Planar, 0.6, 1.0, 100.0, vec![1.0; 5], 1e-4);
     let pairs: Vec<Vec<Vector3<f64>>> =
         configs.iter().map(|c| vec![Vector3::new(c[0].x, 0.09, c[0].z), Vector3::new(c[3].x, -0.09, c[3].z)]).collect();
     group.bench_function("force QP 2 feet no abduction (4 vars, 8 rows), reused solver", |b| {
         b.iter(|| {
             k = (k + 1) % pairs.len();
-            black_box(planar.solve(&pairs[k], &[1.0, 60.0, 0.1, 0.3]).unwrap())
+            black_box(planar.solve(&pairs[k], &[1.0, 60.0, 0.1, 0.3, 0.05]).unwrap())
         })
     });
 

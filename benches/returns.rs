@@ -24,7 +24,8 @@ use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use locobench::controller::baseline::{baseline_controller, baseline_env};
+use locobench::controller::baseline::{baseline_controller, baseline_env, RAMP_TIME};
+use locobench::controller::command::SpeedProfile;
 use locobench::controller::measure::measure;
 use locobench::envs::{make, EnvConfig};
 use locobench::io::write_bytes_atomic;
@@ -297,7 +298,7 @@ fn tabulate(blocks: &[Block], out: &Path, tier_name: &str) -> Result<Tables> {
             let speed = if block.env == "minitaur" { 0.35 } else { 0.5 };
             let mut e = make(&baseline_env(block.env)?)?;
             let mut c = baseline_controller(block.env, speed, None)?;
-            let eps = measure(e.as_mut(), c.as_mut(), 10, 0, speed)?;
+            let eps = measure(e.as_mut(), c.as_mut(), 10, 0, &SpeedProfile::ramp(speed, RAMP_TIME))?;
             let falls = eps.iter().filter(|x| x.fell).count();
             let v = mean_std(&eps.iter().map(|x| x.mean_speed).collect::<Vec<_>>()).0;
             reference(

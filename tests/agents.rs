@@ -334,3 +334,36 @@ fn sac_v1_and_ddpg_with_ou_noise_train_and_checkpoint() {
     assert_eq!(state.counters["noise_steps"], 400, "OU noise advanced once per exploratory step");
     assert!(!names.is_empty());
 }
+
+#[test]
+fn extending_a_finished_run_equals_training_with_the_larger_budget() {
+    // HalfCheetah's episodes have a fixed length, so the 1000-step budget ends an episode and
+    // the extension is exact.
+    let dir = tempfile::tempdir().unwrap();
+    let env = EnvConfig::new("half-cheetah").with_overrides(&[("max_episode_steps".into(), "100".into())]).unwrap();
+    let cfg = |steps: u64| {
+        let o = format!("total_steps={steps},warmup_steps=200,learning_starts=200,eval_every=500,checkpoint_every=400,eval_episodes=1,hidden=[16,16],batch_size=32");
+        build_config("half-cheetah", Algo::Td3, &split_pairs(&o).unwrap()).unwrap()
+    };
+    let whole = dir.path().join("whole");
+    let a = train::train(env.clone(), cfg(1500), 3, &whole, None, false, &RunControl::default()).unwrap();
+    let short = dir.path().join("short");
+    train::train(env, cfg(1000), 3, &short, None, false, &RunControl::default()).unwrap();
+    assert_eq!(train::resume(&short, &RunControl::default()).unwrap().outcome, Outcome::AlreadyFinished);
+    assert!(train::extend(&short, 1000 - 1).is_err(), "shortening a budget must be refused");
+    assert!(train::extend(&short, 1500).unwrap(), "1000 steps end an episode: the extension is exact");
+    let c = train::resume(&short, &RunControl::default()).unwrap();
+    assert_eq!((c.outcome, c.steps), (Outcome::Finished, 1500));
+    assert_eq!(tensors(&a.checkpoint), tensors(&c.checkpoint));
+    assert_eq!(eval_rows(&whole), eval_rows(&short));
+    assert_eq!(train::read_run_config(&short).unwrap().train.total_steps, 1500);
+}
+
+#[test]
+fn reward_scale_must_be_positive_and_defaults_to_one() {
+    assert_eq!(small_config("").reward_scale, 1.0);
+    for bad in ["0", "-1", "nan"] {
+        let o = split_pairs(&format!("reward_scale={bad}")).unwrap();
+        assert!(build_config("minitaur", Algo::Td3, &o).and_then(|c| c.validate()).is_err(), "{bad}");
+    }
+}

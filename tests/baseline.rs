@@ -1,6 +1,7 @@
 //! The Raibert/QP baseline's walking targets, with fixed seeds and the environments' default
 //! (honest) physics: PyBullet's dynamics randomisation on, full motor model, overheat cut-off.
-use locobench::controller::baseline::{baseline_controller, baseline_env};
+use locobench::controller::baseline::{baseline_controller, baseline_controller_for, baseline_env, RAMP_TIME};
+use locobench::controller::command::{Command, SpeedProfile};
 use locobench::controller::gait::GaitKind;
 use locobench::controller::measure::{measure, GaitEpisode};
 use locobench::envs::make;
@@ -8,22 +9,74 @@ use locobench::envs::make;
 fn run(env: &str, speed: f64, gait: Option<GaitKind>) -> Vec<GaitEpisode> {
     let mut e = make(&baseline_env(env).unwrap()).unwrap();
     let mut c = baseline_controller(env, speed, gait).unwrap();
-    measure(e.as_mut(), c.as_mut(), 10, 0, speed).unwrap()
+    measure(e.as_mut(), c.as_mut(), 10, 0, &SpeedProfile::ramp(speed, RAMP_TIME)).unwrap()
+}
+
+/// One episode per reset seed 0..10, each with its own randomised dynamics.
+fn ten_seeds(env: &str, command: Command) -> Vec<GaitEpisode> {
+    let mut e = make(&baseline_env(env).unwrap()).unwrap();
+    let profile = command.speed.clone();
+    let mut c = baseline_controller_for(env, command, None).unwrap();
+    (0..10).flat_map(|seed| measure(e.as_mut(), c.as_mut(), 1, seed, &profile).unwrap()).collect()
+}
+
+/// Mean forward speed over the whole episode (the 1 s ramp from standing included) within 10%
+/// of the set-point, 1000 steps without a fall, on each of 10 seeds.
+fn assert_tracks(env: &str, speed: f64) {
+    let eps = ten_seeds(env, Command::straight(speed, RAMP_TIME));
+    for (seed, e) in eps.iter().enumerate() {
+        assert!(!e.fell && e.length == 1000, "{env} at {speed} m/s, seed {seed}: fell after {} steps", e.length);
+        assert!(
+            (e.mean_speed - speed).abs() <= 0.1 * speed,
+            "{env} at {speed} m/s, seed {seed}: mean speed {:.3}",
+            e.mean_speed
+        );
+    }
 }
 
 #[test]
-fn minitaur_at_0_35_walks_without_falling_near_the_set_point() {
-    let eps = run("minitaur", 0.35, None);
-    let good = eps.iter().filter(|e| !e.fell && e.length == 1000 && (e.mean_speed - 0.35).abs() <= 0.2 * 0.35).count();
-    assert!(good >= 9, "only {good}/10 episodes walked 1000 steps within 20% of 0.35 m/s: {eps:?}");
+fn minitaur_tracks_0_35_m_per_s() {
+    assert_tracks("minitaur", 0.35);
 }
 
 #[test]
-fn minitaur_at_1_0_rarely_falls() {
-    let eps = run("minitaur", 1.0, None);
-    let standing = eps.iter().filter(|e| !e.fell).count();
-    assert!(standing >= 8, "{standing}/10 without a fall");
-    assert!(eps.iter().all(|e| e.mean_speed > 0.5), "{eps:?}");
+fn minitaur_tracks_0_5_m_per_s() {
+    assert_tracks("minitaur", 0.5);
+}
+
+#[test]
+fn minitaur_tracks_1_0_m_per_s() {
+    assert_tracks("minitaur", 1.0);
+}
+
+#[test]
+fn minitaur_follows_pybullets_speed_profile_forwards_then_backwards() {
+    let profile = SpeedProfile::parse("0:0,3:0.35,6:-0.35").unwrap();
+    let eps = ten_seeds("minitaur", Command { speed: profile, yaw_rate: 0.0 });
+    // The profile's own mean over 10 s: (0.525 - 1.4) / 10 m/s.
+    let expected = -0.0875;
+    for (seed, e) in eps.iter().enumerate() {
+        assert!(!e.fell && e.length == 1000, "seed {seed}: fell after {} steps", e.length);
+        assert!((e.mean_speed - expected).abs() < 0.03, "seed {seed}: mean speed {:.3}", e.mean_speed);
+        assert!(e.speed_error < 0.08, "seed {seed}: mean |v - v_profile| {:.3}", e.speed_error);
+    }
+}
+
+#[test]
+fn minitaur_turns_at_the_commanded_yaw_rate_both_ways() {
+    for yaw_rate in [0.2, -0.2] {
+        let eps = ten_seeds("minitaur", Command { speed: SpeedProfile::ramp(0.35, RAMP_TIME), yaw_rate });
+        for (seed, e) in eps.iter().enumerate() {
+            assert!(!e.fell, "{yaw_rate} rad/s, seed {seed}: fell after {} steps", e.length);
+            // The heading lags the commanded one at first: within 20% over the episode.
+            assert!(
+                (e.yaw_rate - yaw_rate).abs() <= 0.2 * yaw_rate.abs(),
+                "{yaw_rate} rad/s, seed {seed}: turned at {:.3}",
+                e.yaw_rate
+            );
+            assert!((e.mean_speed - 0.35).abs() <= 0.1 * 0.35, "seed {seed}: {:.3} m/s", e.mean_speed);
+        }
+    }
 }
 
 #[test]
@@ -38,9 +91,11 @@ fn wrong_env_or_mode_is_a_clear_error() {
     assert!(baseline_env("humanoid").is_err());
     assert!(baseline_controller("ant", 0.5, Some(GaitKind::Bound)).is_err());
     assert!(baseline_controller("minitaur", f64::NAN, None).is_err());
+    let nan_turn = Command { speed: SpeedProfile::ramp(0.35, 1.0), yaw_rate: f64::NAN };
+    assert!(baseline_controller_for("minitaur", nan_turn, None).is_err());
     // The Minitaur controller refuses the leg-model action mode (it commands torques).
     let mut env = make(&locobench::envs::EnvConfig::new("minitaur")).unwrap();
     let mut c = baseline_controller("minitaur", 0.35, None).unwrap();
-    let err = measure(env.as_mut(), c.as_mut(), 1, 0, 0.35).unwrap_err();
+    let err = measure(env.as_mut(), c.as_mut(), 1, 0, &SpeedProfile::ramp(0.35, RAMP_TIME)).unwrap_err();
     assert!(err.to_string().contains("torque"), "{err}");
 }

@@ -54,6 +54,11 @@ pub struct TrainConfig {
     /// Hidden layer sizes of every network.
     pub hidden: Vec<usize>,
     pub gamma: f64,
+    /// Multiplies every reward the learner stores; returns and evaluations stay the environment's.
+    /// 1 unless a preset says otherwise (Haarnoja et al. 2018a tune a reward scale per task; it
+    /// sets how large rewards are against the critic's approximation error).
+    #[serde(default = "unit_scale")]
+    pub reward_scale: f64,
     /// Polyak coefficient of the target networks.
     pub tau: f64,
     pub actor_lr: f64,
@@ -87,6 +92,10 @@ pub struct TrainConfig {
     pub value_lr: f64,
 }
 
+fn unit_scale() -> f64 {
+    1.0
+}
+
 impl TrainConfig {
     /// The defaults each algorithm was published with (REFERENCE §5).
     pub fn defaults(algo: Algo) -> TrainConfig {
@@ -100,6 +109,7 @@ impl TrainConfig {
             buffer_capacity: 1_000_000,
             hidden: vec![400, 300],
             gamma: 0.99,
+            reward_scale: 1.0,
             tau: 0.005,
             actor_lr: 1e-3,
             critic_lr: 1e-3,
@@ -150,6 +160,7 @@ impl TrainConfig {
         positive("alpha_lr", self.alpha_lr)?;
         positive("value_lr", self.value_lr)?;
         positive("initial_alpha", self.initial_alpha)?;
+        positive("reward_scale", self.reward_scale)?;
         anyhow::ensure!((0.0..=1.0).contains(&self.gamma), "gamma must lie in [0, 1]");
         anyhow::ensure!(self.tau > 0.0 && self.tau <= 1.0, "tau must lie in (0, 1]");
         anyhow::ensure!(self.batch_size > 0, "batch_size must be at least 1");

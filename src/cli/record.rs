@@ -1,7 +1,7 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use locobench::controller::baseline::{baseline_controller, baseline_env, parse_gait};
+use locobench::controller::baseline::{baseline_controller_for, baseline_env, parse_gait};
 use locobench::envs::make;
 use locobench::policy::{AgentPolicy, Policy};
 use locobench::record::{spawn_viewer, Recording, RolloutRecorder};
@@ -22,9 +22,11 @@ pub struct RecordArgs {
     pub episodes: usize,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Speed set-point of the Raibert controller (m/s).
+    /// Speed set-point of the Raibert controller (m/s), reached over the first second.
     #[arg(long, default_value_t = 0.35)]
     pub speed: f64,
+    #[command(flatten)]
+    pub command: super::baseline::CommandArgs,
     /// Gait of the Raibert controller (trot, bound, pace).
     #[arg(long)]
     pub gait: Option<String>,
@@ -45,7 +47,8 @@ pub fn run(args: RecordArgs) -> Result<()> {
         "raibert" => {
             let env = args.env.as_deref().context("--policy raibert needs --env minitaur or --env ant")?;
             let gait = args.gait.as_deref().map(parse_gait).transpose()?;
-            (baseline_env(env)?, baseline_controller(env, args.speed, gait)?)
+            let command = args.command.commands(&[args.speed])?.remove(0);
+            (baseline_env(env)?, baseline_controller_for(env, command, gait)?)
         }
         p if p == "random" || p == "zero" || p.starts_with("actions:") => {
             let env = args.env.as_deref().with_context(|| format!("--policy {p} needs --env"))?;

@@ -15,7 +15,8 @@ pub struct TrainArgs {
     pub algo: Option<String>,
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Total environment steps (same as --set total_steps=N).
+    /// Total environment steps (same as --set total_steps=N). With --resume: raise the run's
+    /// budget to N steps and train on (a finished 100k run to 300k, say).
     #[arg(long)]
     pub steps: Option<u64>,
     /// Hyperparameter overrides, e.g. `--set batch_size=256,hidden=[64,64]`.
@@ -86,6 +87,13 @@ pub fn run(args: TrainArgs) -> Result<()> {
         ..Default::default()
     };
     let summary = if let Some(dir) = &args.resume {
+        if let Some(n) = args.steps {
+            let exact = train::extend(dir, n)?;
+            println!("budget of {} raised to {n} steps", dir.display());
+            if !exact {
+                println!("note: the newest checkpoint is mid-episode; that episode is cut short there");
+            }
+        }
         println!("resuming {}", dir.display());
         train::resume(dir, &control)?
     } else {

@@ -10,6 +10,7 @@
 use anyhow::{bail, Result};
 use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
 
+use super::command::{wrap_angle, Command};
 use super::force_qp::{Dimension, ForceQp};
 use super::gait::{GaitKind, GaitScheduler, LEGS};
 use super::raibert_foothold;
@@ -23,7 +24,8 @@ const ANT_LEGS: [usize; LEGS] = [1, 2, 4, 3];
 
 #[derive(Debug, Clone)]
 pub struct AntGaitParams {
-    pub speed: f64,
+    /// Forward speed profile and yaw rate.
+    pub command: Command,
     pub stance_duration: f64,
     pub duty_factor: f64,
     pub body_height: f64,
@@ -31,6 +33,8 @@ pub struct AntGaitParams {
     pub kp_height: f64,
     pub kd_height: f64,
     pub kd_speed: f64,
+    /// Integral gain on the forward-speed error (1/s^2).
+    pub ki_speed: f64,
     pub kp_attitude: f64,
     pub kd_attitude: f64,
     /// Ankle angle magnitude while in swing (rad; the range is 30-70 degrees).
@@ -43,7 +47,7 @@ pub struct AntGaitParams {
 impl Default for AntGaitParams {
     fn default() -> Self {
         AntGaitParams {
-            speed: 0.5,
+            command: Command::straight(0.5, 1.0),
             stance_duration: 0.25,
             duty_factor: 0.6,
             body_height: 0.55,
@@ -51,6 +55,7 @@ impl Default for AntGaitParams {
             kp_height: 100.0,
             kd_height: 10.0,
             kd_speed: 30.0,
+            ki_speed: 20.0,
             kp_attitude: 100.0,
             kd_attitude: 10.0,
             swing_ankle: 0.55,
@@ -79,6 +84,9 @@ pub struct AntController {
     qp: ForceQp,
     legs: Option<Vec<Leg>>,
     pub qp_failures: u64,
+    time: f64,
+    speed_integral: f64,
+    heading_goal: f64,
     /// Stance flags and phase progress per leg during the latest tick, for recorders.
     last_phase: [(bool, f64); LEGS],
     /// Where each swing foot lands when its hip reaches the touchdown angle (world).
@@ -88,6 +96,7 @@ pub struct AntController {
 impl AntController {
     pub fn new(params: AntGaitParams) -> Result<AntController> {
         let gait = GaitScheduler::new(GaitKind::Trot, params.stance_duration, params.duty_factor)?;
+        params.command.validate()?;
         let qp =
             ForceQp::new(Dimension::Spatial, params.friction, 0.1, 50.0, vec![1.0, 1.0, 1.0, 10.0, 10.0, 10.0], 1e-4);
         Ok(AntController {
@@ -96,6 +105,9 @@ impl AntController {
             qp,
             legs: None,
             qp_failures: 0,
+            time: 0.0,
+            speed_integral: 0.0,
+            heading_goal: 0.0,
             last_phase: [(true, 0.0); LEGS],
             foot_targets: [[0.0; 3]; LEGS],
         })
@@ -150,21 +162,44 @@ impl AntController {
         let com = masses.iter().enumerate().fold(Vector3::zeros(), |a, (b, mass)| a + Self::v3(d.xipos(), b) * *mass)
             / total_mass;
         let g = -m.gravity()[2];
-        // Attitude error as a rotation vector (small-angle: from the skew part of R).
-        let att = Vector3::new(r[(2, 1)] - r[(1, 2)], r[(0, 2)] - r[(2, 0)], r[(1, 0)] - r[(0, 1)]) * 0.5;
+        // Heading frame (yaw only): speeds and the wrench are set in it.
+        let yaw = r[(1, 0)].atan2(r[(0, 0)]);
+        if self.time == 0.0 {
+            self.heading_goal = yaw;
+        }
+        let heading = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw);
+        let body = heading.inverse() * r;
+        let local_vel = heading.inverse() * vel;
+        let local_omega = heading.inverse() * omega;
+        let v_des = p.command.speed.at(self.time);
+        let yaw_rate_des = p.command.yaw_rate;
+        // Roll and pitch error as a rotation vector (small-angle: the skew part of the body
+        // attitude in the heading frame); yaw against the commanded heading.
+        let att = Vector3::new(
+            0.5 * (body[(2, 1)] - body[(1, 2)]),
+            0.5 * (body[(0, 2)] - body[(2, 0)]),
+            -wrap_angle(self.heading_goal - yaw),
+        );
+        let speed_error = v_des - local_vel.x;
+        if p.ki_speed > 0.0 {
+            let bound = 0.5 / p.ki_speed * p.kd_speed;
+            self.speed_integral = (self.speed_integral + speed_error * spec.dt).clamp(-bound, bound);
+        }
 
         let phases = self.gait.legs();
         self.last_phase = phases.map(|l| (l.in_stance, l.progress));
         let mut ctrl = vec![0.0; m.nu()];
         let stance: Vec<usize> = (0..LEGS).filter(|&k| phases[k].in_stance).collect();
         if !stance.is_empty() {
-            let force = Vector3::new(
-                total_mass * p.kd_speed * (p.speed - vel.x),
-                total_mass * p.kd_speed * (0.0 - vel.y),
-                total_mass * (g + p.kp_height * (p.body_height - q[2]) - p.kd_height * vel.z),
-            );
+            let force = heading
+                * Vector3::new(
+                    total_mass * (p.kd_speed * speed_error + p.ki_speed * self.speed_integral),
+                    total_mass * p.kd_speed * (0.0 - local_vel.y),
+                    total_mass * (g + p.kp_height * (p.body_height - q[2]) - p.kd_height * vel.z),
+                );
             let inertia = 0.05;
-            let moment = (-att * p.kp_attitude - omega * p.kd_attitude) * inertia;
+            let rate_error = local_omega - Vector3::new(0.0, 0.0, yaw_rate_des);
+            let moment = heading * ((-att * p.kp_attitude - rate_error * p.kd_attitude) * inertia);
             let feet: Vec<Vector3<f64>> =
                 stance.iter().map(|&k| Self::v3(d.site_xpos(), legs[k].foot_site) - com).collect();
             let wrench = [force.x, force.y, force.z.max(0.0), moment.x, moment.y, moment.z];
@@ -183,12 +218,11 @@ impl AntController {
                 }
             }
         }
-        // Hip sweep: the foothold (T_st/2) v + k (v - v_des) ahead of the hip at touchdown,
-        // swept back through stance; a forward step dx needs a hip yaw of about dx / 0.4 m.
-        let offset = raibert_foothold(p.stance_duration, [vel.x, vel.y], [p.speed, 0.0], p.foothold_gain);
-        let reach = (0.5 * p.stance_duration * p.speed + (offset[0] - 0.5 * p.stance_duration * vel.x)).max(0.0)
-            + 0.5 * p.stance_duration * vel.x.max(0.0);
-        let amplitude = (reach / 0.4).clamp(0.0, 0.5);
+        // Hip sweep: the foothold (T_st/2) v + k (v - v_des) ahead of the hip at touchdown plus
+        // the stride the set-point needs, (T_st/2) v_des, swept back through stance; a step dx
+        // needs a hip yaw of about dx / 0.4 m. Signed, so the same law walks backwards.
+        let offset = raibert_foothold(p.stance_duration, [local_vel.x, local_vel.y], [v_des, 0.0], p.foothold_gain);
+        let amplitude = ((offset[0] + 0.5 * p.stance_duration * v_des) / 0.4).clamp(-0.5, 0.5);
         for k in 0..LEGS {
             let leg = &legs[k];
             let (hq, hv) = (q[m.joint_qpos_adr(leg.hip_joint)], v[m.joint_dof_adr(leg.hip_joint)]);
@@ -211,17 +245,26 @@ impl AntController {
             ctrl[leg.ankle_act] = (p.joint_kp * (ankle_target - aq) - p.joint_kd * av) / 150.0;
         }
         self.gait.advance(spec.dt);
+        self.time += spec.dt;
+        self.heading_goal = wrap_angle(self.heading_goal + yaw_rate_des * spec.dt);
         Ok(ctrl.into_iter().map(|c| c.clamp(-1.0, 1.0)).collect())
     }
 }
 
 impl Policy for AntController {
     fn name(&self) -> String {
-        format!("raibert-trot@{}m/s", self.params.speed)
+        let c = &self.params.command;
+        let mut name = format!("raibert-trot@{}m/s", c.speed.final_speed());
+        if c.yaw_rate != 0.0 {
+            name += &format!(",{}rad/s", c.yaw_rate);
+        }
+        name
     }
     fn begin_episode(&mut self, _episode: usize) {
         self.gait.reset();
         self.qp_failures = 0;
+        self.time = 0.0;
+        self.speed_integral = 0.0;
     }
     fn act(&mut self, env: &dyn Env, _observation: &[f64]) -> Result<Vec<f64>> {
         self.controls(env)

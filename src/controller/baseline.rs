@@ -3,6 +3,7 @@
 use anyhow::{bail, Result};
 
 use super::ant::{AntController, AntGaitParams};
+use super::command::Command;
 use super::gait::GaitKind;
 use super::minitaur::{MinitaurController, MinitaurGaitParams};
 use crate::envs::EnvConfig;
@@ -27,14 +28,24 @@ pub fn baseline_env_like(cfg: &EnvConfig) -> Result<EnvConfig> {
     Ok(out)
 }
 
-/// A controller for `env` tracking `speed`; `gait` overrides Minitaur's default bound.
+/// Seconds over which a straight-line set-point is ramped up from standing.
+pub const RAMP_TIME: f64 = 1.0;
+
+/// A controller for `env` walking straight at `speed` (reached over `RAMP_TIME`); `gait`
+/// overrides Minitaur's default bound.
 pub fn baseline_controller(env: &str, speed: f64, gait: Option<GaitKind>) -> Result<Box<dyn Policy>> {
-    anyhow::ensure!(speed.is_finite() && speed >= 0.0, "speed must be a finite number >= 0");
+    anyhow::ensure!(speed.is_finite(), "speed must be a finite number");
+    baseline_controller_for(env, Command::straight(speed, RAMP_TIME), gait)
+}
+
+/// A controller for `env` following a speed profile and a yaw-rate command.
+pub fn baseline_controller_for(env: &str, command: Command, gait: Option<GaitKind>) -> Result<Box<dyn Policy>> {
+    command.validate()?;
     Ok(match env {
         "minitaur" => {
             let defaults = MinitaurGaitParams::default();
             Box::new(MinitaurController::new(MinitaurGaitParams {
-                speed,
+                command,
                 gait: gait.unwrap_or(defaults.gait),
                 ..defaults
             })?)
@@ -43,7 +54,7 @@ pub fn baseline_controller(env: &str, speed: f64, gait: Option<GaitKind>) -> Res
             if gait.is_some_and(|g| g != GaitKind::Trot) {
                 bail!("the Ant controller trots only");
             }
-            Box::new(AntController::new(AntGaitParams { speed, ..Default::default() })?)
+            Box::new(AntController::new(AntGaitParams { command, ..Default::default() })?)
         }
         other => bail!("the Raibert baseline exists for minitaur and ant, not '{other}'"),
     })

@@ -4,8 +4,9 @@
 //!     subject to |f_x|, |f_y| <= mu f_z and f_min <= f_z <= f_max,
 //! with A = [I ... I; [r_1]x ... [r_n]x] (r_i: foot position relative to the centre of mass).
 //! Solved by clarabel. `Planar` has no lateral foot forces (Minitaur has no abduction): forces
-//! (f_x, f_z) per foot, wrench (F_x, F_z, M_x, M_y); roll is still controlled through the
-//! vertical forces of feet on either side.
+//! (f_x, f_z) per foot, wrench (F_x, F_z, M_x, M_y, M_z); roll is still controlled through the
+//! vertical forces of feet on either side, and yaw through the fore-aft forces of feet on either
+//! side.
 use anyhow::{bail, Result};
 use clarabel::algebra::CscMatrix;
 use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverStatus, SupportedConeT};
@@ -17,7 +18,7 @@ use nalgebra::{DMatrix, DVector, Vector3};
 pub enum Dimension {
     /// Forces (f_x, f_y, f_z) per foot; wrench (F_x, F_y, F_z, M_x, M_y, M_z).
     Spatial,
-    /// Forces (f_x, f_z) per foot; wrench (F_x, F_z, M_x, M_y).
+    /// Forces (f_x, f_z) per foot; wrench (F_x, F_z, M_x, M_y, M_z).
     Planar,
 }
 
@@ -30,6 +31,10 @@ pub struct ForceQp {
     pub wrench_weights: Vec<f64>,
     /// Regularisation alpha on |f|^2.
     pub regularisation: f64,
+    /// clarabel's default settings (tolerances 1e-8, equilibration, iterative refinement)
+    /// instead of the faster ones used per control tick; the reference the fast ones are
+    /// tested against.
+    pub precise: bool,
     /// Cached solvers by number of stance feet (see `solve`).
     solvers: HashMap<usize, DefaultSolver<f64>>,
 }
@@ -43,7 +48,16 @@ impl ForceQp {
         wrench_weights: Vec<f64>,
         regularisation: f64,
     ) -> ForceQp {
-        ForceQp { dimension, friction, f_min, f_max, wrench_weights, regularisation, solvers: HashMap::new() }
+        ForceQp {
+            dimension,
+            friction,
+            f_min,
+            f_max,
+            wrench_weights,
+            regularisation,
+            precise: false,
+            solvers: HashMap::new(),
+        }
     }
 
     fn force_dim(&self) -> usize {
@@ -63,13 +77,31 @@ impl ForceQp {
                 m.view_mut((3, 0), (3, 3)).copy_from(&cross);
                 m
             }
-            // Forces f_x, f_z (f_y = 0); rows F_x, F_z, M_x, M_y.
+            // Forces f_x, f_z (f_y = 0); rows F_x, F_z, M_x, M_y, M_z.
             Dimension::Planar => DMatrix::from_row_slice(
-                4,
+                5,
                 2,
-                &[1.0, 0.0, 0.0, 1.0, cross[(0, 0)], cross[(0, 2)], cross[(1, 0)], cross[(1, 2)]],
+                &[
+                    1.0,
+                    0.0,
+                    0.0,
+                    1.0,
+                    cross[(0, 0)],
+                    cross[(0, 2)],
+                    cross[(1, 0)],
+                    cross[(1, 2)],
+                    cross[(2, 0)],
+                    cross[(2, 2)],
+                ],
             ),
         }
+    }
+
+    /// The cost the QP minimises, for forces `forces`.
+    pub fn objective(&self, feet: &[Vector3<f64>], wrench: &[f64], forces: &[f64]) -> f64 {
+        let err = self.wrench(feet, forces) - DVector::from_column_slice(wrench);
+        let weighted: f64 = err.iter().zip(&self.wrench_weights).map(|(e, w)| w * e * e).sum();
+        weighted + self.regularisation * forces.iter().map(|f| f * f).sum::<f64>()
     }
 
     /// The wrench a set of foot forces produces.
@@ -80,7 +112,7 @@ impl ForceQp {
 
     fn stacked_map(&self, feet: &[Vector3<f64>]) -> DMatrix<f64> {
         let k = self.force_dim();
-        let rows = if k == 3 { 6 } else { 4 };
+        let rows = if k == 3 { 6 } else { 5 };
         let mut a = DMatrix::zeros(rows, k * feet.len());
         for (i, r) in feet.iter().enumerate() {
             a.view_mut((0, k * i), (rows, k)).copy_from(&self.wrench_map(*r));
@@ -136,12 +168,23 @@ impl ForceQp {
                 let p_upper = dense_pattern_upper(n, values);
                 let g = rows_to_csc(&g_rows, n);
                 let cones = [SupportedConeT::NonnegativeConeT(h.len())];
-                let settings = DefaultSettingsBuilder::default()
-                    .verbose(false)
-                    .max_iter(50)
-                    .presolve_enable(false)
-                    .build()
-                    .expect("valid settings");
+                let settings = if self.precise {
+                    DefaultSettingsBuilder::default().verbose(false).presolve_enable(false).build()
+                } else {
+                    DefaultSettingsBuilder::default()
+                        .verbose(false)
+                        .max_iter(50)
+                        .presolve_enable(false)
+                        // An absolute duality gap of 1e-6 (the relative one stays at 1e-8: the
+                        // solver's objective omits b'Sb, so a relative test would stop early)
+                        // and no iterative refinement: about half the solve time
+                        // (benches/controller.rs, README), same cost to 1e-4 (tests below).
+                        .tol_gap_abs(1e-6)
+                        .tol_feas(1e-6)
+                        .iterative_refinement_enable(false)
+                        .build()
+                }
+                .expect("valid settings");
                 let solver = DefaultSolver::new(&p_upper, &q, &g, &h, &cones, settings)
                     .map_err(|e| anyhow::anyhow!("QP setup failed: {e:?}"))?;
                 v.insert(solver)
@@ -239,6 +282,59 @@ mod tests {
         assert!(f.chunks(3).all(|c| (c[2] - qp.f_max).abs() < 1e-3));
     }
 
+    /// The per-tick settings against clarabel's defaults on random stance configurations:
+    /// wrenches made from admissible forces (feasible) and arbitrary ones (not reproducible).
+    #[test]
+    fn fast_settings_match_the_default_solver_on_random_cases() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        for dimension in [Dimension::Spatial, Dimension::Planar] {
+            let rows = if dimension == Dimension::Spatial { 6 } else { 5 };
+            let make = |precise| ForceQp {
+                dimension,
+                wrench_weights: vec![1.0, 1.0, 1.0, 10.0, 10.0, 10.0][..rows].to_vec(),
+                precise,
+                ..ForceQp::new(dimension, 0.7, 0.5, 80.0, vec![], 1e-4)
+            };
+            let (mut fast, mut reference) = (make(false), make(true));
+            let k = fast.force_dim();
+            for case in 0..200 {
+                let n = rng.random_range(2..=4);
+                let feet: Vec<Vector3<f64>> = (0..n)
+                    .map(|_| {
+                        Vector3::new(
+                            rng.random_range(-0.3..0.3),
+                            rng.random_range(-0.15..0.15),
+                            rng.random_range(-0.25..-0.15),
+                        )
+                    })
+                    .collect();
+                let wrench: Vec<f64> = if case % 2 == 0 {
+                    let forces: Vec<f64> = (0..n)
+                        .flat_map(|_| {
+                            let fz: f64 = rng.random_range(1.0..60.0);
+                            let mut f: Vec<f64> = (0..k - 1).map(|_| rng.random_range(-0.6..0.6) * fz).collect();
+                            f.push(fz);
+                            f
+                        })
+                        .collect();
+                    fast.wrench(&feet, &forces).iter().copied().collect()
+                } else {
+                    (0..rows).map(|_| rng.random_range(-80.0..120.0)).collect()
+                };
+                let a = fast.solve(&feet, &wrench).unwrap();
+                let b = reference.solve(&feet, &wrench).unwrap();
+                check_constraints(&fast, &a);
+                let (ja, jb) = (fast.objective(&feet, &wrench, &a), reference.objective(&feet, &wrench, &b));
+                assert!(ja - jb <= 1e-4 * (1.0 + jb), "case {case} ({dimension:?}): cost {ja} vs default {jb}");
+                // Forces may differ along directions the cost barely sees (the regularisation is
+                // 1e-4); the wrench they produce may not.
+                let gap = (fast.wrench(&feet, &a) - reference.wrench(&feet, &b)).amax();
+                assert!(gap < 1e-2, "case {case} ({dimension:?}): wrenches differ by {gap}");
+            }
+        }
+    }
+
     #[test]
     fn an_unsolvable_problem_is_an_error_not_a_panic() {
         // Normal force bounds that exclude each other: no admissible force exists.
@@ -248,7 +344,7 @@ mod tests {
 
     #[test]
     fn planar_version_for_minitaur() {
-        let mut qp = ForceQp { dimension: Dimension::Planar, wrench_weights: vec![1.0; 4], ..qp() };
+        let mut qp = ForceQp { dimension: Dimension::Planar, wrench_weights: vec![1.0; 5], ..qp() };
         // A trot's diagonal pair: front-left and back-right.
         let feet = [Vector3::new(0.21, 0.09, -0.2), Vector3::new(-0.21, -0.09, -0.2)];
         // Roll and pitch are tied on a diagonal pair; a wrench made from admissible forces is
@@ -260,7 +356,7 @@ mod tests {
         let w = qp.wrench(&feet, &f);
         assert!((w - &wrench).norm() < 1e-3 * wrench.norm(), "{wrench} vs {f:?}");
         assert!(wrench[2].abs() > 0.5 && wrench[3].abs() > 0.5, "the test wrench should roll and pitch");
-        assert!(qp.solve(&[], &[0.0, 60.0, 0.0, 0.0]).is_err());
+        assert!(qp.solve(&[], &[0.0, 60.0, 0.0, 0.0, 0.0]).is_err());
         assert!(qp.solve(&feet, &[0.0, 60.0]).is_err());
     }
 }

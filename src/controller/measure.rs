@@ -1,9 +1,11 @@
-//! Running a controller for whole episodes and measuring how it walks.
+//! Running a controller (or any policy) for whole episodes and measuring how it walks against a
+//! speed profile: speeds in the heading frame, so turning runs are measured like straight ones.
 use anyhow::Result;
 
+use super::command::{wrap_angle, SpeedProfile};
 use crate::envs::Env;
 use crate::policy::Policy;
-use crate::rollout::{run_episode, StepView};
+use crate::rollout::{run_episode, Observer, StepView};
 
 /// Locomotion measures of one episode.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -11,15 +13,22 @@ pub struct GaitEpisode {
     pub episode_return: f64,
     pub length: usize,
     pub fell: bool,
-    /// Mean forward speed (m/s): forward distance over episode time.
+    /// Mean forward speed (m/s): distance travelled along the robot's heading over episode time.
     pub mean_speed: f64,
     /// Mean |forward velocity - set-point| over steps (m/s).
     pub speed_error: f64,
-    /// Mechanical energy delivered by the motors (J), where the env reports it.
+    /// Mean yaw rate (rad/s): heading change over episode time.
+    pub yaw_rate: f64,
+    /// Net displacement across the heading (m): how far the robot ended up to the side of
+    /// where it was going.
+    pub sideways: f64,
+    /// Mechanical energy delivered by the motors (J), integrated every physics step.
     pub energy: f64,
     /// energy / (m g distance); infinite when the robot did not advance.
     pub cost_of_transport: f64,
+    /// Sum of |sideways step| (m), PyBullet's drift term: sway counts as well as drift.
     pub drift: f64,
+    /// Sum of |vertical step| (m), PyBullet's shake term.
     pub shake: f64,
     /// Control ticks whose force QP failed and fell back to sharing the weight.
     pub qp_failures: f64,
@@ -35,43 +44,81 @@ pub fn mean_cost_of_transport(episodes: &[GaitEpisode]) -> f64 {
     }
 }
 
-/// Runs `episodes` episodes (the first reset seeded with `seed`) and measures each against
-/// the speed set-point.
+/// Position (x, y) and yaw of the floating base (the model's first body).
+fn base_pose(env: &dyn Env) -> ([f64; 2], f64) {
+    let d = env.data();
+    let (p, r) = (&d.xpos()[3..6], &d.xmat()[9..18]);
+    ([p[0], p[1]], r[3].atan2(r[0]))
+}
+
+struct GaitObserver<'a> {
+    profile: &'a SpeedProfile,
+    dt: f64,
+    episode: GaitEpisode,
+    pose: ([f64; 2], f64),
+    forward_distance: f64,
+    turned: f64,
+}
+
+impl Observer for GaitObserver<'_> {
+    fn reset(&mut self, _episode: usize, env: &dyn Env) -> Result<()> {
+        self.pose = base_pose(env);
+        Ok(())
+    }
+
+    fn step(&mut self, v: &StepView) -> Result<()> {
+        let (p, yaw) = base_pose(v.env);
+        let (p0, yaw0) = self.pose;
+        let step = [p[0] - p0[0], p[1] - p0[1]];
+        let mid = yaw0 + 0.5 * wrap_angle(yaw - yaw0);
+        let (along, across) = (step[0] * mid.cos() + step[1] * mid.sin(), -step[0] * mid.sin() + step[1] * mid.cos());
+        let e = &mut self.episode;
+        self.forward_distance += along;
+        e.sideways += across;
+        self.turned += wrap_angle(yaw - yaw0);
+        e.speed_error += (along / self.dt - self.profile.at(v.t as f64 * self.dt)).abs();
+        let info = &v.step.info;
+        e.energy += info.metric("mechanical_energy").unwrap_or(0.0);
+        e.drift += info.metric("dy").map(f64::abs).unwrap_or(0.0);
+        e.shake += info.metric("dz").map(f64::abs).unwrap_or(0.0);
+        self.pose = (p, yaw);
+        Ok(())
+    }
+}
+
+/// Runs `episodes` episodes (the first reset seeded with `seed`) and measures each against the
+/// speed profile (time from each episode's start).
 pub fn measure(
     env: &mut dyn Env,
     policy: &mut dyn Policy,
     episodes: usize,
     seed: u64,
-    set_point: f64,
+    profile: &SpeedProfile,
 ) -> Result<Vec<GaitEpisode>> {
     let dt = env.spec().dt;
     let mass: f64 = env.data().model().body_mass().iter().sum();
     let gravity = -env.data().model().gravity()[2];
     let mut out = Vec::with_capacity(episodes);
     for episode in 0..episodes {
-        let mut e = GaitEpisode::default();
-        let (mut start_x, mut end_x) = (0.0, 0.0);
+        let mut obs = GaitObserver {
+            profile,
+            dt,
+            episode: GaitEpisode::default(),
+            pose: ([0.0; 2], 0.0),
+            forward_distance: 0.0,
+            turned: 0.0,
+        };
         let reset_seed = if episode == 0 { Some(seed) } else { None };
-        let summary = run_episode(env, policy, episode, reset_seed, &mut |v: &StepView| {
-            let (t, step) = (v.t, v.step);
-            let x = step.info.metric("x_position").unwrap_or(0.0);
-            let vx = step.info.metric("x_velocity").unwrap_or(0.0);
-            if t == 0 {
-                start_x = x - vx * dt;
-            }
-            end_x = x;
-            e.speed_error += (vx - set_point).abs();
-            e.energy += step.info.metric("mechanical_energy").unwrap_or(0.0);
-            e.drift += step.info.metric("dy").map(f64::abs).unwrap_or(0.0);
-            e.shake += step.info.metric("dz").map(f64::abs).unwrap_or(0.0);
-            Ok(())
-        })?;
+        let summary = run_episode(env, policy, episode, reset_seed, &mut obs)?;
+        let mut e = obs.episode;
         e.episode_return = summary.episode_return;
         e.length = summary.length;
         e.fell = summary.terminated || summary.unstable;
-        let distance = end_x - start_x;
         let time = summary.length as f64 * dt;
+        let distance = obs.forward_distance;
         e.mean_speed = if time > 0.0 { distance / time } else { 0.0 };
+        e.yaw_rate = if time > 0.0 { obs.turned / time } else { 0.0 };
+        e.sideways = e.sideways.abs();
         e.speed_error /= summary.length.max(1) as f64;
         e.cost_of_transport = if distance > 0.0 { e.energy / (mass * gravity * distance) } else { f64::INFINITY };
         e.qp_failures = policy.diagnostics().iter().find(|(n, _)| *n == "qp_failures").map_or(0.0, |(_, v)| *v);

@@ -15,8 +15,9 @@
 //! hip, reached along a raised arc, tracked in leg space (inverse kinematics + joint PD).
 //! It drives the environment in its torque action mode, so it is scored by the same reward.
 use anyhow::{bail, Context, Result};
-use nalgebra::{Matrix3, Vector3};
+use nalgebra::{Matrix3, Rotation3, Vector3};
 
+use super::command::{wrap_angle, Command};
 use super::force_qp::{Dimension, ForceQp};
 use super::fourbar;
 use super::gait::{gait_telemetry, GaitKind, GaitScheduler, LEGS, LEG_NAMES};
@@ -27,7 +28,8 @@ use crate::policy::{Policy, Telemetry};
 
 #[derive(Debug, Clone)]
 pub struct MinitaurGaitParams {
-    pub speed: f64,
+    /// Forward speed profile and yaw rate.
+    pub command: Command,
     pub gait: GaitKind,
     pub stance_duration: f64,
     pub duty_factor: f64,
@@ -35,11 +37,13 @@ pub struct MinitaurGaitParams {
     /// Raibert speed-correction gain k.
     pub foothold_gain: f64,
     pub swing_clearance: f64,
-    /// Seconds to ramp the speed set-point up from zero.
-    pub ramp_time: f64,
     pub kp_height: f64,
     pub kd_height: f64,
     pub kd_speed: f64,
+    /// Integral gain on the speed error (1/s^2): removes the steady lag of the pure damping term.
+    pub ki_speed: f64,
+    pub kp_yaw: f64,
+    pub kd_yaw: f64,
     pub kp_pitch: f64,
     pub kd_pitch: f64,
     pub swing_kp: f64,
@@ -50,17 +54,19 @@ pub struct MinitaurGaitParams {
 impl Default for MinitaurGaitParams {
     fn default() -> Self {
         MinitaurGaitParams {
-            speed: 0.35,
+            command: Command::straight(0.35, 1.0),
             gait: GaitKind::Bound,
             stance_duration: 0.1,
             duty_factor: 0.7,
             body_height: 0.18,
             foothold_gain: 0.03,
             swing_clearance: 0.04,
-            ramp_time: 1.0,
             kp_height: 300.0,
             kd_height: 30.0,
             kd_speed: 25.0,
+            ki_speed: 20.0,
+            kp_yaw: 40.0,
+            kd_yaw: 10.0,
             kp_pitch: 200.0,
             kd_pitch: 10.0,
             swing_kp: 3.0,
@@ -91,6 +97,10 @@ pub struct MinitaurController {
     gait: GaitScheduler,
     qp: ForceQp,
     time: f64,
+    /// Integral of the forward-speed error (m).
+    speed_integral: f64,
+    /// Commanded heading, the integral of the yaw-rate command (rad).
+    heading_goal: f64,
     was_stance: [bool; LEGS],
     liftoff: [Vector3<f64>; LEGS],
     pub stats: ControllerStats,
@@ -103,12 +113,15 @@ pub struct MinitaurController {
 impl MinitaurController {
     pub fn new(params: MinitaurGaitParams) -> Result<MinitaurController> {
         let gait = GaitScheduler::new(params.gait, params.stance_duration, params.duty_factor)?;
-        let qp = ForceQp::new(Dimension::Planar, params.friction, 2.0, 80.0, vec![1.0, 1.0, 20.0, 20.0], 1e-4);
+        params.command.validate()?;
+        let qp = ForceQp::new(Dimension::Planar, params.friction, 2.0, 80.0, vec![1.0, 1.0, 20.0, 20.0, 20.0], 1e-4);
         Ok(MinitaurController {
             params,
             gait,
             qp,
             time: 0.0,
+            speed_integral: 0.0,
+            heading_goal: 0.0,
             was_stance: [true; LEGS],
             liftoff: [Vector3::zeros(); LEGS],
             stats: ControllerStats::default(),
@@ -143,17 +156,30 @@ impl MinitaurController {
         let r = Matrix3::from_row_slice(&d.xmat()[9 * base..9 * base + 9]);
         let q = d.qpos();
         let v = d.qvel();
-        let (vel, omega_x, omega_y) = (Vector3::new(v[0], v[1], v[2]), v[3], v[4]);
-        let pitch = (-r[(2, 0)]).atan2(r[(0, 0)]);
-        let roll = r[(2, 1)].atan2(r[(2, 2)]);
+        let vel = Vector3::new(v[0], v[1], v[2]);
+        // Base angular velocity: MuJoCo's free joint gives it in the body frame.
+        let omega = r * Vector3::new(v[3], v[4], v[5]);
+        // Heading frame: yaw only. Speeds, footholds and the force QP live in it, so the same
+        // laws hold whichever way the robot faces.
+        let yaw = r[(1, 0)].atan2(r[(0, 0)]);
+        let heading = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw);
+        let to_heading = heading.inverse();
+        let body = to_heading * r;
+        let pitch = (-body[(2, 0)]).atan2(body[(0, 0)]);
+        let roll = body[(2, 1)].atan2(body[(2, 2)]);
+        let local_vel = to_heading * vel;
+        let local_omega = to_heading * omega;
         let masses = m.body_mass();
         let total_mass: f64 = masses.iter().sum();
         let com = masses.iter().enumerate().fold(Vector3::zeros(), |acc, (b, mass)| {
             acc + Vector3::new(d.xipos()[3 * b], d.xipos()[3 * b + 1], d.xipos()[3 * b + 2]) * *mass
         }) / total_mass;
         let g = -m.gravity()[2];
-        let ramp = if p.ramp_time > 0.0 { (self.time / p.ramp_time).min(1.0) } else { 1.0 };
-        let v_des = p.speed * ramp;
+        if self.stats.ticks == 0 {
+            self.heading_goal = yaw;
+        }
+        let v_des = p.command.speed.at(self.time);
+        let yaw_rate_des = p.command.yaw_rate;
 
         let legs = self.gait.legs();
         self.last_phase = legs.map(|l| (l.in_stance, l.progress));
@@ -161,20 +187,29 @@ impl MinitaurController {
         let speeds: [f64; 8] = std::array::from_fn(|i| obs[8 + i]);
         let mut tau = [0.0; 8];
 
+        // Speed error integral, bounded so that a stumble cannot wind it up.
+        let speed_error = v_des - local_vel.x;
+        if p.ki_speed > 0.0 {
+            let bound = 0.5 / p.ki_speed * p.kd_speed;
+            self.speed_integral = (self.speed_integral + speed_error * dt).clamp(-bound, bound);
+        }
+
         // Stance: body wrench -> QP -> torques.
         let stance: Vec<usize> = (0..LEGS).filter(|&l| legs[l].in_stance).collect();
         if !stance.is_empty() {
-            let fx = total_mass * p.kd_speed * (v_des - vel.x);
+            let fx = total_mass * (p.kd_speed * speed_error + p.ki_speed * self.speed_integral);
             let fz = total_mass * (g + p.kp_height * (p.body_height - q[2]) - p.kd_height * vel.z);
             // Body inertia (kg m^2), the order of the real robot's.
-            let (inertia_x, inertia_y) = (0.03, 0.12);
-            let mx = inertia_x * (-p.kp_pitch * roll - p.kd_pitch * omega_x);
-            let my = inertia_y * (-p.kp_pitch * pitch - p.kd_pitch * omega_y);
+            let (inertia_x, inertia_y, inertia_z) = (0.03, 0.12, 0.12);
+            let mx = inertia_x * (-p.kp_pitch * roll - p.kd_pitch * local_omega.x);
+            let my = inertia_y * (-p.kp_pitch * pitch - p.kd_pitch * local_omega.y);
+            let mz = inertia_z
+                * (p.kp_yaw * wrap_angle(self.heading_goal - yaw) + p.kd_yaw * (yaw_rate_des - local_omega.z));
             let feet: Vec<Vector3<f64>> = stance
                 .iter()
-                .map(|&l| Self::site(d, &format!("foot_{}", LEG_NAMES[l])).map(|f| f - com))
+                .map(|&l| Self::site(d, &format!("foot_{}", LEG_NAMES[l])).map(|f| to_heading * (f - com)))
                 .collect::<Result<_>>()?;
-            let forces = match self.qp.solve(&feet, &[fx, fz.max(0.0), mx, my]) {
+            let forces = match self.qp.solve(&feet, &[fx, fz.max(0.0), mx, my, mz]) {
                 Ok(f) => f,
                 Err(_) => {
                     // Fall back to sharing the weight equally.
@@ -183,7 +218,7 @@ impl MinitaurController {
                 }
             };
             for (k, &leg) in stance.iter().enumerate() {
-                let world = Vector3::new(forces[2 * k], 0.0, forces[2 * k + 1]);
+                let world = heading * Vector3::new(forces[2 * k], 0.0, forces[2 * k + 1]);
                 let local = r.transpose() * world;
                 let (o, i) = motor_slots(leg);
                 let t = fourbar::torques_for_ground_force(angles[o], angles[i], [local.x, local.z])
@@ -193,7 +228,9 @@ impl MinitaurController {
             }
         }
 
-        // Swing: Raibert foothold along a raised arc, tracked in leg space.
+        // Swing: Raibert foothold along a raised arc, tracked in leg space. Each hip has its own
+        // forward speed when turning (v - w y), so the outer legs take longer strides.
+        let forward = heading * Vector3::x();
         for leg in 0..LEGS {
             let name = LEG_NAMES[leg];
             let foot = Self::site(d, &format!("foot_{name}"))?;
@@ -206,19 +243,19 @@ impl MinitaurController {
                 self.was_stance[leg] = false;
             }
             let hip = Self::site(d, &format!("hip_{name}"))?;
-            let offset = raibert_foothold(p.stance_duration, [vel.x, 0.0], [v_des, 0.0], p.foothold_gain);
+            let lateral = (to_heading * (hip - com)).y;
+            let hip_speed = local_vel.x - local_omega.z * lateral;
+            let hip_speed_des = v_des - yaw_rate_des * lateral;
+            let offset = raibert_foothold(p.stance_duration, [hip_speed, 0.0], [hip_speed_des, 0.0], p.foothold_gain);
             // Aim where the hip will be at touchdown.
             let remaining = (1.0 - legs[leg].progress) * self.gait.swing_duration();
-            let target = Vector3::new(hip.x + vel.x * remaining + offset[0], hip.y, 0.0);
+            let mut target = hip + forward * (hip_speed * remaining + offset[0]);
+            target.z = 0.0;
             self.foot_targets[leg] = target;
             let s = legs[leg].progress;
             let blend = 0.5 - 0.5 * (std::f64::consts::PI * s).cos();
             let lift = p.swing_clearance * (std::f64::consts::PI * s).sin();
-            let desired = Vector3::new(
-                self.liftoff[leg].x + (target.x - self.liftoff[leg].x) * blend,
-                hip.y,
-                self.liftoff[leg].z + (target.z - self.liftoff[leg].z) * blend + lift,
-            );
+            let desired = self.liftoff[leg] + (target - self.liftoff[leg]) * blend + Vector3::z() * lift;
             let local = r.transpose() * (desired - hip);
             let (o, i) = motor_slots(leg);
             if let Some(goal) = fourbar::inverse([local.x, local.z]) {
@@ -227,6 +264,7 @@ impl MinitaurController {
             }
         }
 
+        self.heading_goal = wrap_angle(self.heading_goal + yaw_rate_des * dt);
         self.gait.advance(dt);
         self.time += dt;
         self.stats.ticks += 1;
@@ -236,11 +274,18 @@ impl MinitaurController {
 
 impl Policy for MinitaurController {
     fn name(&self) -> String {
-        format!("raibert-{:?}@{}m/s", self.params.gait, self.params.speed).to_lowercase()
+        let c = &self.params.command;
+        let mut name = format!("raibert-{:?}@{}m/s", self.params.gait, c.speed.final_speed()).to_lowercase();
+        if c.yaw_rate != 0.0 {
+            name += &format!(",{}rad/s", c.yaw_rate);
+        }
+        name
     }
     fn begin_episode(&mut self, _episode: usize) {
         self.gait.reset();
         self.time = 0.0;
+        self.speed_integral = 0.0;
+        self.heading_goal = 0.0;
         self.was_stance = [true; LEGS];
         self.stats = ControllerStats::default();
     }

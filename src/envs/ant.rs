@@ -144,14 +144,11 @@ impl Env for Ant {
             ],
             metrics: {
                 let d = &self.core.sim.data;
-                // Motor power sampled at the end of the control step (an estimate; the exact
-                // integral would need every physics step).
-                let power: f64 = d.qfrc_actuator().iter().zip(d.qvel()).map(|(f, v)| (f * v).abs()).sum();
                 let mut m = locomotion_metrics(&self.core, velocity);
                 m.extend([
                     ("dy", after[1] - before[1]),
                     ("dz", d.qpos()[2] - z_before),
-                    ("mechanical_energy", power * self.core.spec.dt),
+                    ("mechanical_energy", self.core.sim.last_mechanical_energy),
                 ]);
                 m
             },

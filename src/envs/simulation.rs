@@ -53,6 +53,11 @@ pub(crate) struct Advance {
 pub(crate) struct Simulation {
     pub model: Arc<Model>,
     pub data: Data,
+    /// Mechanical energy the actuators delivered during the latest `advance` (J): sum over
+    /// physics steps of |actuator force . joint velocity| * timestep, the force and velocity
+    /// both at the start of each step (the same rule as Minitaur's motor model).
+    pub last_mechanical_energy: f64,
+    velocity_before: Vec<f64>,
 }
 
 impl Simulation {
@@ -63,7 +68,7 @@ impl Simulation {
 
     pub fn from_model(model: Arc<Model>) -> Result<Simulation, EnvError> {
         let data = Data::new(&model)?;
-        Ok(Simulation { model, data })
+        Ok(Simulation { model, data, last_mechanical_energy: 0.0, velocity_before: Vec::new() })
     }
 
     /// Resets to `qpos0 + qpos_noise`, `qvel_noise`, then computes derived quantities (as
@@ -80,11 +85,19 @@ impl Simulation {
     pub fn advance(&mut self, ctrl: &[f64], frames: usize) -> Result<Advance, EnvError> {
         self.data.set_ctrl(ctrl)?;
         let mut out = Advance::default();
+        let timestep = self.model.timestep();
+        self.last_mechanical_energy = 0.0;
         for _ in 0..frames {
+            self.velocity_before.clear();
+            self.velocity_before.extend_from_slice(self.data.qvel());
             if self.step_once()? {
                 out.unstable = true;
                 break;
             }
+            // mj_step computed qfrc_actuator from the state it started from.
+            let power: f64 =
+                self.data.qfrc_actuator().iter().zip(&self.velocity_before).map(|(f, v)| (f * v).abs()).sum();
+            self.last_mechanical_energy += power * timestep;
         }
         out.warnings = take_warnings();
         Ok(out)

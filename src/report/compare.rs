@@ -5,7 +5,8 @@ use anyhow::Result;
 
 use super::curves::mean_std;
 use super::runs::{is_reward_weight, Run};
-use crate::controller::baseline::{baseline_controller, baseline_env_like};
+use crate::controller::baseline::{baseline_controller, baseline_env_like, RAMP_TIME};
+use crate::controller::command::SpeedProfile;
 use crate::controller::measure::{mean_cost_of_transport, measure, GaitEpisode};
 use crate::envs::{make, EnvConfig};
 use crate::policy::AgentPolicy;
@@ -91,8 +92,9 @@ pub fn compare(env: &str, groups: &[Vec<&Run>], episodes: usize, seed: u64, spee
     let mut rows = Vec::new();
     for variant in &variants {
         let mut env_b = make(&with_weights(baseline_env_like(&groups[0][0].config.env)?, &variant.weights))?;
+        let profile = SpeedProfile::ramp(speed, RAMP_TIME);
         let mut controller = baseline_controller(env, speed, None)?;
-        let eps = measure(env_b.as_mut(), controller.as_mut(), episodes, seed, speed)?;
+        let eps = measure(env_b.as_mut(), controller.as_mut(), episodes, seed, &profile)?;
         rows.push(ComparisonRow {
             policy: format!("baseline ({})", controller.name()),
             reward: variant.name.clone(),
@@ -111,7 +113,7 @@ pub fn compare(env: &str, groups: &[Vec<&Run>], episodes: usize, seed: u64, spee
                 let mut env_rl = make(&with_weights(run_cfg.env.clone(), &variant.weights))?;
                 let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.algo().into() };
                 // RL has no set-point: its speed error is measured against the baseline's.
-                all.extend(measure(env_rl.as_mut(), &mut policy, episodes, seed, speed)?);
+                all.extend(measure(env_rl.as_mut(), &mut policy, episodes, seed, &profile)?);
             }
             rows.push(ComparisonRow {
                 policy: format!("{} ({}, {} seeds)", group[0].algo(), group[0].reward_label(), group.len()),

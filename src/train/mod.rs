@@ -134,6 +134,27 @@ pub fn train(
     trainer.run(control)
 }
 
+/// Raises a run's step budget so that `resume` trains it on, e.g. a finished 100k run to 300k.
+/// Nothing in training depends on the budget, so the result equals a run started with the larger
+/// budget when the newest checkpoint ends an episode (HalfCheetah's 1000-step episodes at any
+/// multiple of 1000); otherwise the episode in progress at that checkpoint is cut short there.
+/// Returns whether the continuation is exact.
+pub fn extend(run_dir: &Path, total_steps: u64) -> Result<bool> {
+    let _lock = run_lock::RunLock::acquire(run_dir)?;
+    let mut run = read_run_config(run_dir)?;
+    if total_steps < run.train.total_steps {
+        bail!(
+            "{} already has a budget of {} steps; --steps {total_steps} would shorten it",
+            run_dir.display(),
+            run.train.total_steps
+        );
+    }
+    let state = checkpoint::load_state(&checkpoint::latest(run_dir)?)?;
+    run.train.total_steps = total_steps;
+    write_bytes_atomic(&run_dir.join("config.toml"), toml::to_string(&run)?.as_bytes())?;
+    Ok(state.at_episode_boundary)
+}
+
 /// Continues a run from its newest checkpoint.
 pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
     let run = read_run_config(run_dir)?;
@@ -383,7 +404,8 @@ impl Trainer {
                 need_reset = true;
             } else {
                 let next32: Vec<f32> = s.observation.iter().map(|&v| v as f32).collect();
-                self.buffer.add(&obs32, &action, s.reward as f32, &next32, s.terminated, s.truncated);
+                let learner_reward = (s.reward * cfg.reward_scale) as f32;
+                self.buffer.add(&obs32, &action, learner_reward, &next32, s.terminated, s.truncated);
                 ep_return += s.reward;
                 ep_len += 1;
                 if s.done() {
