@@ -10,7 +10,7 @@
 use anyhow::{bail, Result};
 use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
 
-use super::command::{wrap_angle, Command};
+use super::command::{integrate_speed_error, wrap_angle, Command};
 use super::force_qp::{Dimension, ForceQp};
 use super::gait::{GaitKind, GaitScheduler, LEGS};
 use super::raibert_foothold;
@@ -181,10 +181,7 @@ impl AntController {
             -wrap_angle(self.heading_goal - yaw),
         );
         let speed_error = v_des - local_vel.x;
-        if p.ki_speed > 0.0 {
-            let bound = 0.5 / p.ki_speed * p.kd_speed;
-            self.speed_integral = (self.speed_integral + speed_error * spec.dt).clamp(-bound, bound);
-        }
+        self.speed_integral = integrate_speed_error(self.speed_integral, speed_error, spec.dt, p.kd_speed, p.ki_speed);
 
         let phases = self.gait.legs();
         self.last_phase = phases.map(|l| (l.in_stance, l.progress));

@@ -88,6 +88,17 @@ impl Command {
     }
 }
 
+/// The integral of the forward-speed error after one more tick, bounded so that the integral
+/// force (ki x integral) never exceeds half the damping gain's worth (0.5 kd): a stumble cannot
+/// wind it up. Unchanged when ki is 0.
+pub fn integrate_speed_error(integral: f64, error: f64, dt: f64, kd: f64, ki: f64) -> f64 {
+    if ki <= 0.0 {
+        return integral;
+    }
+    let bound = 0.5 / ki * kd;
+    (integral + error * dt).clamp(-bound, bound)
+}
+
 /// An angle wrapped to (-pi, pi].
 pub fn wrap_angle(a: f64) -> f64 {
     let two_pi = 2.0 * std::f64::consts::PI;

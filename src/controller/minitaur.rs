@@ -17,7 +17,7 @@
 use anyhow::{bail, Context, Result};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 
-use super::command::{wrap_angle, Command};
+use super::command::{integrate_speed_error, wrap_angle, Command};
 use super::force_qp::{Dimension, ForceQp};
 use super::fourbar;
 use super::gait::{gait_telemetry, GaitKind, GaitScheduler, LEGS, LEG_NAMES};
@@ -189,10 +189,7 @@ impl MinitaurController {
 
         // Speed error integral, bounded so that a stumble cannot wind it up.
         let speed_error = v_des - local_vel.x;
-        if p.ki_speed > 0.0 {
-            let bound = 0.5 / p.ki_speed * p.kd_speed;
-            self.speed_integral = (self.speed_integral + speed_error * dt).clamp(-bound, bound);
-        }
+        self.speed_integral = integrate_speed_error(self.speed_integral, speed_error, dt, p.kd_speed, p.ki_speed);
 
         // Stance: body wrench -> QP -> torques.
         let stance: Vec<usize> = (0..LEGS).filter(|&l| legs[l].in_stance).collect();
