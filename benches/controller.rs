@@ -1,4 +1,5 @@
-//! Stance-force QP solve time (clarabel), per control tick: 4 stance feet in 3D (12 variables,
+//! Stance-force QP solve time per control tick (the active-set method the controllers use,
+//! clarabel with per-tick settings, clarabel's defaults): 4 stance feet in 3D (12 variables,
 //! 24 inequality rows, as for Ant) and 2 feet without abduction (Minitaur). Goal: <= 50 us.
 //! Then the whole controller tick on a live state, without the physics step.
 //!
@@ -8,7 +9,7 @@ use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use locobench::controller::baseline::{baseline_controller, baseline_env};
-use locobench::controller::force_qp::{Dimension, ForceQp};
+use locobench::controller::force_qp::{Dimension, ForceQp, QpMethod};
 use locobench::envs::make;
 use nalgebra::Vector3;
 
@@ -30,31 +31,39 @@ fn bench(c: &mut Criterion) {
     let wrench = [2.0, -1.0, 60.0, 0.5, -0.3, 0.1];
     let spatial = || ForceQp::new(Dimension::Spatial, 0.6, 1.0, 100.0, vec![1.0; 6], 1e-4);
     let mut qp = spatial();
+    qp.method = QpMethod::Clarabel;
+    let mut active = spatial();
     let mut k = 0;
     let mut precise = spatial();
-    precise.precise = true;
+    precise.method = QpMethod::ClarabelReference;
     group.bench_function("force QP 4 feet 3D, clarabel default settings (the reference)", |b| {
         b.iter(|| {
             k = (k + 1) % configs.len();
             black_box(precise.solve(&configs[k], &wrench).unwrap())
         })
     });
-    group.bench_function("force QP 4 feet 3D (12 vars, 24 rows), reused solver", |b| {
+    group.bench_function("force QP 4 feet 3D (12 vars, 24 rows), active set, warm start", |b| {
         b.iter(|| {
             k = (k + 1) % configs.len();
-            black_box(qp.solve(&configs[k], &wrench).unwrap())
+            black_box(active.solve(&configs[k], &wrench).unwrap())
         })
     });
-    group.bench_function("force QP 4 feet 3D (12 vars, 24 rows), new solver each tick", |b| {
+    group.bench_function("force QP 4 feet 3D, active set, cold start", |b| {
         b.iter(|| {
             k = (k + 1) % configs.len();
             black_box(spatial().solve(&configs[k], &wrench).unwrap())
         })
     });
+    group.bench_function("force QP 4 feet 3D (12 vars, 24 rows), clarabel per-tick settings, reused solver", |b| {
+        b.iter(|| {
+            k = (k + 1) % configs.len();
+            black_box(qp.solve(&configs[k], &wrench).unwrap())
+        })
+    });
     let mut planar = ForceQp::new(Dimension::Planar, 0.6, 1.0, 100.0, vec![1.0; 5], 1e-4);
     let pairs: Vec<Vec<Vector3<f64>>> =
         configs.iter().map(|c| vec![Vector3::new(c[0].x, 0.09, c[0].z), Vector3::new(c[3].x, -0.09, c[3].z)]).collect();
-    group.bench_function("force QP 2 feet no abduction (4 vars, 8 rows), reused solver", |b| {
+    group.bench_function("force QP 2 feet no abduction (4 vars, 8 rows), active set", |b| {
         b.iter(|| {
             k = (k + 1) % pairs.len();
             black_box(planar.solve(&pairs[k], &[1.0, 60.0, 0.1, 0.3, 0.05]).unwrap())

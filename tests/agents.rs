@@ -367,3 +367,59 @@ fn reward_scale_must_be_positive_and_defaults_to_one() {
         assert!(build_config("minitaur", Algo::Td3, &o).and_then(|c| c.validate()).is_err(), "{bad}");
     }
 }
+
+#[test]
+fn observation_normalisation_is_fitted_on_the_warm_up_and_travels_with_the_actor() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = EnvConfig::new("half-cheetah").with_overrides(&[("max_episode_steps".into(), "100".into())]).unwrap();
+    let cfg = |extra: &str| {
+        let o = format!("total_steps=1500,warmup_steps=1000,learning_starts=1000,eval_every=500,checkpoint_every=400,eval_episodes=1,hidden=[16,16],batch_size=32{extra}");
+        build_config("half-cheetah", Algo::Td3, &split_pairs(&o).unwrap()).unwrap()
+    };
+    assert!(!cfg("").normalize_observations, "off unless asked for");
+    let bad = build_config(
+        "half-cheetah",
+        Algo::Td3,
+        &split_pairs("normalize_observations=true,learning_starts=10").unwrap(),
+    );
+    assert!(bad.and_then(|c| c.validate()).is_err(), "statistics need warm-up transitions");
+
+    let whole = dir.path().join("whole");
+    let a =
+        train::train(env.clone(), cfg(",normalize_observations=true"), 4, &whole, None, false, &RunControl::default())
+            .unwrap();
+    let t = tensors(&a.checkpoint);
+    let get = |name: &str| t.iter().find(|(n, _)| n == name).unwrap_or_else(|| panic!("no {name}")).1.clone();
+    let (mean, inv_std) = (get("actor.obs_mean"), get("actor.obs_inv_std"));
+    assert_eq!(mean.len(), 17);
+    assert!(mean.iter().any(|&m| m != 0.0) && inv_std.iter().all(|&s| s.is_finite() && s > 0.0 && s != 1.0));
+    // The statistics are frozen: a checkpoint before learning starts still has the identity.
+    let early = whole.join("checkpoints/step_000000400");
+    let e = tensors(&early);
+    assert!(e.iter().find(|(n, _)| n == "actor.obs_mean").unwrap().1.iter().all(|&m| m == 0.0));
+
+    // A run stopped before the fit and resumed gives the same weights and evaluations.
+    let split = dir.path().join("split");
+    let control = RunControl { stop_after: Some(700), ..Default::default() };
+    train::train(env.clone(), cfg(",normalize_observations=true"), 4, &split, None, false, &control).unwrap();
+    let c = train::resume(&split, &RunControl::default()).unwrap();
+    assert_eq!(tensors(&a.checkpoint), tensors(&c.checkpoint));
+    assert_eq!(eval_rows(&whole), eval_rows(&split));
+
+    // The exported policy acts exactly as the checkpoint does.
+    let out = dir.path().join("exported");
+    train::export_policy(&a.checkpoint, &out).unwrap();
+    let (_, from_ckpt) = train::load_policy(&a.checkpoint).unwrap();
+    let (_, from_export) = train::load_policy(&out).unwrap();
+    let obs: Vec<f32> = (0..17).map(|i| (i as f32 * 0.37).sin() * 3.0).collect();
+    assert_eq!(from_ckpt.act(&obs).unwrap(), from_export.act(&obs).unwrap());
+
+    // Without normalisation the same seed gives other weights (the option is not inert).
+    let plain = train::train(env, cfg(""), 4, &dir.path().join("plain"), None, false, &RunControl::default()).unwrap();
+    let p = tensors(&plain.checkpoint);
+    assert!(p.iter().all(|(n, _)| !n.contains("obs_")));
+    assert_ne!(
+        p.iter().find(|(n, _)| n == "actor.0.weight").map(|x| &x.1),
+        t.iter().find(|(n, _)| n == "actor.0.weight").map(|x| &x.1)
+    );
+}

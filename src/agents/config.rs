@@ -59,6 +59,10 @@ pub struct TrainConfig {
     /// sets how large rewards are against the critic's approximation error).
     #[serde(default = "unit_scale")]
     pub reward_scale: f64,
+    /// Feed the networks observations standardised by the warm-up transitions' mean and std,
+    /// frozen from then on (`agents::normalize`). Off unless a preset says otherwise.
+    #[serde(default)]
+    pub normalize_observations: bool,
     /// Polyak coefficient of the target networks.
     pub tau: f64,
     pub actor_lr: f64,
@@ -110,6 +114,7 @@ impl TrainConfig {
             hidden: vec![400, 300],
             gamma: 0.99,
             reward_scale: 1.0,
+            normalize_observations: false,
             tau: 0.005,
             actor_lr: 1e-3,
             critic_lr: 1e-3,
@@ -161,6 +166,12 @@ impl TrainConfig {
         positive("value_lr", self.value_lr)?;
         positive("initial_alpha", self.initial_alpha)?;
         positive("reward_scale", self.reward_scale)?;
+        anyhow::ensure!(
+            !self.normalize_observations || self.learning_starts >= 1000,
+            "normalize_observations estimates its statistics from the transitions before learning starts: \
+             learning_starts must be at least 1000, got {}",
+            self.learning_starts
+        );
         anyhow::ensure!((0.0..=1.0).contains(&self.gamma), "gamma must lie in [0, 1]");
         anyhow::ensure!(self.tau > 0.0 && self.tau <= 1.0, "tau must lie in (0, 1]");
         anyhow::ensure!(self.batch_size > 0, "batch_size must be at least 1");

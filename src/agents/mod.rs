@@ -13,6 +13,7 @@ mod dpg;
 mod kernels;
 pub mod nets;
 pub mod noise;
+pub mod normalize;
 pub mod optim;
 mod sac;
 pub mod second_core;
@@ -25,6 +26,7 @@ pub use buffer::{Batch, ReplayBuffer};
 pub use config::{Algo, SacVersion, TrainConfig};
 pub use denormals::flush_denormals_to_zero;
 pub use dpg::DeterministicAgent;
+pub use normalize::NormalizedAgent;
 pub use sac::SacAgent;
 
 use optim::Adam;
@@ -48,6 +50,11 @@ pub trait Agent: Send {
     /// Called at the start of every training episode (resets OU noise).
     fn begin_episode(&mut self) {}
     fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses>;
+    /// Called once, when learning starts, with the warm-up transitions (observation
+    /// normalisation estimates its statistics here; other agents ignore it).
+    fn fit_observations(&mut self, _buffer: &ReplayBuffer) -> Result<()> {
+        Ok(())
+    }
     /// Every network parameter, targets included, by checkpoint name.
     fn parameters(&self) -> Vec<(String, Var)>;
     fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)>;
@@ -58,10 +65,11 @@ pub trait Agent: Send {
 
 /// Builds the agent a config asks for, initialised from `rng`.
 pub fn make_agent(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
-    Ok(match cfg.algo {
+    let agent: Box<dyn Agent> = match cfg.algo {
         Algo::Td3 | Algo::Ddpg => Box::new(DeterministicAgent::new(cfg, obs_dim, act_dim, rng)?),
         Algo::Sac => Box::new(SacAgent::new(cfg, obs_dim, act_dim, rng)?),
-    })
+    };
+    Ok(if cfg.normalize_observations { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
 }
 
 /// Layer sizes `input, hidden..., output`.

@@ -3,7 +3,8 @@
 //!     minimise (A f - b)' S (A f - b) + alpha |f|^2
 //!     subject to |f_x|, |f_y| <= mu f_z and f_min <= f_z <= f_max,
 //! with A = [I ... I; [r_1]x ... [r_n]x] (r_i: foot position relative to the centre of mass).
-//! Solved by clarabel. `Planar` has no lateral foot forces (Minitaur has no abduction): forces
+//! Solved per tick by a warm-started dense active-set method (`active_set`), with clarabel as
+//! the fallback and the reference it is tested against. `Planar` has no lateral foot forces (Minitaur has no abduction): forces
 //! (f_x, f_z) per foot, wrench (F_x, F_z, M_x, M_y, M_z); roll is still controlled through the
 //! vertical forces of feet on either side, and yaw through the fore-aft forces of feet on either
 //! side.
@@ -13,6 +14,21 @@ use clarabel::solver::{DefaultSettingsBuilder, DefaultSolver, IPSolver, SolverSt
 use std::collections::HashMap;
 
 use nalgebra::{DMatrix, DVector, Vector3};
+
+use super::active_set::{self, ActiveSetSolution};
+
+/// How `ForceQp::solve` solves.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum QpMethod {
+    /// The dense active-set method warm-started from the previous solve (clarabel with the
+    /// per-tick settings if it fails). The default.
+    ActiveSet,
+    /// clarabel with per-tick settings (absolute gap 1e-6, no iterative refinement).
+    Clarabel,
+    /// clarabel's default settings (tolerances 1e-8, equilibration, iterative refinement): the
+    /// reference the others are tested against.
+    ClarabelReference,
+}
 
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Dimension {
@@ -31,12 +47,19 @@ pub struct ForceQp {
     pub wrench_weights: Vec<f64>,
     /// Regularisation alpha on |f|^2.
     pub regularisation: f64,
-    /// clarabel's default settings (tolerances 1e-8, equilibration, iterative refinement)
-    /// instead of the faster ones used per control tick; the reference the fast ones are
-    /// tested against.
-    pub precise: bool,
-    /// Cached solvers by number of stance feet (see `solve`).
+    pub method: QpMethod,
+    /// Cached clarabel solvers by number of stance feet (see `solve_clarabel`).
     solvers: HashMap<usize, DefaultSolver<f64>>,
+    /// The previous active-set solution (foot count, forces, active rows): the warm start.
+    warm: Option<(usize, ActiveSetSolution)>,
+}
+
+/// The QP of one tick in dense form: minimise 1/2 f'Pf + q'f subject to G f <= h.
+struct Problem {
+    p: DMatrix<f64>,
+    q: DVector<f64>,
+    g: DMatrix<f64>,
+    h: DVector<f64>,
 }
 
 impl ForceQp {
@@ -55,8 +78,9 @@ impl ForceQp {
             f_max,
             wrench_weights,
             regularisation,
-            precise: false,
+            method: QpMethod::ActiveSet,
             solvers: HashMap::new(),
+            warm: None,
         }
     }
 
@@ -120,9 +144,27 @@ impl ForceQp {
         a
     }
 
-    /// Forces for the stance feet at `feet` (flattened per foot), or an error when the solver
-    /// fails; callers fall back to a safe default and count it.
+    /// Forces for the stance feet at `feet` (flattened per foot), or an error when no solver
+    /// succeeds; callers fall back to a safe default and count it.
     pub fn solve(&mut self, feet: &[Vector3<f64>], wrench: &[f64]) -> Result<Vec<f64>> {
+        let problem = self.problem(feet, wrench)?;
+        match self.method {
+            QpMethod::ActiveSet => match self.solve_active_set(feet.len(), &problem) {
+                Ok(f) => Ok(f),
+                Err(_) => self.solve_clarabel(feet.len(), &problem, false),
+            },
+            QpMethod::Clarabel => self.solve_clarabel(feet.len(), &problem, false),
+            QpMethod::ClarabelReference => self.solve_clarabel(feet.len(), &problem, true),
+        }
+    }
+
+    /// The active-set method alone (no fallback), for tests and benches.
+    pub fn solve_with_active_set(&mut self, feet: &[Vector3<f64>], wrench: &[f64]) -> Result<Vec<f64>> {
+        let problem = self.problem(feet, wrench)?;
+        self.solve_active_set(feet.len(), &problem)
+    }
+
+    fn problem(&self, feet: &[Vector3<f64>], wrench: &[f64]) -> Result<Problem> {
         let k = self.force_dim();
         let n = k * feet.len();
         if feet.is_empty() {
@@ -138,26 +180,51 @@ impl ForceQp {
         let q = -(a.transpose() * &s * &b) * 2.0;
 
         // Inequalities G f <= h, per foot: friction pyramid faces and normal-force bounds.
-        let mut g_rows: Vec<Vec<(usize, f64)>> = Vec::new();
-        let mut h = Vec::new();
+        let rows_per_foot = 2 * (k - 1) + 2;
+        let mut g = DMatrix::zeros(rows_per_foot * feet.len(), n);
+        let mut h = DVector::zeros(rows_per_foot * feet.len());
         for foot in 0..feet.len() {
-            let base = k * foot;
+            let (base, row) = (k * foot, rows_per_foot * foot);
             let z = base + k - 1;
             for t in 0..k - 1 {
-                g_rows.push(vec![(base + t, 1.0), (z, -self.friction)]);
-                g_rows.push(vec![(base + t, -1.0), (z, -self.friction)]);
-                h.extend([0.0, 0.0]);
+                for (j, sign) in [1.0, -1.0].into_iter().enumerate() {
+                    g[(row + 2 * t + j, base + t)] = sign;
+                    g[(row + 2 * t + j, z)] = -self.friction;
+                }
             }
-            g_rows.push(vec![(z, 1.0)]);
-            h.push(self.f_max);
-            g_rows.push(vec![(z, -1.0)]);
-            h.push(-self.f_min);
+            g[(row + rows_per_foot - 2, z)] = 1.0;
+            h[row + rows_per_foot - 2] = self.f_max;
+            g[(row + rows_per_foot - 1, z)] = -1.0;
+            h[row + rows_per_foot - 1] = -self.f_min;
         }
-        let q = q.as_slice().to_vec();
-        let values = upper_triangle_values(&p);
-        // One solver per number of stance feet, built once: later ticks only update P and q
-        // (the constraints depend on the foot count alone). Presolve must be off for updates.
-        let solver = match self.solvers.entry(feet.len()) {
+        Ok(Problem { p, q, g, h })
+    }
+
+    fn solve_active_set(&mut self, feet: usize, problem: &Problem) -> Result<Vec<f64>> {
+        // The constraints depend on the foot count alone, so the previous solution with the
+        // same count is feasible: start there with its active set. Otherwise start from
+        // vertical forces at f_min.
+        let (x0, working) = match self.warm.take() {
+            Some((count, previous)) if count == feet => (previous.x, previous.active),
+            _ => {
+                let k = self.force_dim();
+                (DVector::from_fn(k * feet, |i, _| if i % k == k - 1 { self.f_min } else { 0.0 }), Vec::new())
+            }
+        };
+        let solution = active_set::solve(&problem.p, &problem.q, &problem.g, &problem.h, x0, working)?;
+        let forces = solution.x.as_slice().to_vec();
+        self.warm = Some((feet, solution));
+        Ok(forces)
+    }
+
+    fn solve_clarabel(&mut self, feet: usize, problem: &Problem, reference: bool) -> Result<Vec<f64>> {
+        let n = problem.q.len();
+        let q = problem.q.as_slice().to_vec();
+        let values = upper_triangle_values(&problem.p);
+        // One solver per number of stance feet and setting, built once: later ticks only update
+        // P and q (the constraints depend on the foot count alone). Presolve must be off for
+        // updates.
+        let solver = match self.solvers.entry(feet) {
             std::collections::hash_map::Entry::Occupied(e) => {
                 let s = e.into_mut();
                 s.update_P(&values).map_err(|e| anyhow::anyhow!("QP update failed: {e:?}"))?;
@@ -166,9 +233,10 @@ impl ForceQp {
             }
             std::collections::hash_map::Entry::Vacant(v) => {
                 let p_upper = dense_pattern_upper(n, values);
-                let g = rows_to_csc(&g_rows, n);
+                let g = dense_to_csc(&problem.g);
+                let h = problem.h.as_slice().to_vec();
                 let cones = [SupportedConeT::NonnegativeConeT(h.len())];
-                let settings = if self.precise {
+                let settings = if reference {
                     DefaultSettingsBuilder::default().verbose(false).presolve_enable(false).build()
                 } else {
                     DefaultSettingsBuilder::default()
@@ -213,22 +281,19 @@ fn dense_pattern_upper(n: usize, values: Vec<f64>) -> CscMatrix<f64> {
     CscMatrix::new(n, n, colptr, rowval, values)
 }
 
-fn rows_to_csc(rows: &[Vec<(usize, f64)>], ncols: usize) -> CscMatrix<f64> {
-    let mut cols: Vec<Vec<(usize, f64)>> = vec![Vec::new(); ncols];
-    for (r, row) in rows.iter().enumerate() {
-        for &(c, v) in row {
-            cols[c].push((r, v));
-        }
-    }
+/// The nonzeros of a dense matrix in compressed-column form.
+fn dense_to_csc(m: &DMatrix<f64>) -> CscMatrix<f64> {
     let (mut colptr, mut rowval, mut nzval) = (vec![0], Vec::new(), Vec::new());
-    for col in cols {
-        for (r, v) in col {
-            rowval.push(r);
-            nzval.push(v);
+    for c in 0..m.ncols() {
+        for r in 0..m.nrows() {
+            if m[(r, c)] != 0.0 {
+                rowval.push(r);
+                nzval.push(m[(r, c)]);
+            }
         }
         colptr.push(rowval.len());
     }
-    CscMatrix::new(rows.len(), ncols, colptr, rowval, nzval)
+    CscMatrix::new(m.nrows(), m.ncols(), colptr, rowval, nzval)
 }
 
 #[cfg(test)]
@@ -282,23 +347,27 @@ mod tests {
         assert!(f.chunks(3).all(|c| (c[2] - qp.f_max).abs() < 1e-3));
     }
 
-    /// The per-tick settings against clarabel's defaults on random stance configurations:
-    /// wrenches made from admissible forces (feasible) and arbitrary ones (not reproducible).
+    /// The active-set method (warm-started whenever consecutive cases have the same foot
+    /// count) and clarabel's per-tick settings against clarabel's defaults on random stance
+    /// configurations: wrenches made from admissible forces (feasible) and arbitrary ones (not
+    /// reproducible).
     #[test]
-    fn fast_settings_match_the_default_solver_on_random_cases() {
+    fn active_set_and_fast_settings_match_the_default_solver_on_random_cases() {
         use rand::{Rng, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
         for dimension in [Dimension::Spatial, Dimension::Planar] {
             let rows = if dimension == Dimension::Spatial { 6 } else { 5 };
-            let make = |precise| ForceQp {
+            let make = |method| ForceQp {
                 dimension,
                 wrench_weights: vec![1.0, 1.0, 1.0, 10.0, 10.0, 10.0][..rows].to_vec(),
-                precise,
+                method,
                 ..ForceQp::new(dimension, 0.7, 0.5, 80.0, vec![], 1e-4)
             };
-            let (mut fast, mut reference) = (make(false), make(true));
+            let mut active_set = make(QpMethod::ActiveSet);
+            let mut fast = make(QpMethod::Clarabel);
+            let mut reference = make(QpMethod::ClarabelReference);
             let k = fast.force_dim();
-            for case in 0..200 {
+            for case in 0..300 {
                 let n = rng.random_range(2..=4);
                 let feet: Vec<Vector3<f64>> = (0..n)
                     .map(|_| {
@@ -322,15 +391,50 @@ mod tests {
                 } else {
                     (0..rows).map(|_| rng.random_range(-80.0..120.0)).collect()
                 };
-                let a = fast.solve(&feet, &wrench).unwrap();
                 let b = reference.solve(&feet, &wrench).unwrap();
+                let jb = reference.objective(&feet, &wrench, &b);
+                let exact = active_set.solve_with_active_set(&feet, &wrench).unwrap();
+                check_constraints(&active_set, &exact);
+                let je = active_set.objective(&feet, &wrench, &exact);
+                // Feasible (checked above) and exact up to rounding: it may not cost more than the
+                // interior-point solution, and less only within clarabel's tolerance (its gap is
+                // relative to an objective without the constant b'Sb).
+                assert!(
+                    je <= jb + 1e-9 * (1.0 + jb) && je >= jb - 1e-4 * (1.0 + jb),
+                    "case {case} ({dimension:?}): active set {je} vs {jb}"
+                );
+                let gap = (active_set.wrench(&feet, &exact) - reference.wrench(&feet, &b)).amax();
+                assert!(gap < 1e-3, "case {case} ({dimension:?}): active-set wrench differs by {gap}");
+
+                let a = fast.solve(&feet, &wrench).unwrap();
                 check_constraints(&fast, &a);
-                let (ja, jb) = (fast.objective(&feet, &wrench, &a), reference.objective(&feet, &wrench, &b));
+                let ja = fast.objective(&feet, &wrench, &a);
                 assert!(ja - jb <= 1e-4 * (1.0 + jb), "case {case} ({dimension:?}): cost {ja} vs default {jb}");
                 // Forces may differ along directions the cost barely sees (the regularisation is
                 // 1e-4); the wrench they produce may not.
                 let gap = (fast.wrench(&feet, &a) - reference.wrench(&feet, &b)).amax();
                 assert!(gap < 1e-2, "case {case} ({dimension:?}): wrenches differ by {gap}");
+            }
+        }
+    }
+
+    /// Over a gait-like sequence (feet drifting, the wrench changing a little each tick) the warm
+    /// start keeps the solve to a few iterations and agrees with a cold solve.
+    #[test]
+    fn warm_started_solves_agree_with_cold_ones_along_a_gait() {
+        let mut warm = qp();
+        for tick in 0..200 {
+            let t = tick as f64 * 0.01;
+            let feet: Vec<Vector3<f64>> =
+                feet().iter().map(|f| f + Vector3::new(-0.1 * t.sin(), 0.0, 0.01 * t)).collect();
+            let wrench = [8.0 * t.cos(), 3.0 * t.sin(), 55.0 + 10.0 * t.sin(), 2.0 * t.cos(), 1.5, -0.5 * t];
+            let f = warm.solve_with_active_set(&feet, &wrench).unwrap();
+            let iterations = warm.warm.as_ref().unwrap().1.iterations;
+            let cold = qp().solve_with_active_set(&feet, &wrench).unwrap();
+            let diff = f.iter().zip(&cold).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
+            assert!(diff < 1e-6, "tick {tick}: warm and cold solutions differ by {diff}");
+            if tick > 0 {
+                assert!(iterations <= 6, "tick {tick}: {iterations} iterations from the warm start");
             }
         }
     }

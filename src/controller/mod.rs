@@ -2,6 +2,7 @@
 //! Gait scheduling, Raibert foot placement, Minitaur four-bar leg kinematics, the stance-force
 //! QP (clarabel), and the Minitaur and Ant controllers, which implement the same `Policy`
 //! interface as every other policy and run through the same `Env`, scored by the same reward.
+pub mod active_set;
 pub mod ant;
 pub mod baseline;
 pub mod command;

@@ -310,6 +310,8 @@ struct Trainer {
     episodes: u64,
     wall_offset: f64,
     metrics: Vec<MetricsRow>,
+    /// False when fine-tuning: the observation statistics come with the initial weights.
+    fit_observations: bool,
 }
 
 impl Trainer {
@@ -333,6 +335,7 @@ impl Trainer {
             episodes: 0,
             wall_offset: 0.0,
             metrics: Vec::new(),
+            fit_observations: run.init_from.is_none(),
         })
     }
 
@@ -424,6 +427,9 @@ impl Trainer {
             }
 
             // Learn.
+            if self.fit_observations && self.step == cfg.learning_starts.max(1) {
+                self.agent.fit_observations(&self.buffer)?;
+            }
             if self.step >= cfg.learning_starts && self.buffer.len() >= cfg.batch_size.min(self.buffer.capacity()) {
                 for _ in 0..cfg.updates_per_step {
                     self.buffer.sample_into(&mut self.batch, &mut self.rng);
