@@ -29,6 +29,11 @@ pub struct BaselineArgs {
     /// Also print every episode.
     #[arg(long)]
     pub verbose: bool,
+    /// Also print where the controller met the robot's limits (episode means): motor commands
+    /// clipped at the torque limit (stance and swing legs), stance forces on the friction cone, stance feet slipping,
+    /// swing targets out of the leg's reach, distance from the foothold at touchdown.
+    #[arg(long)]
+    pub limits: bool,
 }
 
 /// What the Raibert controller is asked to do besides a constant speed (shared by `baseline`
@@ -109,6 +114,18 @@ pub fn run(args: BaselineArgs) -> Result<()> {
             col(|e| e.length as f64).0,
             eps.iter().map(|e| e.qp_failures).sum::<f64>(),
         );
+        if args.limits {
+            let names: Vec<&str> =
+                eps.first().map(|e| e.diagnostics.iter().map(|(n, _)| *n).collect()).unwrap_or_default();
+            let line: Vec<String> = names
+                .iter()
+                .enumerate()
+                .map(|(k, n)| {
+                    format!("{n} {:.3}", eps.iter().map(|e| e.diagnostics[k].1).sum::<f64>() / eps.len() as f64)
+                })
+                .collect();
+            println!("       limits: {}", line.join(", "));
+        }
         if args.verbose {
             for (i, e) in eps.iter().enumerate() {
                 println!("    episode {i}: {e:?}");

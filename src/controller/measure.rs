@@ -32,6 +32,8 @@ pub struct GaitEpisode {
     pub shake: f64,
     /// Control ticks whose force QP failed and fell back to sharing the weight.
     pub qp_failures: f64,
+    /// The rest of the policy's end-of-episode diagnostics (a controller's limits).
+    pub diagnostics: Vec<(&'static str, f64)>,
 }
 
 /// Mean cost of transport over the episodes that moved forward (infinite if none did).
@@ -121,7 +123,9 @@ pub fn measure(
         e.sideways = e.sideways.abs();
         e.speed_error /= summary.length.max(1) as f64;
         e.cost_of_transport = if distance > 0.0 { e.energy / (mass * gravity * distance) } else { f64::INFINITY };
-        e.qp_failures = policy.diagnostics().iter().find(|(n, _)| *n == "qp_failures").map_or(0.0, |(_, v)| *v);
+        let diagnostics = policy.diagnostics();
+        e.qp_failures = diagnostics.iter().find(|(n, _)| *n == "qp_failures").map_or(0.0, |(_, v)| *v);
+        e.diagnostics = diagnostics.into_iter().filter(|(n, _)| !matches!(*n, "qp_failures" | "ticks")).collect();
         out.push(e);
     }
     Ok(out)

@@ -48,6 +48,13 @@ pub struct MinitaurGaitParams {
     pub kd_pitch: f64,
     pub swing_kp: f64,
     pub swing_kd: f64,
+    /// The swing gain grows with the commanded speed, swing_kp x clamp(|v| / this, 1, 2): a
+    /// swing lasts about 43 ms whatever the speed while the stride grows with it, and with the
+    /// low-speed gain the feet landed 10-11 cm short of their footholds at 1.1-1.2 m/s and the
+    /// robot fell (`baseline --limits`, README). A stiffer swing at low speed only costs energy.
+    pub swing_gain_speed: f64,
+    /// Friction coefficient the force QP assumes: the lowest foot friction PyBullet's
+    /// randomisation draws (0.8).
     pub friction: f64,
 }
 
@@ -71,16 +78,33 @@ impl Default for MinitaurGaitParams {
             kd_pitch: 10.0,
             swing_kp: 3.0,
             swing_kd: 0.05,
-            friction: 0.7,
+            swing_gain_speed: 0.75,
+            friction: 0.8,
         }
     }
 }
 
-/// What the controller counted over an episode.
+/// What the controller counted over an episode, including where it ran into the robot's limits
+/// (`MinitaurController::limits`).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ControllerStats {
     pub ticks: u64,
     pub qp_failures: u64,
+    /// Motor commands, and those the 3.5 N m limit clipped (stance and swing legs).
+    pub motor_commands: u64,
+    pub stance_torque_clipped: u64,
+    pub swing_torque_clipped: u64,
+    /// Stance foot-ticks, those whose QP force lies on the friction cone, and those whose foot
+    /// slid more than 5 mm over the tick (0.5 m/s).
+    pub stance_ticks: u64,
+    pub on_friction_cone: u64,
+    pub slipping: u64,
+    /// Swing foot-ticks, and those whose target lay outside the four-bar's reach.
+    pub swing_ticks: u64,
+    pub out_of_reach: u64,
+    /// Touchdowns, and the summed horizontal distance from foot to target at touchdown (m).
+    pub touchdowns: u64,
+    pub touchdown_miss: f64,
 }
 
 /// Where each leg's motors sit in the action vector: (outer, inner).
@@ -103,6 +127,8 @@ pub struct MinitaurController {
     heading_goal: f64,
     was_stance: [bool; LEGS],
     liftoff: [Vector3<f64>; LEGS],
+    /// Each foot's position at the previous tick (slip measure).
+    last_foot: [Option<Vector3<f64>>; LEGS],
     pub stats: ControllerStats,
     /// The latest swing targets (world), for recorders.
     pub foot_targets: [Vector3<f64>; LEGS],
@@ -124,6 +150,7 @@ impl MinitaurController {
             heading_goal: 0.0,
             was_stance: [true; LEGS],
             liftoff: [Vector3::zeros(); LEGS],
+            last_foot: [None; LEGS],
             stats: ControllerStats::default(),
             foot_targets: [Vector3::zeros(); LEGS],
             last_phase: [(true, 0.0); LEGS],
@@ -215,7 +242,10 @@ impl MinitaurController {
                 }
             };
             for (k, &leg) in stance.iter().enumerate() {
-                let world = heading * Vector3::new(forces[2 * k], 0.0, forces[2 * k + 1]);
+                let (fx, fz) = (forces[2 * k], forces[2 * k + 1]);
+                self.stats.stance_ticks += 1;
+                self.stats.on_friction_cone += (fx.abs() >= p.friction * fz * (1.0 - 1e-6)) as u64;
+                let world = heading * Vector3::new(fx, 0.0, fz);
                 let local = r.transpose() * world;
                 let (o, i) = motor_slots(leg);
                 let t = fourbar::torques_for_ground_force(angles[o], angles[i], [local.x, local.z])
@@ -228,13 +258,23 @@ impl MinitaurController {
         // Swing: Raibert foothold along a raised arc, tracked in leg space. Each hip has its own
         // forward speed when turning (v - w y), so the outer legs take longer strides.
         let forward = heading * Vector3::x();
+        let swing_kp = p.swing_kp * (v_des.abs() / p.swing_gain_speed).clamp(1.0, 2.0);
         for leg in 0..LEGS {
             let name = LEG_NAMES[leg];
             let foot = Self::site(d, &format!("foot_{name}"))?;
+            let moved = self.last_foot[leg].map(|last| (foot - last).xy().norm());
+            self.last_foot[leg] = Some(foot);
             if legs[leg].in_stance {
+                if !self.was_stance[leg] {
+                    self.stats.touchdowns += 1;
+                    self.stats.touchdown_miss += (foot - self.foot_targets[leg]).xy().norm();
+                } else if moved.is_some_and(|m| m > 0.005) {
+                    self.stats.slipping += 1;
+                }
                 self.was_stance[leg] = true;
                 continue;
             }
+            self.stats.swing_ticks += 1;
             if self.was_stance[leg] {
                 self.liftoff[leg] = foot;
                 self.was_stance[leg] = false;
@@ -255,9 +295,12 @@ impl MinitaurController {
             let desired = self.liftoff[leg] + (target - self.liftoff[leg]) * blend + Vector3::z() * lift;
             let local = r.transpose() * (desired - hip);
             let (o, i) = motor_slots(leg);
-            if let Some(goal) = fourbar::inverse([local.x, local.z]) {
-                tau[o] = p.swing_kp * (goal[0] - angles[o]) - p.swing_kd * speeds[o];
-                tau[i] = p.swing_kp * (goal[1] - angles[i]) - p.swing_kd * speeds[i];
+            match fourbar::inverse([local.x, local.z]) {
+                Some(goal) => {
+                    tau[o] = swing_kp * (goal[0] - angles[o]) - p.swing_kd * speeds[o];
+                    tau[i] = swing_kp * (goal[1] - angles[i]) - p.swing_kd * speeds[i];
+                }
+                None => self.stats.out_of_reach += 1,
             }
         }
 
@@ -265,7 +308,32 @@ impl MinitaurController {
         self.gait.advance(dt);
         self.time += dt;
         self.stats.ticks += 1;
+        self.stats.motor_commands += 8;
+        for (leg, phase) in legs.iter().enumerate() {
+            let (o, i) = motor_slots(leg);
+            let clipped = [tau[o], tau[i]].iter().filter(|t| t.abs() > 3.5).count() as u64;
+            if phase.in_stance {
+                self.stats.stance_torque_clipped += clipped;
+            } else {
+                self.stats.swing_torque_clipped += clipped;
+            }
+        }
         Ok(tau.map(|t| t.clamp(-3.5, 3.5)))
+    }
+
+    /// Where the controller ran into the robot's limits this episode, as fractions (and the mean
+    /// touchdown miss in metres): what sets the highest speed it sustains.
+    pub fn limits(&self) -> Vec<(&'static str, f64)> {
+        let s = &self.stats;
+        let frac = |n: u64, d: u64| if d == 0 { 0.0 } else { n as f64 / d as f64 };
+        vec![
+            ("stance_torque_clipped", frac(s.stance_torque_clipped, s.motor_commands)),
+            ("swing_torque_clipped", frac(s.swing_torque_clipped, s.motor_commands)),
+            ("on_friction_cone", frac(s.on_friction_cone, s.stance_ticks)),
+            ("slipping", frac(s.slipping, s.stance_ticks)),
+            ("out_of_reach", frac(s.out_of_reach, s.swing_ticks)),
+            ("touchdown_miss_m", if s.touchdowns == 0 { 0.0 } else { s.touchdown_miss / s.touchdowns as f64 }),
+        ]
     }
 }
 
@@ -284,13 +352,16 @@ impl Policy for MinitaurController {
         self.speed_integral = 0.0;
         self.heading_goal = 0.0;
         self.was_stance = [true; LEGS];
+        self.last_foot = [None; LEGS];
         self.stats = ControllerStats::default();
     }
     fn act(&mut self, env: &dyn Env, observation: &[f64]) -> Result<Vec<f64>> {
         Ok(self.torques(env, observation)?.to_vec())
     }
     fn diagnostics(&self) -> Vec<(&'static str, f64)> {
-        vec![("ticks", self.stats.ticks as f64), ("qp_failures", self.stats.qp_failures as f64)]
+        let mut d = vec![("ticks", self.stats.ticks as f64), ("qp_failures", self.stats.qp_failures as f64)];
+        d.extend(self.limits());
+        d
     }
     fn telemetry(&self) -> Telemetry {
         gait_telemetry(&self.last_phase, |leg| {
