@@ -57,11 +57,9 @@ pub struct TrainConfig {
     /// Multiplies every reward the learner stores; returns and evaluations stay the environment's.
     /// 1 unless a preset says otherwise (Haarnoja et al. 2018a tune a reward scale per task; it
     /// sets how large rewards are against the critic's approximation error).
-    #[serde(default = "unit_scale")]
     pub reward_scale: f64,
     /// Feed the networks observations standardised by the warm-up transitions' mean and std,
     /// frozen from then on (`agents::normalize`). Off unless a preset says otherwise.
-    #[serde(default)]
     pub normalize_observations: bool,
     /// Polyak coefficient of the target networks.
     pub tau: f64,
@@ -96,11 +94,20 @@ pub struct TrainConfig {
     pub value_lr: f64,
 }
 
-fn unit_scale() -> f64 {
-    1.0
-}
-
 impl TrainConfig {
+    /// Reads a `[train]` table: keys it does not give take the algorithm's defaults (so a run
+    /// written before a hyperparameter existed still loads), an unknown key is an error naming it.
+    pub fn from_table(table: &toml::Table) -> anyhow::Result<TrainConfig> {
+        let algo = match table.get("algo") {
+            Some(toml::Value::String(name)) => Algo::parse(name)?,
+            Some(other) => anyhow::bail!("algo must be a name like \"td3\", got {other}"),
+            None => anyhow::bail!("no algo given"),
+        };
+        let mut merged = toml::Table::try_from(TrainConfig::defaults(algo))?;
+        merged.extend(table.clone());
+        toml::Value::Table(merged).try_into().map_err(|e: toml::de::Error| anyhow::anyhow!("{}", e.message()))
+    }
+
     /// The defaults each algorithm was published with (REFERENCE §5).
     pub fn defaults(algo: Algo) -> TrainConfig {
         let td3 = TrainConfig {

@@ -7,6 +7,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod evaluate;
 pub mod metrics;
+pub mod run_config;
 pub mod run_lock;
 pub mod seeds;
 pub mod stop;
@@ -18,7 +19,6 @@ use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
-use serde::{Deserialize, Serialize};
 
 use crate::agents::{make_agent, Agent, Batch, Losses, ReplayBuffer, TrainConfig};
 use crate::envs::{make, Env, EnvConfig};
@@ -30,17 +30,7 @@ use evaluate::{evaluate, to_env_action, Evaluation};
 use metrics::MetricsRow;
 use seeds::{init_rng, train_episode_seed, training_rng, RngState};
 
-/// `config.toml` of a run.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct RunConfig {
-    pub seed: u64,
-    pub crate_version: String,
-    pub git_commit: Option<String>,
-    /// Checkpoint the weights were initialised from (fine-tuning), if any.
-    pub init_from: Option<String>,
-    pub env: EnvConfig,
-    pub train: TrainConfig,
-}
+pub use run_config::{read_run_config, RunConfig};
 
 /// How a call to `train`/`resume` ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -117,6 +107,7 @@ pub fn train(
     }
     let init_checkpoint = init_from.map(resolve_checkpoint).transpose()?;
     let run = RunConfig {
+        format: run_config::FORMAT,
         seed,
         crate_version: env!("CARGO_PKG_VERSION").to_string(),
         git_commit: git_commit(),
@@ -130,7 +121,7 @@ pub fn train(
     }
     std::fs::create_dir_all(run_dir)?;
     let _lock = run_lock::RunLock::acquire(run_dir)?;
-    write_bytes_atomic(&run_dir.join("config.toml"), toml::to_string(&run)?.as_bytes())?;
+    write_bytes_atomic(&run_dir.join("config.toml"), run.to_toml()?.as_bytes())?;
     trainer.run(control)
 }
 
@@ -151,7 +142,7 @@ pub fn extend(run_dir: &Path, total_steps: u64) -> Result<bool> {
     }
     let state = checkpoint::load_state(&checkpoint::latest(run_dir)?)?;
     run.train.total_steps = total_steps;
-    write_bytes_atomic(&run_dir.join("config.toml"), toml::to_string(&run)?.as_bytes())?;
+    write_bytes_atomic(&run_dir.join("config.toml"), run.to_toml()?.as_bytes())?;
     Ok(state.at_episode_boundary)
 }
 
@@ -218,13 +209,6 @@ pub fn run_progress(run_dir: &Path) -> Result<RunProgress> {
         metrics_step: rows.iter().map(|r| r.step).max(),
         last_eval: rows.iter().rev().find_map(|r| r.eval_mean),
     })
-}
-
-pub fn read_run_config(run_dir: &Path) -> Result<RunConfig> {
-    let path = run_dir.join("config.toml");
-    let text = std::fs::read_to_string(&path)
-        .with_context(|| format!("{} is not a run directory (no config.toml)", run_dir.display()))?;
-    toml::from_str(&text).with_context(|| format!("{} is corrupt", path.display()))
 }
 
 /// Accepts a checkpoint directory or a run directory (meaning its newest checkpoint).
