@@ -31,8 +31,7 @@ fn filled_buffer(rng: &mut ChaCha8Rng) -> ReplayBuffer {
 }
 
 fn bench(c: &mut Criterion) {
-    locobench::agents::flush_denormals_to_zero();
-    locobench::agents::keep_freed_memory();
+    let _runtime = locobench::runtime::Runtime::enter(1);
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let buf = filled_buffer(&mut rng);
     let mut group = c.benchmark_group("agents");
@@ -46,7 +45,7 @@ fn bench(c: &mut Criterion) {
         let label = format!("{}-{}", hidden[0], hidden[1]);
         group.throughput(Throughput::Elements(1));
         for threads in [1, 2] {
-            let _helper = (threads == 2).then(locobench::agents::second_core::HelperGuard::start);
+            let _runtime = locobench::runtime::Runtime::enter(threads);
             group.bench_function(format!("{}/update {label} batch {BATCH}, {threads} thread(s)", algo.name()), |b| {
                 b.iter(|| {
                     buf.sample_into(&mut batch, &mut rng);

@@ -42,9 +42,7 @@ fn config(algo: Algo) -> TrainConfig {
 }
 
 fn updates_per_second(algo: Algo, updates: usize) -> Result<f64> {
-    locobench::agents::flush_denormals_to_zero();
-    locobench::agents::keep_freed_memory();
-    let _helper = (threads() == 2).then(locobench::agents::second_core::HelperGuard::start);
+    let _runtime = locobench::runtime::Runtime::enter(threads());
     let mut rng = ChaCha8Rng::seed_from_u64(0);
     let mut buf = ReplayBuffer::new(50_000, OBS, ACT);
     let mut obs: Vec<f32> = (0..OBS).map(|_| rng.random_range(-1.0..1.0)).collect();
@@ -121,7 +119,7 @@ fn td3_update_flops() -> f64 {
 /// Single-thread f32 matmul rate of the gemm library candle uses, on a large square product:
 /// the practical peak of one core, the roofline the TD3 update is measured against.
 fn matmul_peak_gflops() -> Result<f64> {
-    locobench::agents::keep_freed_memory();
+    let _runtime = locobench::runtime::Runtime::enter(1);
     use candle_core::{Device, Tensor};
     let n = 1024;
     let a = Tensor::rand(-1f32, 1f32, (n, n), &Device::Cpu)?;

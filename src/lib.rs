@@ -8,5 +8,6 @@ pub mod policy;
 pub mod record;
 pub mod report;
 pub mod rollout;
+pub mod runtime;
 pub mod sweep;
 pub mod train;

@@ -7,17 +7,10 @@ fn main() {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
-    // candle's default thread pools busy-wait; one thread is fastest at these sizes (REFERENCE
-    // §6). Set before any candle code runs; users can still choose otherwise.
-    for var in ["RAYON_NUM_THREADS", "CANDLE_NUM_THREADS"] {
-        if std::env::var_os(var).is_none() {
-            std::env::set_var(var, "1");
-        }
-    }
-    // The training hot-path settings (agents::denormals, agents::allocator) for every command,
-    // so that `eval` and `record` compute exactly as evaluation during training did.
-    locobench::agents::flush_denormals_to_zero();
-    locobench::agents::keep_freed_memory();
+    // Before any other thread or candle code runs (see src/runtime.rs); every command then
+    // computes under the same settings as training.
+    locobench::runtime::configure_process();
+    let _runtime = locobench::runtime::Runtime::enter(1);
     if let Err(e) = cli::run() {
         eprintln!("error: {e:#}");
         std::process::exit(1);

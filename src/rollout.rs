@@ -89,6 +89,7 @@ pub fn run_episode(
     reset_seed: Option<u64>,
     observer: &mut dyn Observer,
 ) -> Result<EpisodeSummary> {
+    let _runtime = crate::runtime::Runtime::enter(1);
     let (mut obs, _) = env.reset(reset_seed)?;
     policy.begin_episode(episode);
     observer.reset(episode, &*env)?;

@@ -423,3 +423,22 @@ fn observation_normalisation_is_fitted_on_the_warm_up_and_travels_with_the_actor
         t.iter().find(|(n, _)| n == "actor.0.weight").map(|x| &x.1)
     );
 }
+
+/// A library caller evaluating a checkpoint on a thread of its own (no CLI start-up, no training
+/// loop) reproduces the run's logged evaluation bit for bit. (That the thread computes with
+/// flush-to-zero is tested in `runtime`.)
+#[test]
+fn evaluation_on_a_fresh_thread_matches_the_runs_own() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = tiny_pendulum_run(Algo::Sac, "", &dir.path().join("run"));
+    let logged = s.last_eval.as_ref().unwrap().mean();
+    let checkpoint = s.checkpoint.clone();
+    let fresh = std::thread::spawn(move || {
+        let (run, agent) = train::load_policy(&checkpoint).unwrap();
+        let mut env = locobench::envs::make(&run.env).unwrap();
+        train::evaluate::evaluate(agent.as_ref(), env.as_mut(), run.train.eval_episodes, run.seed).unwrap().mean()
+    })
+    .join()
+    .unwrap();
+    assert_eq!(fresh.to_bits(), logged.to_bits());
+}

@@ -10,7 +10,7 @@ pub fn flush_denormals_to_zero() {
 }
 
 /// This thread's SSE control register (MXCSR), 0 off x86-64.
-pub(super) fn float_mode() -> u32 {
+pub fn float_mode() -> u32 {
     #[cfg(target_arch = "x86_64")]
     {
         let mut csr: u32 = 0;
@@ -24,7 +24,7 @@ pub(super) fn float_mode() -> u32 {
 
 /// Sets this thread's MXCSR to a value `float_mode` returned (on this or another thread). The
 /// bits change how subnormal floats and rounding are treated, nothing else.
-pub(super) fn set_float_mode(_csr: u32) {
+pub fn set_float_mode(_csr: u32) {
     #[cfg(target_arch = "x86_64")]
     // SAFETY: writes this thread's SSE control register with a value read from a control
     // register, so no reserved bit is set.

@@ -39,6 +39,7 @@ pub fn to_env_action(env: &dyn Env, normalised: &[f32]) -> Vec<f64> {
 }
 
 pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed: u64) -> Result<Evaluation> {
+    let _runtime = crate::runtime::Runtime::enter(1);
     let terms = env.spec().reward_terms.clone();
     let mut eval = Evaluation {
         returns: Vec::with_capacity(episodes),

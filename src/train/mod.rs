@@ -324,10 +324,7 @@ impl Trainer {
     }
 
     fn run(&mut self, control: &RunControl) -> Result<RunSummary> {
-        // Also set by the CLI at start-up; a library caller's training thread gets it here.
-        crate::agents::flush_denormals_to_zero();
-        crate::agents::keep_freed_memory();
-        let _helper = (control.threads >= 2).then(crate::agents::second_core::HelperGuard::start);
+        let _runtime = crate::runtime::Runtime::enter(control.threads);
         let cfg = self.cfg.clone();
         let signals = stop::stop_signals();
         let bar = if control.show_progress { ProgressBar::new(cfg.total_steps) } else { ProgressBar::hidden() };
