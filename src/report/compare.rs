@@ -116,7 +116,7 @@ pub fn compare(env: &str, groups: &[Vec<&Run>], episodes: usize, seed: u64, spee
                 all.extend(measure(env_rl.as_mut(), &mut policy, episodes, seed, &profile)?);
             }
             rows.push(ComparisonRow {
-                policy: format!("{} ({}, {} seeds)", group[0].algo(), group[0].reward_label(), group.len()),
+                policy: format!("{} ({}, {} seeds)", group[0].group().label(), group[0].reward_label(), group.len()),
                 reward: variant.name.clone(),
                 episodes: all,
                 set_point: None,

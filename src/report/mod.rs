@@ -4,11 +4,11 @@
 pub mod anchors;
 pub mod compare;
 pub mod curves;
+pub mod document;
 pub mod plots;
 pub mod runs;
 
 use std::collections::BTreeMap;
-use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
 use anyhow::Result;
@@ -16,6 +16,7 @@ use anyhow::Result;
 use crate::io::write_bytes_atomic;
 use compare::{compare, ComparisonRow};
 use curves::{eval_curve, mean_std, rolling, EvalCurve};
+use document::Document;
 use plots::{bands_svg, Band, Marker};
 use runs::{find_runs, Group, Run};
 
@@ -114,16 +115,13 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
         envs.entry(g.env.clone()).or_default().push((g, rs));
     }
 
-    let mut html = String::new();
-    let mut md = String::new();
+    let mut doc = Document::new("locobench report");
     let mut summaries = Vec::new();
     let mut comparisons = BTreeMap::new();
-    let _ = writeln!(md, "# locobench report\n\n{} runs from {}.\n", runs.len(), paths_list(paths));
-    let _ = writeln!(html, "<h1>locobench report</h1><p>{} runs from {}.</p>", runs.len(), escape(&paths_list(paths)));
+    doc.paragraph(format!("{} runs from {}.", runs.len(), paths_list(paths)));
 
     for (env, env_groups) in &envs {
-        let _ = writeln!(md, "## {env}\n");
-        let _ = writeln!(html, "<h2>{}</h2>", escape(env));
+        doc.heading(1, env.as_str());
 
         // Evaluation curves: mean ± std across seeds per group.
         let env_summaries: Vec<GroupSummary> = env_groups.iter().map(|(g, rs)| summarise(g, rs)).collect();
@@ -162,25 +160,32 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
             &markers,
         )?;
         write_bytes_atomic(&out.join(&eval_svg), svg.as_bytes())?;
-        let _ = writeln!(md, "![evaluation curves]({eval_svg})\n");
-        let _ = writeln!(html, "<figure>{svg}</figure>");
-
-        md.push_str("| algorithm | reward | seeds | steps | final eval (mean ± std over seeds) | normalised AUC | wall time (min) |\n|---|---|---|---|---|---|---|\n");
-        html.push_str("<table><tr><th>algorithm</th><th>reward</th><th>seeds</th><th>steps</th><th>final eval</th><th>normalised AUC</th><th>wall time (min)</th></tr>");
-        for s in &env_summaries {
-            let cells = [
-                s.group.algo.clone(),
-                s.group.reward.clone(),
-                s.seeds.to_string(),
-                s.steps.to_string(),
-                format!("{} ± {}", fmt_return(s.final_mean), fmt_return(s.final_std)),
-                fmt_return(s.auc),
-                fmt(s.wall_time / 60.0, 1),
-            ];
-            table_row(&mut md, &mut html, &cells);
-        }
-        html.push_str("</table>");
-        md.push('\n');
+        doc.figure(eval_svg, svg, "evaluation curves");
+        doc.table(
+            &[
+                "algorithm",
+                "reward",
+                "seeds",
+                "steps",
+                "final eval (mean ± std over seeds)",
+                "normalised AUC",
+                "wall time (min)",
+            ],
+            env_summaries
+                .iter()
+                .map(|s| {
+                    vec![
+                        s.group.label(),
+                        s.group.reward.clone(),
+                        s.seeds.to_string(),
+                        s.steps.to_string(),
+                        format!("{} ± {}", fmt_return(s.final_mean), fmt_return(s.final_std)),
+                        fmt_return(s.auc),
+                        fmt(s.wall_time / 60.0, 1),
+                    ]
+                })
+                .collect(),
+        );
 
         // Training returns per episode: 50-episode rolling mean and std, one chart per group.
         for (g, rs) in env_groups {
@@ -192,13 +197,16 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
                     Band { label: format!("seed {}", r.config.seed), x, mean, std, raw: y }
                 })
                 .collect();
-            let file = format!("{env}_{}_{}_training.svg", g.algo, slug(&g.reward));
+            let mut file = format!("{env}_{}_{}", g.algo, slug(&g.reward));
+            if !g.settings.is_empty() {
+                file += &format!("_{}", slug(&g.settings));
+            }
+            file += "_training.svg";
             let title =
                 format!("{env} {}: episode returns (faint), {ROLLING_WINDOW}-episode rolling mean ± std", g.label());
             let svg = bands_svg(&title, "environment steps", "episode return", &bands, &[])?;
             write_bytes_atomic(&out.join(&file), svg.as_bytes())?;
-            let _ = writeln!(md, "![training returns]({file})\n");
-            let _ = writeln!(html, "<figure>{svg}</figure>");
+            doc.figure(file, svg, "training returns");
         }
 
         // Baseline against RL.
@@ -206,88 +214,60 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
         if let (Some(speed), true) = (speed, opts.compare_episodes > 0) {
             let gs: Vec<Vec<&Run>> = env_groups.iter().map(|(_, rs)| (*rs).clone()).collect();
             let rows = compare(env, &gs, opts.compare_episodes, opts.seed, speed)?;
-            let _ = writeln!(
-                md,
-                "### Baseline vs RL\n\n{} episodes per policy and seed; baseline set-point {speed} m/s. Speed error is \
-                 measured against the baseline's set-point for every policy. The baseline runs in the runs' env \
-                 options with its own action mode.\n",
+            doc.heading(2, "Baseline vs RL");
+            doc.paragraph(format!(
+                "{} episodes per policy and seed; baseline set-point {speed} m/s. Speed error is measured against \
+                 the baseline's set-point for every policy. The baseline runs in the runs' env options with its own \
+                 action mode.",
                 opts.compare_episodes
+            ));
+            doc.table(
+                &[
+                    "reward",
+                    "policy",
+                    "return",
+                    "speed m/s",
+                    "speed error m/s",
+                    "energy J",
+                    "CoT",
+                    "drift m",
+                    "shake m",
+                    "falls",
+                    "length",
+                ],
+                rows.iter()
+                    .map(|row| {
+                        let (ret, ret_sd) = row.stat(|e| e.episode_return);
+                        vec![
+                            row.reward.clone(),
+                            row.policy.clone(),
+                            format!("{} ± {}", fmt_return(ret), fmt_return(ret_sd)),
+                            fmt(row.stat(|e| e.mean_speed).0, 3),
+                            fmt(row.stat(|e| e.speed_error).0, 3),
+                            fmt(row.stat(|e| e.energy).0, 1),
+                            fmt(row.cost_of_transport(), 2),
+                            fmt(row.stat(|e| e.drift).0, 3),
+                            fmt(row.stat(|e| e.shake).0, 3),
+                            format!("{}/{}", row.falls(), row.episodes.len()),
+                            fmt(row.stat(|e| e.length as f64).0, 0),
+                        ]
+                    })
+                    .collect(),
             );
-            let _ = writeln!(
-                html,
-                "<h3>Baseline vs RL</h3><p>{} episodes per policy and seed; baseline set-point {speed} m/s. \
-                 Speed error is measured against the baseline's set-point for every policy.</p>",
-                opts.compare_episodes
-            );
-            let header = [
-                "reward",
-                "policy",
-                "return",
-                "speed m/s",
-                "speed error m/s",
-                "energy J",
-                "CoT",
-                "drift m",
-                "shake m",
-                "falls",
-                "length",
-            ];
-            md.push_str(&format!("| {} |\n|{}\n", header.join(" | "), "---|".repeat(header.len())));
-            html.push_str("<table><tr>");
-            for h in header {
-                let _ = write!(html, "<th>{h}</th>");
-            }
-            html.push_str("</tr>");
-            for row in &rows {
-                let (ret, ret_sd) = row.stat(|e| e.episode_return);
-                let cells = [
-                    row.reward.clone(),
-                    row.policy.clone(),
-                    format!("{} ± {}", fmt_return(ret), fmt_return(ret_sd)),
-                    fmt(row.stat(|e| e.mean_speed).0, 3),
-                    fmt(row.stat(|e| e.speed_error).0, 3),
-                    fmt(row.stat(|e| e.energy).0, 1),
-                    fmt(row.cost_of_transport(), 2),
-                    fmt(row.stat(|e| e.drift).0, 3),
-                    fmt(row.stat(|e| e.shake).0, 3),
-                    format!("{}/{}", row.falls(), row.episodes.len()),
-                    fmt(row.stat(|e| e.length as f64).0, 0),
-                ];
-                table_row(&mut md, &mut html, &cells);
-            }
-            html.push_str("</table>");
-            md.push('\n');
             comparisons.insert(env.clone(), rows);
         }
         summaries.extend(env_summaries);
     }
 
-    let runs_list: String = runs
-        .iter()
-        .map(|r| format!("- `{}`: {} seed {}\n", r.dir.display(), r.group().label(), r.config.seed))
-        .collect();
-    let _ = writeln!(md, "## Runs\n\n{runs_list}");
-    let page = format!(
-        "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>locobench report</title><style>\
-         body{{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}}\
-         table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}\
-         th{{background:#eee}}figure{{margin:1em 0}}</style></head><body>\n{html}\n<h2>Runs</h2><pre>{}</pre></body></html>\n",
-        escape(&runs_list)
+    doc.heading(1, "Runs");
+    doc.lines(
+        runs.iter().map(|r| format!("`{}`: {} seed {}", r.dir.display(), r.group().label(), r.config.seed)).collect(),
     );
     let index = out.join("index.html");
     let readme = out.join("README.md");
-    write_bytes_atomic(&index, page.as_bytes())?;
-    write_bytes_atomic(&readme, md.as_bytes())?;
+    write_bytes_atomic(&index, doc.to_html().as_bytes())?;
+    write_bytes_atomic(&readme, doc.to_markdown().as_bytes())?;
     Ok(Report { index, readme, groups: summaries, comparisons })
-}
-
-fn table_row(md: &mut String, html: &mut String, cells: &[String]) {
-    let _ = writeln!(md, "| {} |", cells.join(" | "));
-    html.push_str("<tr>");
-    for c in cells {
-        let _ = write!(html, "<td>{}</td>", escape(c));
-    }
-    html.push_str("</tr>");
 }
 
 fn paths_list(paths: &[PathBuf]) -> String {
@@ -296,8 +276,4 @@ fn paths_list(paths: &[PathBuf]) -> String {
 
 fn slug(s: &str) -> String {
     s.chars().map(|c| if c.is_ascii_alphanumeric() || c == '.' { c } else { '-' }).collect()
-}
-
-fn escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
 }

@@ -59,9 +59,40 @@ impl Run {
         }
     }
 
+    /// Hyperparameters and non-reward environment options that differ from what
+    /// `locobench train --env E --algo A` would use today (the algorithm's defaults and the
+    /// shipped presets), e.g. `reward_scale=100`; empty when none. Budget and bookkeeping keys
+    /// (steps, evaluation and checkpoint cadence) do not count.
+    pub fn settings_label(&self) -> String {
+        const BOOKKEEPING: [&str; 4] = ["total_steps", "eval_every", "eval_episodes", "checkpoint_every"];
+        let mut changed = Vec::new();
+        if let Ok(preset) = crate::train::config::build_config(self.env(), self.config.train.algo, &[]) {
+            let ours = toml::Table::try_from(&self.config.train).unwrap_or_default();
+            let theirs = toml::Table::try_from(&preset).unwrap_or_default();
+            for (k, v) in &ours {
+                if !BOOKKEEPING.contains(&k.as_str()) && theirs.get(k) != Some(v) {
+                    changed.push(format!("{k}={v}"));
+                }
+            }
+        }
+        let defaults = EnvConfig::new(self.env()).resolved_options().unwrap_or_default();
+        for (k, v) in &self.config.env.options {
+            if !is_reward_weight(k) && defaults.get(k) != Some(v) {
+                changed.push(format!("{k}={v}"));
+            }
+        }
+        changed.sort();
+        changed.join(",")
+    }
+
     /// Runs that differ only in their seed share a group.
     pub fn group(&self) -> Group {
-        Group { env: self.env().to_string(), algo: self.algo().to_string(), reward: self.reward_label() }
+        Group {
+            env: self.env().to_string(),
+            algo: self.algo().to_string(),
+            reward: self.reward_label(),
+            settings: self.settings_label(),
+        }
     }
 
     pub fn evals(&self) -> impl Iterator<Item = (u64, f64)> + '_ {
@@ -86,15 +117,20 @@ pub struct Group {
     pub env: String,
     pub algo: String,
     pub reward: String,
+    /// `Run::settings_label`: empty for the shipped settings.
+    pub settings: String,
 }
 
 impl Group {
     pub fn label(&self) -> String {
-        if self.reward == "default reward" {
-            self.algo.clone()
-        } else {
-            format!("{} ({})", self.algo, self.reward)
+        let mut label = self.algo.clone();
+        if !self.settings.is_empty() {
+            label += &format!(" [{}]", self.settings);
         }
+        if self.reward != "default reward" {
+            label += &format!(" ({})", self.reward);
+        }
+        label
     }
 }
 
@@ -136,4 +172,43 @@ pub fn find_runs(paths: &[PathBuf]) -> Result<Vec<Run>> {
     dirs.sort();
     dirs.dedup();
     dirs.iter().map(|d| Run::load(d)).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::agents::Algo;
+    use crate::train::config::{build_config, split_pairs};
+
+    fn run(env: &str, algo: Algo, settings: &str, options: &[(&str, &str)]) -> Run {
+        let pairs: Vec<(String, String)> = options.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+        let mut env_config = EnvConfig::new(env).with_overrides(&pairs).unwrap();
+        env_config.options = env_config.resolved_options().unwrap();
+        Run {
+            dir: PathBuf::from("r"),
+            config: RunConfig {
+                format: crate::train::run_config::FORMAT,
+                seed: 0,
+                crate_version: String::new(),
+                git_commit: None,
+                init_from: None,
+                env: env_config,
+                train: build_config(env, algo, &split_pairs(settings).unwrap()).unwrap(),
+            },
+            metrics: vec![],
+        }
+    }
+
+    #[test]
+    fn groups_tell_changed_settings_apart_but_not_budgets() {
+        let plain = run("half-cheetah", Algo::Td3, "total_steps=300000", &[]);
+        assert_eq!(plain.settings_label(), "");
+        assert_eq!(plain.group().label(), "td3");
+        let scaled = run("half-cheetah", Algo::Td3, "reward_scale=100,normalize_observations=true", &[]);
+        assert_eq!(scaled.settings_label(), "normalize_observations=true,reward_scale=100.0");
+        assert_ne!(plain.group(), scaled.group());
+        let relaxed = run("minitaur", Algo::Sac, "", &[("fall_up_threshold", "0.7"), ("drift_weight", "0.5")]);
+        assert_eq!(relaxed.settings_label(), "fall_up_threshold=0.7");
+        assert_eq!(relaxed.group().label(), "sac [fall_up_threshold=0.7] (drift=0.5)");
+    }
 }

@@ -1,0 +1,161 @@
+//! The report as one model, rendered to Markdown and to a self-contained HTML page, so the two
+//! cannot say different things.
+use std::fmt::Write as _;
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Block {
+    Heading {
+        level: usize,
+        text: String,
+    },
+    Paragraph(String),
+    /// An SVG chart: the Markdown links `file`, the HTML page embeds `svg`.
+    Figure {
+        file: String,
+        svg: String,
+        caption: String,
+    },
+    Table {
+        header: Vec<String>,
+        rows: Vec<Vec<String>>,
+    },
+    /// Lines shown as they are: a list in Markdown, preformatted in HTML.
+    Lines(Vec<String>),
+}
+
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Document {
+    pub title: String,
+    pub blocks: Vec<Block>,
+}
+
+impl Document {
+    pub fn new(title: &str) -> Document {
+        Document { title: title.to_string(), blocks: Vec::new() }
+    }
+
+    pub fn heading(&mut self, level: usize, text: impl Into<String>) {
+        self.blocks.push(Block::Heading { level, text: text.into() });
+    }
+
+    pub fn paragraph(&mut self, text: impl Into<String>) {
+        self.blocks.push(Block::Paragraph(text.into()));
+    }
+
+    pub fn figure(&mut self, file: impl Into<String>, svg: String, caption: impl Into<String>) {
+        self.blocks.push(Block::Figure { file: file.into(), svg, caption: caption.into() });
+    }
+
+    pub fn table(&mut self, header: &[&str], rows: Vec<Vec<String>>) {
+        self.blocks.push(Block::Table { header: header.iter().map(|h| h.to_string()).collect(), rows });
+    }
+
+    pub fn lines(&mut self, lines: Vec<String>) {
+        self.blocks.push(Block::Lines(lines));
+    }
+
+    pub fn to_markdown(&self) -> String {
+        let mut md = format!("# {}\n\n", self.title);
+        for block in &self.blocks {
+            match block {
+                Block::Heading { level, text } => {
+                    let _ = writeln!(md, "{} {text}\n", "#".repeat(level + 1));
+                }
+                Block::Paragraph(text) => {
+                    let _ = writeln!(md, "{text}\n");
+                }
+                Block::Figure { file, caption, .. } => {
+                    let _ = writeln!(md, "![{caption}]({file})\n");
+                }
+                Block::Table { header, rows } => {
+                    let _ = writeln!(md, "| {} |\n|{}", header.join(" | "), "---|".repeat(header.len()));
+                    for row in rows {
+                        let _ = writeln!(md, "| {} |", row.join(" | "));
+                    }
+                    md.push('\n');
+                }
+                Block::Lines(lines) => {
+                    for line in lines {
+                        let _ = writeln!(md, "- {line}");
+                    }
+                    md.push('\n');
+                }
+            }
+        }
+        md
+    }
+
+    pub fn to_html(&self) -> String {
+        let mut body = format!("<h1>{}</h1>\n", escape(&self.title));
+        for block in &self.blocks {
+            match block {
+                Block::Heading { level, text } => {
+                    let _ = writeln!(body, "<h{n}>{}</h{n}>", escape(text), n = level + 1);
+                }
+                Block::Paragraph(text) => {
+                    let _ = writeln!(body, "<p>{}</p>", escape(text));
+                }
+                Block::Figure { svg, caption, .. } => {
+                    let _ = writeln!(body, "<figure>{svg}<figcaption>{}</figcaption></figure>", escape(caption));
+                }
+                Block::Table { header, rows } => {
+                    body.push_str("<table><tr>");
+                    for h in header {
+                        let _ = write!(body, "<th>{}</th>", escape(h));
+                    }
+                    body.push_str("</tr>");
+                    for row in rows {
+                        body.push_str("<tr>");
+                        for c in row {
+                            let _ = write!(body, "<td>{}</td>", escape(c));
+                        }
+                        body.push_str("</tr>");
+                    }
+                    body.push_str("</table>\n");
+                }
+                Block::Lines(lines) => {
+                    let _ = writeln!(body, "<pre>{}</pre>", escape(&lines.join("\n")));
+                }
+            }
+        }
+        format!(
+            "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{}</title><style>\
+             body{{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}}\
+             table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}\
+             th{{background:#eee}}figure{{margin:1em 0}}figcaption{{color:#555;font-size:90%}}</style></head><body>\n\
+             {body}</body></html>\n",
+            escape(&self.title)
+        )
+    }
+}
+
+fn escape(s: &str) -> String {
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every text of the model appears in both renderings (escaped in HTML).
+    #[test]
+    fn markdown_and_html_carry_the_same_content() {
+        let mut d = Document::new("report");
+        d.heading(1, "minitaur");
+        d.paragraph("5 episodes per policy <seeded>");
+        d.figure("a.svg", "<svg id=\"chart\"></svg>".into(), "evaluation curves");
+        d.table(&["policy", "return"], vec![vec!["td3".into(), "2.9 ± 0.1".into()], vec!["sac".into(), "10".into()]]);
+        d.lines(vec!["`runs/a`: td3 seed 0".into()]);
+        let (md, html) = (d.to_markdown(), d.to_html());
+        for text in
+            ["minitaur", "evaluation curves", "policy", "return", "td3", "2.9 ± 0.1", "sac", "`runs/a`: td3 seed 0"]
+        {
+            assert!(md.contains(text) && html.contains(text), "{text}");
+        }
+        assert!(md.contains("5 episodes per policy <seeded>") && html.contains("5 episodes per policy &lt;seeded&gt;"));
+        assert!(md.contains("![evaluation curves](a.svg)") && html.contains("<svg id=\"chart\"></svg>"));
+        assert!(md.contains("## minitaur") && html.contains("<h2>minitaur</h2>"));
+        assert_eq!(md.matches("| td3 |").count(), 1);
+        assert_eq!(html.matches("<tr>").count(), 3);
+    }
+}
