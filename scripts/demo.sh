@@ -2,9 +2,9 @@
 # The main job, a short real demo (a few minutes on 2 cores once built):
 #   1. SAC learns to balance InvertedPendulum, recorded into a rerun file as it learns;
 #   2. a sweep: TD3 and DDPG learn it too, two seeds each, two processes side by side;
-#   3. a Minitaur walking policy trained with SAC (300k steps, shipped in models/policies/,
-#      retrain it with the command in its README) is evaluated and recorded, beside the
-#      Raibert/QP baseline controller at 0.35 m/s;
+#   3. two Minitaur walking policies trained with SAC and TD3 (300k steps each, shipped in
+#      models/policies/, retrain them with the commands in their READMEs) are evaluated and
+#      recorded, beside the Raibert/QP baseline controller at 0.35 m/s;
 #   4. a report compares everything: learning curves, baseline vs RL under three rewards.
 # Everything goes under demo/; the paths are printed at the end.
 set -euo pipefail
@@ -14,6 +14,7 @@ cargo build --release --quiet
 bin=target/release/locobench
 out=demo
 policy=models/policies/minitaur-sac
+td3_policy=models/policies/minitaur-td3
 rm -rf "$out"
 mkdir -p "$out"
 "$bin" envs
@@ -22,11 +23,12 @@ mkdir -p "$out"
 "$bin" eval --checkpoint "$out/run-inverted-pendulum-sac" --episodes 10
 "$bin" sweep --env inverted-pendulum --algo td3,ddpg --seeds 2 --jobs 2 --out "$out/pendulum-sweep"
 "$bin" sweep status "$out/pendulum-sweep"
-"$bin" eval --checkpoint "$policy" --episodes 10
+for p in "$policy" "$td3_policy"; do "$bin" eval --checkpoint "$p" --episodes 10; done
 "$bin" baseline --env minitaur --speed 0.35 --episodes 3 --seed 0
 "$bin" record --env minitaur --policy raibert --speed 0.35 --out "$out/minitaur-raibert.rrd"
 "$bin" record --policy "$policy" --out "$out/minitaur-sac.rrd"
-"$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/pendulum-sweep" "$policy" --out "$out/report" --episodes 3
+"$bin" record --policy "$td3_policy" --out "$out/minitaur-td3.rrd"
+"$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/pendulum-sweep" "$policy" "$td3_policy" --out "$out/report" --episodes 3
 echo
 echo "Report (open in a browser):   $(pwd)/$out/report/index.html  (Markdown: $out/report/README.md)"
 echo "rerun recordings:             $(pwd)/$out/*.rrd  (viewer: pip install rerun-sdk==0.36.3; rerun FILE)"
