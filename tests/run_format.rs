@@ -72,3 +72,22 @@ fn a_garbage_config_names_the_file() {
     let err = format!("{:#}", train::read_run_config(dir.path()).unwrap_err());
     assert!(err.contains(&dir.path().join("config.toml").display().to_string()), "{err}");
 }
+
+#[test]
+fn results_kept_without_checkpoints_count_as_finished_when_their_metrics_reach_the_budget() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let kept = root.join("benches/results/half-cheetah/td3-seed0-300k");
+    assert!(!kept.join("checkpoints").exists());
+    assert!(train::run_progress(&kept).unwrap().finished());
+
+    // The same files with a larger budget are not finished; with checkpoints, the checkpoint
+    // decides.
+    let dir = tempfile::tempdir().unwrap();
+    let short = dir.path().join("short");
+    std::fs::create_dir_all(&short).unwrap();
+    std::fs::copy(kept.join("metrics.csv"), short.join("metrics.csv")).unwrap();
+    let config = std::fs::read_to_string(kept.join("config.toml")).unwrap();
+    std::fs::write(short.join("config.toml"), config.replace("total_steps = 300000", "total_steps = 400000")).unwrap();
+    assert!(!train::run_progress(&short).unwrap().finished());
+    assert!(train::run_progress(Path::new(FIXTURE)).unwrap().finished(), "its checkpoint is at the budget");
+}

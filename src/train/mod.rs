@@ -189,8 +189,13 @@ pub struct RunProgress {
 }
 
 impl RunProgress {
+    /// The newest checkpoint is at the budget; or, for results kept without checkpoints
+    /// (config.toml + metrics.csv, as under benches/results), the metrics reach it.
     pub fn finished(&self) -> bool {
-        self.checkpoint_step.is_some_and(|s| s >= self.total_steps)
+        match self.checkpoint_step {
+            Some(step) => step >= self.total_steps,
+            None => self.metrics_step.is_some_and(|s| s >= self.total_steps),
+        }
     }
 
     pub fn step(&self) -> u64 {
