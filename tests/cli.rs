@@ -285,3 +285,54 @@ fn an_exported_policy_acts_exactly_as_its_checkpoint() {
     let (ok, _, err) = locobench(&["train", "--resume", exported.to_str().unwrap(), "--quiet"]);
     assert!(!ok && err.contains("no checkpoint"), "{err}");
 }
+
+/// Every command that builds an environment takes the same option group: a TOML file, then
+/// `--option`, then `--reward`, in that order.
+#[test]
+fn env_options_file_option_and_reward_work_alike_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("env.toml");
+    std::fs::write(&file, "[options]\nmax_episode_steps = 30\ndrift_weight = 0.5\n").unwrap();
+    let f = file.to_str().unwrap();
+    let run = dir.path().join("run");
+    let r = run.to_str().unwrap();
+    let (ok, out, err) = locobench(&[
+        "train",
+        "--env",
+        "minitaur",
+        "--algo",
+        "sac",
+        "--steps",
+        "60",
+        "--env-config",
+        f,
+        "--option",
+        "drift_weight=0.75",
+        "--reward",
+        "shake=0.25",
+        "--set",
+        "hidden=[8,8],batch_size=16,warmup_steps=20,learning_starts=20,eval_every=60,eval_episodes=1",
+        "--out",
+        r,
+        "--quiet",
+        "--threads",
+        "1",
+    ]);
+    assert!(ok, "{out}\n{err}");
+    let config = std::fs::read_to_string(run.join("config.toml")).unwrap();
+    for line in ["max_episode_steps = 30", "drift_weight = 0.75", "shake_weight = 0.25"] {
+        assert!(config.contains(line), "{line} missing:\n{config}");
+    }
+    // eval, baseline and rollout read the same file; a reward term an env lacks is an error.
+    let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "1", "--env-config", f]);
+    assert!(ok && out.contains("mean length 30.0"), "{out}\n{err}");
+    let (ok, out, err) =
+        locobench(&["baseline", "--env", "minitaur", "--episodes", "1", "--env-config", f, "--reward", "drift=1"]);
+    assert!(ok && out.contains("30.0"), "{out}\n{err}");
+    let csv = dir.path().join("r.csv");
+    let (ok, _, err) = locobench(&["rollout", "--env", "minitaur", "--env-config", f, "--out", csv.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    assert!(std::fs::read_to_string(&csv).unwrap().lines().count() <= 31);
+    let (ok, _, err) = locobench(&["baseline", "--env", "ant", "--episodes", "1", "--reward", "energy=1"]);
+    assert!(!ok && err.contains("energy"), "{err}");
+}

@@ -174,10 +174,11 @@ impl TrainConfig {
         positive("initial_alpha", self.initial_alpha)?;
         positive("reward_scale", self.reward_scale)?;
         anyhow::ensure!(
-            !self.normalize_observations || self.learning_starts >= 1000,
+            !self.normalize_observations || self.learning_starts >= self.batch_size.max(2) as u64,
             "normalize_observations estimates its statistics from the transitions before learning starts: \
-             learning_starts must be at least 1000, got {}",
-            self.learning_starts
+             learning_starts ({}) must be at least the batch size ({})",
+            self.learning_starts,
+            self.batch_size
         );
         anyhow::ensure!((0.0..=1.0).contains(&self.gamma), "gamma must lie in [0, 1]");
         anyhow::ensure!(self.tau > 0.0 && self.tau <= 1.0, "tau must lie in (0, 1]");

@@ -23,9 +23,9 @@ pub struct BaselineArgs {
     /// trot, bound or pace (Minitaur bounds by default; Ant trots).
     #[arg(long)]
     pub gait: Option<String>,
-    /// Environment option overrides, e.g. `--option drift_weight=1`.
-    #[arg(long = "option", value_name = "KEY=VALUE,...")]
-    pub options: Vec<String>,
+    /// Options over the baseline's environment (Minitaur in torque mode), e.g. `--reward drift=1`.
+    #[command(flatten)]
+    pub env_options: super::EnvOptionArgs,
     /// Also print every episode.
     #[arg(long)]
     pub verbose: bool,
@@ -65,7 +65,7 @@ impl CommandArgs {
 
 pub fn run(args: BaselineArgs) -> Result<()> {
     let gait = args.gait.as_deref().map(parse_gait).transpose()?;
-    let cfg = super::apply_options(baseline_env(&args.env)?, &args.options)?;
+    let cfg = args.env_options.apply(baseline_env(&args.env)?)?;
     let mut env = make(&cfg)?;
     println!(
         "{:>6} {:>17} {:>8} {:>9} {:>8} {:>8} {:>9} {:>7} {:>8} {:>8} {:>6} {:>7} {:>8}",

@@ -4,8 +4,6 @@ use anyhow::Result;
 use locobench::envs::make;
 use locobench::train::{evaluate::evaluate, load_policy};
 
-use super::train::env_config;
-
 #[derive(clap::Args, Debug)]
 pub struct EvalArgs {
     /// A checkpoint directory, or a run directory (its newest checkpoint).
@@ -16,19 +14,15 @@ pub struct EvalArgs {
     /// Seed for the evaluation episodes (default: the run's seed, as during training).
     #[arg(long)]
     pub seed: Option<u64>,
-    /// Evaluate under other reward weights, e.g. `--reward drift=1,shake=1,energy=0.005`.
-    #[arg(long)]
-    pub reward: Option<String>,
-    /// Environment option overrides.
-    #[arg(long = "option", value_name = "KEY=VALUE,...")]
-    pub options: Vec<String>,
+    /// Options over the run's own environment, e.g. `--reward drift=1,shake=1,energy=0.005` to
+    /// evaluate under other reward weights.
+    #[command(flatten)]
+    pub env_options: super::EnvOptionArgs,
 }
 
 pub fn run(args: EvalArgs) -> Result<()> {
     let (run, agent) = load_policy(&args.checkpoint)?;
-    let mut env_cfg = run.env.clone();
-    let extra = env_config(&run.env.name, &args.options, args.reward.as_deref())?;
-    env_cfg.options.extend(extra.options);
+    let env_cfg = args.env_options.apply(run.env.clone())?;
     let mut env = make(&env_cfg)?;
     let e = evaluate(agent.as_ref(), env.as_mut(), args.episodes, args.seed.unwrap_or(run.seed))?;
     println!(

@@ -55,40 +55,67 @@ pub fn run() -> Result<()> {
     }
 }
 
-/// Options every command that builds an environment accepts.
-#[derive(clap::Args, Debug, Clone)]
-pub struct EnvArgs {
-    /// Environment name (see `locobench envs`).
-    #[arg(long)]
-    pub env: String,
-    /// TOML file with environment options (`[options]` table or bare keys).
+/// How every command that builds an environment takes its options: a TOML file, `--option`
+/// pairs and `--reward` weights by term name, applied in that order over the command's base
+/// (an env's defaults, a checkpoint's run, the baseline's setup).
+#[derive(clap::Args, Debug, Clone, Default)]
+pub struct EnvOptionArgs {
+    /// TOML file with environment options (an `[options]` table or bare keys).
     #[arg(long, value_name = "FILE")]
     pub env_config: Option<std::path::PathBuf>,
     /// Environment option overrides, e.g. `--option drift_weight=0.25,max_episode_steps=500`.
     #[arg(long = "option", value_name = "KEY=VALUE,...")]
     pub options: Vec<String>,
+    /// Reward weights by term name, e.g. `--reward drift=0.25,shake=0.1`.
+    #[arg(long, value_name = "TERM=WEIGHT,...")]
+    pub reward: Option<String>,
+}
+
+impl EnvOptionArgs {
+    /// `base` with the file's options, then `--option`, then `--reward` applied.
+    pub fn apply(&self, base: locobench::envs::EnvConfig) -> Result<locobench::envs::EnvConfig> {
+        let pairs = self.pairs(&base.name)?;
+        Ok(base.with_overrides(&pairs)?)
+    }
+
+    /// The same settings as `key=value` pairs of env options, in the order they apply (what a
+    /// sweep hands each job as `--option`).
+    pub fn pairs(&self, env: &str) -> Result<Vec<(String, String)>> {
+        use anyhow::Context;
+        let mut pairs = Vec::new();
+        if let Some(path) = &self.env_config {
+            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+            let table: toml::Table = text.parse().with_context(|| format!("parsing {}", path.display()))?;
+            let options = match table.get("options") {
+                Some(toml::Value::Table(t)) => t.clone(),
+                _ => table,
+            };
+            pairs.extend(options.into_iter().map(|(k, v)| (k, v.to_string())));
+        }
+        for o in &self.options {
+            pairs.extend(locobench::envs::parse_overrides(o)?);
+        }
+        if let Some(r) = &self.reward {
+            for (term, value) in locobench::envs::parse_overrides(r)? {
+                pairs.push((locobench::envs::reward_weight_option(env, &term)?.to_string(), value));
+            }
+        }
+        Ok(pairs)
+    }
+}
+
+/// An environment name and its options (`rollout`).
+#[derive(clap::Args, Debug, Clone)]
+pub struct EnvArgs {
+    /// Environment name (see `locobench envs`).
+    #[arg(long)]
+    pub env: String,
+    #[command(flatten)]
+    pub options: EnvOptionArgs,
 }
 
 impl EnvArgs {
     pub fn config(&self) -> Result<locobench::envs::EnvConfig> {
-        use anyhow::Context;
-        let mut cfg = locobench::envs::EnvConfig::new(&self.env);
-        if let Some(path) = &self.env_config {
-            let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-            let table: toml::Table = text.parse().with_context(|| format!("parsing {}", path.display()))?;
-            cfg.options = match table.get("options") {
-                Some(toml::Value::Table(t)) => t.clone(),
-                _ => table,
-            };
-        }
-        apply_options(cfg, &self.options)
+        self.options.apply(locobench::envs::EnvConfig::new(&self.env))
     }
-}
-
-/// Applies `--option key=value,...` arguments in order.
-pub fn apply_options(mut cfg: locobench::envs::EnvConfig, options: &[String]) -> Result<locobench::envs::EnvConfig> {
-    for o in options {
-        cfg = cfg.with_overrides(&locobench::envs::parse_overrides(o)?)?;
-    }
-    Ok(cfg)
 }

@@ -30,9 +30,9 @@ pub struct RecordArgs {
     /// Gait of the Raibert controller (trot, bound, pace).
     #[arg(long)]
     pub gait: Option<String>,
-    /// Environment option overrides, e.g. `--option max_episode_steps=200`.
-    #[arg(long = "option", value_name = "KEY=VALUE,...")]
-    pub options: Vec<String>,
+    /// Options over the policy's environment, e.g. `--option max_episode_steps=200`.
+    #[command(flatten)]
+    pub env_options: super::EnvOptionArgs,
     /// The recording to write.
     #[arg(long, default_value = "rollout.rrd")]
     pub out: PathBuf,
@@ -66,7 +66,7 @@ pub fn run(args: RecordArgs) -> Result<()> {
             (run.env, Box::new(AgentPolicy { agent: agent_holder.as_ref(), label }) as Box<dyn Policy>)
         }
     };
-    let cfg = super::apply_options(cfg, &args.options)?;
+    let cfg = args.env_options.apply(cfg)?;
     let mut env = make(&cfg)?;
     let recording = Recording::create(&args.out)?;
     let mut recorder = RolloutRecorder::new(recording.stream(), env.data().model())?;

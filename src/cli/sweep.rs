@@ -34,9 +34,10 @@ pub struct SweepArgs {
     /// Hyperparameters for every job, as `locobench train --set`.
     #[arg(long = "set", value_name = "KEY=VALUE,...")]
     pub set: Vec<String>,
-    /// Env options for every job, as `locobench train --option`.
-    #[arg(long = "option", value_name = "KEY=VALUE,...")]
-    pub options: Vec<String>,
+    /// Env options for every job (file, `--option`, `--reward`), as `locobench train` takes
+    /// them; each job gets them as `--option` pairs.
+    #[command(flatten)]
+    pub env_options: super::EnvOptionArgs,
     /// The sweep directory.
     #[arg(long, required = true)]
     pub out: Option<PathBuf>,
@@ -111,6 +112,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
         Algo::parse(a)?;
     }
     locobench::envs::EnvConfig::new(&env).resolved_options()?;
+    let env_name = env.clone();
     let spec = SweepSpec {
         env,
         algos: args.algo.clone(),
@@ -118,7 +120,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
         seeds: (args.first_seed..args.first_seed + args.seeds).collect(),
         steps: args.steps,
         set: args.set.clone(),
-        options: args.options.clone(),
+        options: args.env_options.pairs(&env_name)?.into_iter().map(|(k, v)| format!("{k}={v}")).collect(),
     };
     let jobs = jobs(&spec, &out)?;
     write_plan(&spec, &out, &jobs)?;

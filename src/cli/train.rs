@@ -2,7 +2,7 @@ use std::path::PathBuf;
 
 use anyhow::{bail, Result};
 use locobench::agents::Algo;
-use locobench::envs::{parse_overrides, reward_weight_option, EnvConfig};
+use locobench::envs::EnvConfig;
 use locobench::train::{self, config::build_config, config::split_pairs, Outcome, RunControl};
 
 #[derive(clap::Args, Debug)]
@@ -22,12 +22,8 @@ pub struct TrainArgs {
     /// Hyperparameter overrides, e.g. `--set batch_size=256,hidden=[64,64]`.
     #[arg(long = "set", value_name = "KEY=VALUE,...")]
     pub set: Vec<String>,
-    /// Environment option overrides, e.g. `--option max_episode_steps=500`.
-    #[arg(long = "option", value_name = "KEY=VALUE,...")]
-    pub options: Vec<String>,
-    /// Reward weights by term name, e.g. `--reward drift=0.25,shake=0.1`.
-    #[arg(long)]
-    pub reward: Option<String>,
+    #[command(flatten)]
+    pub env_options: super::EnvOptionArgs,
     /// Run directory (default runs/<env>-<algo>-seed<seed>).
     #[arg(long)]
     pub out: Option<PathBuf>,
@@ -35,7 +31,7 @@ pub struct TrainArgs {
     #[arg(long, value_name = "CHECKPOINT")]
     pub init_from: Option<PathBuf>,
     /// Continue a stopped run from its newest checkpoint.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["env", "algo", "set", "options", "reward", "init_from", "out"])]
+    #[arg(long, value_name = "DIR", conflicts_with_all = ["env", "algo", "set", "options", "reward", "env_config", "init_from", "out"])]
     pub resume: Option<PathBuf>,
     /// Replace an existing run directory.
     #[arg(long)]
@@ -60,18 +56,6 @@ pub struct TrainArgs {
     /// more cores.
     #[arg(long, value_name = "1|2", value_parser = clap::value_parser!(u8).range(1..=2))]
     pub threads: Option<u8>,
-}
-
-/// Env config from `--option` and `--reward`.
-pub fn env_config(env: &str, options: &[String], reward: Option<&str>) -> Result<EnvConfig> {
-    let mut cfg = super::apply_options(EnvConfig::new(env), options)?;
-    if let Some(r) = reward {
-        for (term, value) in parse_overrides(r)? {
-            let key = reward_weight_option(env, &term)?;
-            cfg = cfg.with_overrides(&[(key.to_string(), value)])?;
-        }
-    }
-    Ok(cfg)
 }
 
 fn default_threads() -> usize {
@@ -110,7 +94,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             overrides.push(("warmup_steps".into(), "0".into()));
         }
         let cfg = build_config(env, algo, &overrides)?;
-        let env_cfg = env_config(env, &args.options, args.reward.as_deref())?;
+        let env_cfg = args.env_options.apply(EnvConfig::new(env))?;
         let out =
             args.out.clone().unwrap_or_else(|| PathBuf::from(format!("runs/{env}-{}-seed{}", algo.name(), args.seed)));
         if args.init_from.as_ref().is_some_and(|p| !p.exists()) {
