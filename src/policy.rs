@@ -175,6 +175,16 @@ impl Policy for AgentPolicy<'_> {
     fn act(&mut self, env: &dyn Env, observation: &[f64]) -> Result<Vec<f64>> {
         let obs: Vec<f32> = observation.iter().map(|&v| v as f32).collect();
         let normalised = self.agent.act(&obs)?;
-        Ok(crate::train::evaluate::to_env_action(env, &normalised))
+        Ok(to_env_action(env, &normalised))
     }
+}
+
+/// Maps a normalised action in [-1, 1] to the environment's bounds.
+pub fn to_env_action(env: &dyn Env, normalised: &[f32]) -> Vec<f64> {
+    let s = &env.spec().action_space;
+    normalised
+        .iter()
+        .zip(s.low.iter().zip(&s.high))
+        .map(|(&a, (&l, &h))| l + (a as f64 + 1.0) * 0.5 * (h - l))
+        .collect()
 }

@@ -13,7 +13,6 @@
 //! Files are written to a temporary name beside the target and renamed when complete.
 mod rollout;
 mod scene;
-mod training;
 
 use std::path::{Path, PathBuf};
 
@@ -21,7 +20,6 @@ use anyhow::{Context, Result};
 
 pub use rollout::RolloutRecorder;
 pub use scene::{body_entity, log_scene};
-pub use training::log_training_row;
 
 /// Where the application id shows in the viewer.
 pub const APPLICATION_ID: &str = "locobench";

@@ -4,6 +4,8 @@ use anyhow::Result;
 
 use crate::agents::Agent;
 use crate::envs::Env;
+use crate::policy::AgentPolicy;
+use crate::rollout::{run_episode, StepView};
 
 use super::seeds::eval_episode_seed;
 
@@ -28,18 +30,9 @@ impl Evaluation {
     }
 }
 
-/// Maps a normalised action in [-1, 1] to the environment's bounds.
-pub fn to_env_action(env: &dyn Env, normalised: &[f32]) -> Vec<f64> {
-    let s = &env.spec().action_space;
-    normalised
-        .iter()
-        .zip(s.low.iter().zip(&s.high))
-        .map(|(&a, (&l, &h))| l + (a as f64 + 1.0) * 0.5 * (h - l))
-        .collect()
-}
-
+/// Runs the protocol's episodes through `rollout::run_episode`, the path `eval`, recordings and
+/// reports take too.
 pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed: u64) -> Result<Evaluation> {
-    let _runtime = crate::runtime::Runtime::enter(1);
     let terms = env.spec().reward_terms.clone();
     let mut eval = Evaluation {
         returns: Vec::with_capacity(episodes),
@@ -47,26 +40,16 @@ pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed:
         term_means: terms.iter().map(|&t| (t, 0.0)).collect(),
         unstable_episodes: 0,
     };
+    let mut policy = AgentPolicy { agent, label: agent.algo().name().to_string() };
     for i in 0..episodes {
-        let (mut obs, _) = env.reset(Some(eval_episode_seed(run_seed, i as u64)))?;
-        let (mut ret, mut len) = (0.0, 0);
-        loop {
-            let obs32: Vec<f32> = obs.iter().map(|&v| v as f32).collect();
-            let action = to_env_action(env, &agent.act(&obs32)?);
-            let s = env.step(&action)?;
-            ret += s.reward;
-            len += 1;
-            for ((_, total), (_, v)) in eval.term_means.iter_mut().zip(&s.info.reward_terms) {
-                *total += v / episodes as f64;
-            }
-            if s.done() {
-                eval.unstable_episodes += s.info.unstable as usize;
-                break;
-            }
-            obs = s.observation;
+        let seed = eval_episode_seed(run_seed, i as u64);
+        let s = run_episode(env, &mut policy, i, Some(seed), &mut |_: &StepView| Ok(()))?;
+        for ((_, mean), (_, total)) in eval.term_means.iter_mut().zip(&s.term_totals) {
+            *mean += total / episodes as f64;
         }
-        eval.returns.push(ret);
-        eval.lengths.push(len);
+        eval.unstable_episodes += s.unstable as usize;
+        eval.returns.push(s.episode_return);
+        eval.lengths.push(s.length);
     }
     Ok(eval)
 }

@@ -1,0 +1,62 @@
+//! The training run's rerun recording: learning curves, and an evaluation rollout at chosen
+//! evaluations.
+use anyhow::Result;
+use rerun::RecordingStream;
+
+use crate::agents::Agent;
+use crate::envs::{make, Env, EnvConfig};
+use crate::policy::AgentPolicy;
+use crate::record::RolloutRecorder;
+
+use super::metrics::MetricsRow;
+use super::seeds;
+
+/// Logs every value a metrics row carries under `training/`.
+pub fn log_training_row(rec: &RecordingStream, row: &MetricsRow) -> Result<()> {
+    rec.reset_time();
+    rec.set_time_sequence("train_step", row.step as i64);
+    let values = [
+        ("training/episode_return", row.episode_return),
+        ("training/episode_length", row.episode_length.map(|l| l as f64)),
+        ("training/eval_mean", row.eval_mean),
+        ("training/eval_std", row.eval_std),
+        ("training/critic_loss", row.critic_loss),
+        ("training/actor_loss", row.actor_loss),
+        ("training/alpha", row.alpha),
+        ("training/steps_per_s", Some(row.steps_per_s)),
+    ];
+    for (path, value) in values {
+        if let Some(v) = value {
+            rec.log(path, &rerun::Scalars::single(v))?;
+        }
+    }
+    Ok(())
+}
+
+/// The training run's recording: curves, and the first evaluation episode at every evaluation
+/// (on an environment of its own, so the run's numbers do not depend on recording).
+pub(super) struct TrainingRecorder<'a> {
+    rollouts: RolloutRecorder<'a>,
+    env: Box<dyn Env>,
+    stream: &'a RecordingStream,
+}
+
+impl<'a> TrainingRecorder<'a> {
+    pub(super) fn new(stream: &'a RecordingStream, env: &EnvConfig) -> Result<TrainingRecorder<'a>> {
+        let env = make(env)?;
+        Ok(TrainingRecorder { rollouts: RolloutRecorder::new(stream, env.data().model())?, env, stream })
+    }
+
+    pub(super) fn curves(&self, row: &MetricsRow) -> Result<()> {
+        log_training_row(self.stream, row)
+    }
+
+    pub(super) fn evaluation_rollout(&mut self, agent: &dyn Agent, step: u64, run_seed: u64) -> Result<()> {
+        self.rollouts.set_train_step(Some(step));
+        let seed = seeds::eval_episode_seed(run_seed, 0);
+        let mut policy = AgentPolicy { agent, label: agent.algo().name().to_string() };
+        crate::rollout::run_episode(self.env.as_mut(), &mut policy, 0, Some(seed), &mut self.rollouts)?;
+        self.rollouts.set_train_step(None);
+        Ok(())
+    }
+}
