@@ -28,7 +28,7 @@ fn main() -> Result<()> {
         let (obs, act) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
         let per = ReplayBuffer::new(1, obs, act).bytes_per_transition();
         println!("| {name} | {obs} | {act} | {per} | {:.2} GiB |", gib(per as f64 * 1e6));
-        if *name == "humanoid" {
+        if name == "humanoid" {
             humanoid = (obs, act);
         }
     }

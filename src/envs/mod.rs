@@ -25,7 +25,9 @@ pub use half_cheetah::{HalfCheetah, HalfCheetahOptions};
 pub use humanoid::{Humanoid, HumanoidOptions};
 pub use inverted_pendulum::{InvertedPendulum, InvertedPendulumOptions};
 pub use minitaur::{Minitaur, MinitaurOptions};
-pub use registry::{env_names, make, parse_overrides, reward_weight_option, EnvConfig};
+pub use registry::{
+    env_names, lookup, make, model_xml, parse_overrides, reward_weight_option, EnvConfig, EnvEntry, ENVS,
+};
 
 use crate::mujoco::Data;
 
@@ -121,18 +123,6 @@ pub trait Env: Send {
     /// Overwrites positions and velocities mid-episode (Gymnasium's `set_state`), e.g. to start
     /// from a recorded state. Lengths are checked; the values are the caller's responsibility.
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError>;
-}
-
-/// The MJCF text an environment is built from.
-pub fn model_xml(env_name: &str) -> Option<&'static str> {
-    Some(match env_name {
-        "half-cheetah" => half_cheetah::MODEL_XML,
-        "ant" => ant::MODEL_XML,
-        "humanoid" => humanoid::MODEL_XML,
-        "inverted-pendulum" => inverted_pendulum::MODEL_XML,
-        "minitaur" => minitaur::MODEL_XML,
-        _ => return None,
-    })
 }
 
 /// Checks an action against the space and returns a clipped copy and the number clipped.

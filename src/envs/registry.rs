@@ -1,16 +1,103 @@
-//! Environment names → constructors, with typed options read from TOML.
+//! The environment registry: every environment is declared once, in [`ENVS`] (name, model,
+//! options type and constructor, reward weights), and every lookup by name goes through that
+//! table; an unknown name is an error everywhere.
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use super::{
-    Ant, AntOptions, Env, EnvError, HalfCheetah, HalfCheetahOptions, Humanoid, HumanoidOptions, InvertedPendulum,
-    InvertedPendulumOptions, Minitaur, MinitaurOptions,
+    ant, half_cheetah, humanoid, inverted_pendulum, minitaur, Ant, AntOptions, Env, EnvError, HalfCheetah,
+    HalfCheetahOptions, Humanoid, HumanoidOptions, InvertedPendulum, InvertedPendulumOptions, Minitaur,
+    MinitaurOptions,
 };
 
-const NAMES: [&str; 5] = ["half-cheetah", "ant", "humanoid", "inverted-pendulum", "minitaur"];
+/// An environment type the registry can build from its options.
+pub trait Registered: Env + Sized + 'static {
+    /// Its options, every field defaulted (`#[serde(default, deny_unknown_fields)]`).
+    type Options: DeserializeOwned + Serialize;
+    fn build(options: Self::Options) -> Result<Self, EnvError>;
+}
 
-pub fn env_names() -> &'static [&'static str] {
-    &NAMES
+macro_rules! registered {
+    ($($env:ty => $options:ty),* $(,)?) => {$(
+        impl Registered for $env {
+            type Options = $options;
+            fn build(options: $options) -> Result<Self, EnvError> {
+                <$env>::new(options)
+            }
+        }
+    )*};
+}
+registered!(HalfCheetah => HalfCheetahOptions, Ant => AntOptions, Humanoid => HumanoidOptions,
+    InvertedPendulum => InvertedPendulumOptions, Minitaur => MinitaurOptions);
+
+/// One environment's declaration.
+pub struct EnvEntry {
+    pub name: &'static str,
+    /// The MJCF model it loads.
+    pub model_xml: &'static str,
+    /// Reward term names (as `--reward` takes them) and the option that weighs each.
+    pub reward_weights: &'static [(&'static str, &'static str)],
+    build: fn(&EnvConfig) -> Result<Box<dyn Env>, EnvError>,
+    resolve: fn(&EnvConfig) -> Result<toml::Table, EnvError>,
+}
+
+const fn entry<E: Registered>(
+    name: &'static str,
+    model_xml: &'static str,
+    reward_weights: &'static [(&'static str, &'static str)],
+) -> EnvEntry {
+    EnvEntry { name, model_xml, reward_weights, build: build::<E>, resolve: resolve::<E> }
+}
+
+fn build<E: Registered>(c: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
+    Ok(Box::new(E::build(typed_options(c)?)?))
+}
+
+/// Every option with its effective value, after building the env once to validate them.
+fn resolve<E: Registered>(c: &EnvConfig) -> Result<toml::Table, EnvError> {
+    E::build(typed_options(c)?)?;
+    let typed: E::Options = typed_options(c)?;
+    Ok(toml::Table::try_from(&typed).expect("options serialise to a table"))
+}
+
+const MUJOCO_REWARD: &[(&str, &str)] =
+    &[("forward", "forward_reward_weight"), ("ctrl", "ctrl_cost_weight"), ("ctrl_cost", "ctrl_cost_weight")];
+const LEGGED_REWARD: &[(&str, &str)] = &[
+    ("forward", "forward_reward_weight"),
+    ("ctrl", "ctrl_cost_weight"),
+    ("ctrl_cost", "ctrl_cost_weight"),
+    ("contact", "contact_cost_weight"),
+    ("contact_cost", "contact_cost_weight"),
+    ("healthy", "healthy_reward"),
+];
+
+/// The registry. Adding an environment is one line here (plus its module and model file).
+pub const ENVS: &[EnvEntry] = &[
+    entry::<HalfCheetah>("half-cheetah", half_cheetah::MODEL_XML, MUJOCO_REWARD),
+    entry::<Ant>("ant", ant::MODEL_XML, LEGGED_REWARD),
+    entry::<Humanoid>("humanoid", humanoid::MODEL_XML, LEGGED_REWARD),
+    entry::<InvertedPendulum>("inverted-pendulum", inverted_pendulum::MODEL_XML, &[]),
+    entry::<Minitaur>(
+        "minitaur",
+        minitaur::MODEL_XML,
+        &[
+            ("distance", "distance_weight"),
+            ("energy", "energy_weight"),
+            ("drift", "drift_weight"),
+            ("shake", "shake_weight"),
+        ],
+    ),
+];
+
+/// The declaration of `name`, or an error listing the known names.
+pub fn lookup(name: &str) -> Result<&'static EnvEntry, EnvError> {
+    ENVS.iter()
+        .find(|e| e.name == name)
+        .ok_or_else(|| EnvError::UnknownEnv { name: name.to_string(), known: env_names().join(", ") })
+}
+
+pub fn env_names() -> Vec<&'static str> {
+    ENVS.iter().map(|e| e.name).collect()
 }
 
 /// An environment name plus its options as a TOML table (keys not given take their defaults).
@@ -45,19 +132,7 @@ impl EnvConfig {
 
     /// Every option with its effective value (defaults filled in), validated.
     pub fn resolved_options(&self) -> Result<toml::Table, EnvError> {
-        fn resolve<T: DeserializeOwned + Serialize>(c: &EnvConfig) -> Result<toml::Table, EnvError> {
-            let typed: T = typed_options(c)?;
-            Ok(toml::Table::try_from(&typed).expect("options serialise to a table"))
-        }
-        check_name(&self.name)?;
-        make(self)?; // validates
-        match self.name.as_str() {
-            "half-cheetah" => resolve::<HalfCheetahOptions>(self),
-            "ant" => resolve::<AntOptions>(self),
-            "humanoid" => resolve::<HumanoidOptions>(self),
-            "inverted-pendulum" => resolve::<InvertedPendulumOptions>(self),
-            _ => resolve::<MinitaurOptions>(self),
-        }
+        (lookup(&self.name)?.resolve)(self)
     }
 }
 
@@ -102,35 +177,18 @@ pub fn parse_overrides(text: &str) -> Result<Vec<(String, String)>, EnvError> {
 /// The option that weighs a reward term: `drift` -> `drift_weight` on Minitaur, `forward` ->
 /// `forward_reward_weight`, `ctrl` -> `ctrl_cost_weight`, ... on the others.
 pub fn reward_weight_option(env: &str, term: &str) -> Result<&'static str, EnvError> {
-    check_name(env)?;
-    let key = match (env, term) {
-        ("minitaur", "distance") => "distance_weight",
-        ("minitaur", "energy") => "energy_weight",
-        ("minitaur", "drift") => "drift_weight",
-        ("minitaur", "shake") => "shake_weight",
-        ("minitaur", _) => "",
-        ("inverted-pendulum", _) => "",
-        (_, "forward") => "forward_reward_weight",
-        (_, "ctrl" | "ctrl_cost") => "ctrl_cost_weight",
-        ("ant" | "humanoid", "contact" | "contact_cost") => "contact_cost_weight",
-        ("ant" | "humanoid", "healthy") => "healthy_reward",
-        _ => "",
-    };
-    if key.is_empty() {
-        return Err(EnvError::InvalidOption {
-            env: env.to_string(),
-            message: format!("'{term}' is not a weighted reward term of {env}"),
-        });
-    }
-    Ok(key)
-}
-
-fn check_name(name: &str) -> Result<(), EnvError> {
-    if NAMES.contains(&name) {
-        Ok(())
-    } else {
-        Err(EnvError::UnknownEnv { name: name.to_string(), known: NAMES.join(", ") })
-    }
+    let entry = lookup(env)?;
+    entry.reward_weights.iter().find(|(t, _)| *t == term).map(|(_, key)| *key).ok_or_else(|| EnvError::InvalidOption {
+        env: env.to_string(),
+        message: format!(
+            "'{term}' is not a weighted reward term of {env} (its terms: {})",
+            if entry.reward_weights.is_empty() {
+                "none".to_string()
+            } else {
+                entry.reward_weights.iter().map(|(t, _)| *t).collect::<Vec<_>>().join(", ")
+            }
+        ),
+    })
 }
 
 fn typed_options<T: DeserializeOwned>(c: &EnvConfig) -> Result<T, EnvError> {
@@ -154,12 +212,40 @@ fn typed_options<T: DeserializeOwned>(c: &EnvConfig) -> Result<T, EnvError> {
 
 /// Builds the environment a config names.
 pub fn make(config: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
-    check_name(&config.name)?;
-    Ok(match config.name.as_str() {
-        "half-cheetah" => Box::new(HalfCheetah::new(typed_options(config)?)?),
-        "ant" => Box::new(Ant::new(typed_options(config)?)?),
-        "humanoid" => Box::new(Humanoid::new(typed_options(config)?)?),
-        "inverted-pendulum" => Box::new(InvertedPendulum::new(typed_options(config)?)?),
-        _ => Box::new(Minitaur::new(typed_options(config)?)?),
-    })
+    (lookup(&config.name)?.build)(config)
+}
+
+/// The MJCF model an environment loads.
+pub fn model_xml(env_name: &str) -> Result<&'static str, EnvError> {
+    Ok(lookup(env_name)?.model_xml)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every declaration is whole: the name is unique, the env builds with its defaults, each
+    /// reward weight names an option the env really has, and the model is the env's own.
+    #[test]
+    fn every_entry_is_consistent() {
+        let names = env_names();
+        for (i, e) in ENVS.iter().enumerate() {
+            assert!(!names[..i].contains(&e.name), "{} declared twice", e.name);
+            let config = EnvConfig::new(e.name);
+            let env = make(&config).unwrap();
+            assert_eq!(env.spec().name, e.name);
+            let options = config.resolved_options().unwrap();
+            for (term, key) in e.reward_weights {
+                assert!(options.contains_key(*key), "{}: reward term {term} names missing option {key}", e.name);
+                assert_eq!(reward_weight_option(e.name, term).unwrap(), *key);
+            }
+            assert_eq!(model_xml(e.name).unwrap(), e.model_xml);
+        }
+        for bad in [make(&EnvConfig::new("hopper")).err(), model_xml("hopper").err(), lookup("").err()] {
+            assert!(matches!(bad, Some(EnvError::UnknownEnv { .. })));
+        }
+        assert!(EnvConfig::new("walker").resolved_options().is_err());
+        assert!(reward_weight_option("inverted-pendulum", "forward").is_err());
+        assert!(reward_weight_option("minitaur", "forward").is_err());
+    }
 }
