@@ -1,9 +1,8 @@
 use anyhow::Result;
 use locobench::controller::baseline::{baseline_controller_for, baseline_env, parse_gait, RAMP_TIME};
 use locobench::controller::command::{Command, SpeedProfile};
-use locobench::controller::measure::{mean_cost_of_transport, measure};
+use locobench::controller::measure::{measure, summary_cells, SUMMARY_COLUMNS};
 use locobench::envs::make;
-use locobench::report::curves::mean_std;
 
 #[derive(clap::Args, Debug)]
 pub struct BaselineArgs {
@@ -67,22 +66,13 @@ pub fn run(args: BaselineArgs) -> Result<()> {
     let gait = args.gait.as_deref().map(parse_gait).transpose()?;
     let cfg = args.env_options.apply(baseline_env(&args.env)?)?;
     let mut env = make(&cfg)?;
-    println!(
-        "{:>6} {:>17} {:>8} {:>9} {:>8} {:>8} {:>9} {:>7} {:>8} {:>8} {:>6} {:>7} {:>8}",
-        "speed",
-        "return",
-        "v mean",
-        "v error",
-        "yaw r/s",
-        "side m",
-        "energy J",
-        "CoT",
-        "drift m",
-        "shake m",
-        "falls",
-        "length",
-        "QP fails"
-    );
+    let widths = [17, 9, 15, 14, 7, 9, 7, 8, 8, 6, 6];
+    let line = |first: String, cells: &[String], last: String| {
+        let middle: Vec<String> = cells.iter().zip(widths).map(|(c, w)| format!("{c:>w$}")).collect();
+        println!("{first:>6} {} {last:>8}", middle.join(" "));
+    };
+    let header: Vec<String> = SUMMARY_COLUMNS.iter().map(|c| c.to_string()).collect();
+    line("speed".into(), &header, "QP fails".into());
     if let Some(p) = &args.command.profile {
         println!("speed profile {p} (the speed column shows where it ends)");
     }
@@ -91,29 +81,8 @@ pub fn run(args: BaselineArgs) -> Result<()> {
         let profile = command.speed.clone();
         let mut controller = baseline_controller_for(&args.env, command, gait)?;
         let eps = measure(env.as_mut(), controller.as_mut(), args.episodes, args.seed, &profile)?;
-        let col = |f: fn(&locobench::controller::measure::GaitEpisode) -> f64| {
-            mean_std(&eps.iter().map(f).collect::<Vec<_>>())
-        };
-        let (ret, ret_std) = col(|e| e.episode_return);
-        let cot = mean_cost_of_transport(&eps);
-        println!(
-            "{:>6.2} {:>9.2} ± {:>5.2} {:>8.3} {:>9.3} {:>8.3} {:>8.3} {:>9.1} {:>7.2} {:>8.3} {:>8.3} {:>3}/{:<2} {:>7.1} {:>8}",
-            speed,
-            ret,
-            ret_std,
-            col(|e| e.mean_speed).0,
-            col(|e| e.speed_error).0,
-            col(|e| e.yaw_rate).0,
-            col(|e| e.sideways).0,
-            col(|e| e.energy).0,
-            cot,
-            col(|e| e.drift).0,
-            col(|e| e.shake).0,
-            eps.iter().filter(|e| e.fell).count(),
-            eps.len(),
-            col(|e| e.length as f64).0,
-            eps.iter().map(|e| e.qp_failures).sum::<f64>(),
-        );
+        let qp_failures = eps.iter().map(|e| e.qp_failures).sum::<f64>();
+        line(format!("{speed:.2}"), &summary_cells(&eps, |v| format!("{v:.2}")), qp_failures.to_string());
         if args.limits {
             let names: Vec<&str> =
                 eps.first().map(|e| e.diagnostics.iter().map(|(n, _)| *n).collect()).unwrap_or_default();

@@ -130,3 +130,42 @@ pub fn measure(
     }
     Ok(out)
 }
+
+/// The columns both `locobench baseline` and the report's baseline-vs-RL tables show for a set of
+/// measured episodes (means over the episodes), so the two cannot drift apart.
+pub const SUMMARY_COLUMNS: [&str; 11] = [
+    "return",
+    "speed m/s",
+    "speed error m/s",
+    "yaw rate rad/s",
+    "side m",
+    "energy J",
+    "CoT",
+    "drift m",
+    "shake m",
+    "falls",
+    "length",
+];
+
+/// `SUMMARY_COLUMNS` for `episodes`, as text: the return as mean ± std, `fmt_return` formats
+/// returns (their scale spans 0.01 to 10,000).
+pub fn summary_cells(episodes: &[GaitEpisode], fmt_return: impl Fn(f64) -> String) -> Vec<String> {
+    let n = episodes.len().max(1) as f64;
+    let mean = |f: fn(&GaitEpisode) -> f64| episodes.iter().map(f).sum::<f64>() / n;
+    let ret = mean(|e| e.episode_return);
+    let ret_std = (episodes.iter().map(|e| (e.episode_return - ret).powi(2)).sum::<f64>() / n).sqrt();
+    let fixed = |v: f64, digits: usize| if v.is_finite() { format!("{v:.digits$}") } else { "–".to_string() };
+    vec![
+        format!("{} ± {}", fmt_return(ret), fmt_return(ret_std)),
+        fixed(mean(|e| e.mean_speed), 3),
+        fixed(mean(|e| e.speed_error), 3),
+        fixed(mean(|e| e.yaw_rate), 3),
+        fixed(mean(|e| e.sideways), 3),
+        fixed(mean(|e| e.energy), 1),
+        fixed(mean_cost_of_transport(episodes), 2),
+        fixed(mean(|e| e.drift), 3),
+        fixed(mean(|e| e.shake), 3),
+        format!("{}/{}", episodes.iter().filter(|e| e.fell).count(), episodes.len()),
+        fixed(mean(|e| e.length as f64), 0),
+    ]
+}

@@ -3,11 +3,10 @@
 //! of transport, drift, shake, falls, length).
 use anyhow::Result;
 
-use super::curves::mean_std;
 use super::runs::{is_reward_weight, Run};
 use crate::controller::baseline::{baseline_controller, baseline_env_like, RAMP_TIME};
 use crate::controller::command::SpeedProfile;
-use crate::controller::measure::{mean_cost_of_transport, measure, GaitEpisode};
+use crate::controller::measure::{measure, GaitEpisode};
 use crate::envs::{make, EnvConfig};
 use crate::policy::AgentPolicy;
 use crate::train::{has_policy, load_policy};
@@ -40,18 +39,6 @@ pub struct ComparisonRow {
     pub episodes: Vec<GaitEpisode>,
     /// The speed set-point, for the baseline only (RL has none).
     pub set_point: Option<f64>,
-}
-
-impl ComparisonRow {
-    pub fn stat(&self, f: impl Fn(&GaitEpisode) -> f64) -> (f64, f64) {
-        mean_std(&self.episodes.iter().map(f).collect::<Vec<_>>())
-    }
-    pub fn falls(&self) -> usize {
-        self.episodes.iter().filter(|e| e.fell).count()
-    }
-    pub fn cost_of_transport(&self) -> f64 {
-        mean_cost_of_transport(&self.episodes)
-    }
 }
 
 fn with_weights(mut cfg: EnvConfig, weights: &[(String, f64)]) -> EnvConfig {

@@ -13,6 +13,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 
+use crate::controller::measure::{summary_cells, SUMMARY_COLUMNS};
 use crate::io::write_bytes_atomic;
 use compare::{compare, ComparisonRow};
 use curves::{eval_curve, mean_std, rolling, EvalCurve};
@@ -221,36 +222,14 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
                  action mode.",
                 opts.compare_episodes
             ));
+            let header: Vec<&str> = ["reward", "policy"].into_iter().chain(SUMMARY_COLUMNS).collect();
             doc.table(
-                &[
-                    "reward",
-                    "policy",
-                    "return",
-                    "speed m/s",
-                    "speed error m/s",
-                    "energy J",
-                    "CoT",
-                    "drift m",
-                    "shake m",
-                    "falls",
-                    "length",
-                ],
+                &header,
                 rows.iter()
                     .map(|row| {
-                        let (ret, ret_sd) = row.stat(|e| e.episode_return);
-                        vec![
-                            row.reward.clone(),
-                            row.policy.clone(),
-                            format!("{} ± {}", fmt_return(ret), fmt_return(ret_sd)),
-                            fmt(row.stat(|e| e.mean_speed).0, 3),
-                            fmt(row.stat(|e| e.speed_error).0, 3),
-                            fmt(row.stat(|e| e.energy).0, 1),
-                            fmt(row.cost_of_transport(), 2),
-                            fmt(row.stat(|e| e.drift).0, 3),
-                            fmt(row.stat(|e| e.shake).0, 3),
-                            format!("{}/{}", row.falls(), row.episodes.len()),
-                            fmt(row.stat(|e| e.length as f64).0, 0),
-                        ]
+                        let mut cells = vec![row.reward.clone(), row.policy.clone()];
+                        cells.extend(summary_cells(&row.episodes, fmt_return));
+                        cells
                     })
                     .collect(),
             );
