@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::options::Check;
-use super::simulation::{locomotion_metrics, reset_info, EnvCore, Simulation, VelocityNoise};
+use super::simulation::{locomotion_metrics, reset_info, EnvCore, Simulation, StepOutcome, VelocityNoise};
 use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
@@ -123,8 +123,8 @@ impl Env for Ant {
         let before = self.torso_xy();
         let z_before = self.core.sim.data.qpos()[2];
         let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
-            Ok(w) => w,
-            Err(unstable) => return Ok(unstable),
+            StepOutcome::Stepped(warnings) => warnings,
+            StepOutcome::BlewUp(step) => return Ok(step),
         };
         self.core.sim.data.rne_post_constraint()?;
         let after = self.torso_xy();

@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::options::Check;
-use super::simulation::{EnvCore, Simulation, VelocityNoise};
+use super::simulation::{EnvCore, Simulation, StepOutcome, VelocityNoise};
 use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
@@ -85,8 +85,8 @@ impl Env for HalfCheetah {
         let start = self.core.begin_step(action)?;
         let x_before = self.core.sim.data.qpos()[0];
         let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
-            Ok(w) => w,
-            Err(unstable) => return Ok(unstable),
+            StepOutcome::Stepped(warnings) => warnings,
+            StepOutcome::BlewUp(step) => return Ok(step),
         };
         let x_after = self.core.sim.data.qpos()[0];
         let x_velocity = (x_after - x_before) / self.core.spec.dt;

@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::options::Check;
-use super::simulation::{EnvCore, Simulation, VelocityNoise};
+use super::simulation::{EnvCore, Simulation, StepOutcome, VelocityNoise};
 use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
@@ -77,8 +77,8 @@ impl Env for InvertedPendulum {
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
         let start = self.core.begin_step(action)?;
         let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
-            Ok(w) => w,
-            Err(unstable) => return Ok(unstable),
+            StepOutcome::Stepped(warnings) => warnings,
+            StepOutcome::BlewUp(step) => return Ok(step),
         };
         let observation = self.observation();
         let terminated = !observation.iter().all(|v| v.is_finite()) || observation[1].abs() > self.opts.max_pole_angle;

@@ -150,6 +150,14 @@ pub(crate) struct EnvCore {
     pub last_obs: Vec<f64>,
 }
 
+/// How a control step's physics went.
+pub(crate) enum StepOutcome {
+    /// It ran; MuJoCo's warnings, if any.
+    Stepped(Vec<String>),
+    /// It blew up: the step to return as it is (the episode is over).
+    BlewUp(Step),
+}
+
 /// What `EnvCore::begin_step` hands back: the clipped action and how many entries were clipped.
 pub(crate) struct StepStart {
     pub action: Vec<f64>,
@@ -182,15 +190,14 @@ impl EnvCore {
         Ok(StepStart { action, clipped })
     }
 
-    /// Runs the physics for one control step. `Err(step)` carries the step to return when the
-    /// physics blew up (the episode is then over).
-    pub fn advance(&mut self, start: &StepStart, frames: usize) -> Result<Result<Vec<String>, Step>, EnvError> {
+    /// Runs the physics for one control step.
+    pub fn advance(&mut self, start: &StepStart, frames: usize) -> Result<StepOutcome, EnvError> {
         let adv = self.sim.advance(&start.action, frames)?;
         if adv.unstable {
             self.clock.finish_if(true);
-            return Ok(Err(unstable_step(&self.last_obs, &self.spec, start.clipped, adv.warnings)));
+            return Ok(StepOutcome::BlewUp(unstable_step(&self.last_obs, &self.spec, start.clipped, adv.warnings)));
         }
-        Ok(Ok(adv.warnings))
+        Ok(StepOutcome::Stepped(adv.warnings))
     }
 
     /// Counts the step, applies the time limit and assembles the result.
