@@ -13,19 +13,13 @@ pub enum Algo {
 
 impl Algo {
     pub fn parse(name: &str) -> anyhow::Result<Algo> {
-        match name {
-            "td3" => Ok(Algo::Td3),
-            "sac" => Ok(Algo::Sac),
-            "ddpg" => Ok(Algo::Ddpg),
-            other => anyhow::bail!("unknown algorithm '{other}'; known algorithms: td3, sac, ddpg"),
-        }
+        super::registry::ALGOS.iter().find(|e| e.name == name).map(|e| e.algo).ok_or_else(|| {
+            let known: Vec<&str> = super::registry::ALGOS.iter().map(|e| e.name).collect();
+            anyhow::anyhow!("unknown algorithm '{name}'; known algorithms: {}", known.join(", "))
+        })
     }
     pub fn name(self) -> &'static str {
-        match self {
-            Algo::Td3 => "td3",
-            Algo::Sac => "sac",
-            Algo::Ddpg => "ddpg",
-        }
+        super::registry::entry(self).name
     }
 }
 
@@ -108,10 +102,15 @@ impl TrainConfig {
         toml::Value::Table(merged).try_into().map_err(|e: toml::de::Error| anyhow::anyhow!("{}", e.message()))
     }
 
-    /// The defaults each algorithm was published with (REFERENCE §5).
+    /// The defaults each algorithm was published with (REFERENCE §5), from its registry entry.
     pub fn defaults(algo: Algo) -> TrainConfig {
-        let td3 = TrainConfig {
-            algo,
+        (super::registry::entry(algo).defaults)()
+    }
+
+    /// TD3's published settings (Fujimoto et al. 2018).
+    pub fn td3_defaults() -> TrainConfig {
+        TrainConfig {
+            algo: Algo::Td3,
             total_steps: 1_000_000,
             warmup_steps: 10_000,
             learning_starts: 10_000,
@@ -144,21 +143,31 @@ impl TrainConfig {
             alpha_lr: 3e-4,
             target_entropy: None,
             value_lr: 3e-4,
-        };
-        match algo {
-            Algo::Td3 => td3,
-            // "Our DDPG" of the TD3 paper: TD3's settings without its three changes.
-            Algo::Ddpg => {
-                TrainConfig { policy_noise: 0.0, noise_clip: 0.0, policy_delay: 1, twin_critics: false, ..td3 }
-            }
-            Algo::Sac => TrainConfig {
-                batch_size: 256,
-                hidden: vec![256, 256],
-                actor_lr: 3e-4,
-                critic_lr: 3e-4,
-                policy_delay: 1,
-                ..td3
-            },
+        }
+    }
+
+    /// "Our DDPG" of the TD3 paper: TD3's settings without its three changes.
+    pub fn ddpg_defaults() -> TrainConfig {
+        TrainConfig {
+            algo: Algo::Ddpg,
+            policy_noise: 0.0,
+            noise_clip: 0.0,
+            policy_delay: 1,
+            twin_critics: false,
+            ..TrainConfig::td3_defaults()
+        }
+    }
+
+    /// SAC v2's (Haarnoja et al. 2018b): 256-256, Adam 3e-4, batch 256.
+    pub fn sac_defaults() -> TrainConfig {
+        TrainConfig {
+            algo: Algo::Sac,
+            batch_size: 256,
+            hidden: vec![256, 256],
+            actor_lr: 3e-4,
+            critic_lr: 3e-4,
+            policy_delay: 1,
+            ..TrainConfig::td3_defaults()
         }
     }
 

@@ -15,6 +15,7 @@ pub mod nets;
 pub mod noise;
 pub mod normalize;
 pub mod optim;
+pub mod registry;
 mod sac;
 pub mod second_core;
 
@@ -65,10 +66,7 @@ pub trait Agent: Send {
 
 /// Builds the agent a config asks for, initialised from `rng`.
 pub fn make_agent(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
-    let agent: Box<dyn Agent> = match cfg.algo {
-        Algo::Td3 | Algo::Ddpg => Box::new(DeterministicAgent::new(cfg, obs_dim, act_dim, rng)?),
-        Algo::Sac => Box::new(SacAgent::new(cfg, obs_dim, act_dim, rng)?),
-    };
+    let agent = (registry::entry(cfg.algo).build)(cfg, obs_dim, act_dim, rng)?;
     Ok(if cfg.normalize_observations { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
 }
 

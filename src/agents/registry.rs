@@ -1,0 +1,58 @@
+//! The algorithm registry: each algorithm is declared once, in [`ALGOS`] (name, published
+//! defaults, constructor); parsing names, defaults and `make_agent` all go through it.
+use candle_core::Result;
+use rand_chacha::ChaCha8Rng;
+
+use super::{Agent, Algo, DeterministicAgent, SacAgent, TrainConfig};
+
+pub struct AlgoEntry {
+    pub algo: Algo,
+    /// The name `--algo` and config files use.
+    pub name: &'static str,
+    /// The settings it was published with.
+    pub defaults: fn() -> TrainConfig,
+    /// Builds the agent for observation and action sizes, initialised from the RNG.
+    pub build: fn(&TrainConfig, usize, usize, &mut ChaCha8Rng) -> Result<Box<dyn Agent>>,
+}
+
+pub const ALGOS: &[AlgoEntry] = &[
+    AlgoEntry { algo: Algo::Td3, name: "td3", defaults: TrainConfig::td3_defaults, build: deterministic },
+    AlgoEntry { algo: Algo::Sac, name: "sac", defaults: TrainConfig::sac_defaults, build: sac },
+    AlgoEntry { algo: Algo::Ddpg, name: "ddpg", defaults: TrainConfig::ddpg_defaults, build: deterministic },
+];
+
+/// The entry of an algorithm (every `Algo` has one; tested).
+pub fn entry(algo: Algo) -> &'static AlgoEntry {
+    ALGOS.iter().find(|e| e.algo == algo).expect("every Algo is registered")
+}
+
+fn deterministic(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
+    Ok(Box::new(DeterministicAgent::new(cfg, obs, act, rng)?))
+}
+
+fn sac(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
+    Ok(Box::new(SacAgent::new(cfg, obs, act, rng)?))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_algorithm_is_declared_once_and_round_trips() {
+        for (i, e) in ALGOS.iter().enumerate() {
+            assert!(ALGOS[..i].iter().all(|o| o.name != e.name && o.algo != e.algo), "{} twice", e.name);
+            assert_eq!(Algo::parse(e.name).unwrap(), e.algo);
+            assert_eq!(e.algo.name(), e.name);
+            assert_eq!((e.defaults)().algo, e.algo);
+            // The serialised name is the registry's.
+            let table = toml::Table::try_from(&(e.defaults)()).unwrap();
+            assert_eq!(table["algo"].as_str(), Some(e.name));
+        }
+        for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg] {
+            entry(algo);
+        }
+        let err = Algo::parse("ppo").unwrap_err().to_string();
+        assert!(err.contains("ppo") && err.contains("td3, sac, ddpg"), "{err}");
+    }
+}
