@@ -10,7 +10,7 @@
 use anyhow::{bail, Result};
 use nalgebra::{Matrix3, Rotation3, Unit, Vector3};
 
-use super::command::{integrate_speed_error, wrap_angle, Command};
+use super::command::{integrate_speed_error, wrap_angle, Command, HeadingFrame};
 use super::force_qp::{Dimension, ForceQp};
 use super::gait::{GaitKind, GaitScheduler, LEGS};
 use super::raibert_foothold;
@@ -163,14 +163,12 @@ impl AntController {
             / total_mass;
         let g = -m.gravity()[2];
         // Heading frame (yaw only): speeds and the wrench are set in it.
-        let yaw = r[(1, 0)].atan2(r[(0, 0)]);
+        let frame = HeadingFrame::new(&r, vel, omega);
+        let (yaw, heading, body) = (frame.yaw, frame.heading, frame.body);
+        let (local_vel, local_omega) = (frame.velocity, frame.angular_velocity);
         if self.time == 0.0 {
             self.heading_goal = yaw;
         }
-        let heading = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw);
-        let body = heading.inverse() * r;
-        let local_vel = heading.inverse() * vel;
-        let local_omega = heading.inverse() * omega;
         let v_des = p.command.speed.at(self.time);
         let yaw_rate_des = p.command.yaw_rate;
         // Roll and pitch error as a rotation vector (small-angle: the skew part of the body

@@ -142,3 +142,37 @@ mod tests {
         assert!((wrap_angle(0.3) - 0.3).abs() < 1e-12);
     }
 }
+
+/// A floating base seen in its heading frame (yaw removed): what both controllers set their
+/// speeds, wrenches and footholds in, so the same laws hold whichever way the robot faces.
+pub struct HeadingFrame {
+    /// Yaw of the base (rad).
+    pub yaw: f64,
+    /// Rotation from the heading frame to the world.
+    pub heading: nalgebra::Rotation3<f64>,
+    /// The base's attitude with yaw removed (pitch and roll only).
+    pub body: nalgebra::Matrix3<f64>,
+    /// Linear and angular velocity in the heading frame.
+    pub velocity: nalgebra::Vector3<f64>,
+    pub angular_velocity: nalgebra::Vector3<f64>,
+}
+
+impl HeadingFrame {
+    /// From the base's rotation matrix and its world-frame velocities.
+    pub fn new(
+        rotation: &nalgebra::Matrix3<f64>,
+        velocity: nalgebra::Vector3<f64>,
+        angular_velocity: nalgebra::Vector3<f64>,
+    ) -> HeadingFrame {
+        let yaw = rotation[(1, 0)].atan2(rotation[(0, 0)]);
+        let heading = nalgebra::Rotation3::from_axis_angle(&nalgebra::Vector3::z_axis(), yaw);
+        let to_heading = heading.inverse();
+        HeadingFrame {
+            yaw,
+            heading,
+            body: to_heading * rotation,
+            velocity: to_heading * velocity,
+            angular_velocity: to_heading * angular_velocity,
+        }
+    }
+}

@@ -15,9 +15,9 @@
 //! hip, reached along a raised arc, tracked in leg space (inverse kinematics + joint PD).
 //! It drives the environment in its torque action mode, so it is scored by the same reward.
 use anyhow::{bail, Context, Result};
-use nalgebra::{Matrix3, Rotation3, Vector3};
+use nalgebra::{Matrix3, Vector3};
 
-use super::command::{integrate_speed_error, wrap_angle, Command};
+use super::command::{integrate_speed_error, wrap_angle, Command, HeadingFrame};
 use super::force_qp::{Dimension, ForceQp};
 use super::fourbar;
 use super::gait::{gait_telemetry, GaitKind, GaitScheduler, LEGS, LEG_NAMES};
@@ -188,14 +188,12 @@ impl MinitaurController {
         let omega = r * Vector3::new(v[3], v[4], v[5]);
         // Heading frame: yaw only. Speeds, footholds and the force QP live in it, so the same
         // laws hold whichever way the robot faces.
-        let yaw = r[(1, 0)].atan2(r[(0, 0)]);
-        let heading = Rotation3::from_axis_angle(&Vector3::z_axis(), yaw);
+        let frame = HeadingFrame::new(&r, vel, omega);
+        let (yaw, heading, body) = (frame.yaw, frame.heading, frame.body);
         let to_heading = heading.inverse();
-        let body = to_heading * r;
         let pitch = (-body[(2, 0)]).atan2(body[(0, 0)]);
         let roll = body[(2, 1)].atan2(body[(2, 2)]);
-        let local_vel = to_heading * vel;
-        let local_omega = to_heading * omega;
+        let (local_vel, local_omega) = (frame.velocity, frame.angular_velocity);
         let masses = m.body_mass();
         let total_mass: f64 = masses.iter().sum();
         let com = masses.iter().enumerate().fold(Vector3::zeros(), |acc, (b, mass)| {
