@@ -43,6 +43,14 @@ impl NormalizedAgent {
     fn stats(&self) -> Result<(Vec<f32>, Vec<f32>)> {
         Ok((self.mean.as_tensor().to_vec1::<f32>()?, self.inv_std.as_tensor().to_vec1::<f32>()?))
     }
+
+    /// One observation as the inner agent sees it.
+    fn normalized(&self, obs: &[f32]) -> Result<Vec<f32>> {
+        let (mean, inv_std) = self.stats()?;
+        let mut x = obs.to_vec();
+        normalize_rows(&mut x, &mean, &inv_std);
+        Ok(x)
+    }
 }
 
 /// `(x - mean) * inv_std`, clipped, in place over rows of `mean.len()` values.
@@ -81,16 +89,11 @@ impl Agent for NormalizedAgent {
     }
 
     fn act(&self, obs: &[f32]) -> Result<Vec<f32>> {
-        let (mean, inv_std) = self.stats()?;
-        let mut x = obs.to_vec();
-        normalize_rows(&mut x, &mean, &inv_std);
-        self.inner.act(&x)
+        self.inner.act(&self.normalized(obs)?)
     }
 
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
-        let (mean, inv_std) = self.stats()?;
-        let mut x = obs.to_vec();
-        normalize_rows(&mut x, &mean, &inv_std);
+        let x = self.normalized(obs)?;
         self.inner.explore(&x, rng)
     }
 

@@ -57,15 +57,6 @@ impl SpeedProfile {
     pub fn final_speed(&self) -> f64 {
         self.knots[self.knots.len() - 1].1
     }
-
-    /// The largest |speed| the profile asks for.
-    pub fn peak_speed(&self) -> f64 {
-        self.knots.iter().map(|k| k.1.abs()).fold(0.0, f64::max)
-    }
-
-    pub fn describe(&self) -> String {
-        self.knots.iter().map(|(t, v)| format!("{t}:{v}")).collect::<Vec<_>>().join(",")
-    }
 }
 
 /// A speed profile plus a yaw-rate command.
@@ -110,39 +101,6 @@ pub fn wrap_angle(a: f64) -> f64 {
     }
 }
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn profile_interpolates_and_holds() {
-        let p = SpeedProfile::parse("0:0, 3:0.35, 6:-0.35").unwrap();
-        assert_eq!(p.at(0.0), 0.0);
-        assert!((p.at(1.5) - 0.175).abs() < 1e-12);
-        assert!((p.at(4.5) - 0.0).abs() < 1e-12);
-        assert_eq!(p.at(10.0), -0.35);
-        assert_eq!(p.peak_speed(), 0.35);
-        let r = SpeedProfile::ramp(1.0, 2.0);
-        assert_eq!((r.at(1.0), r.at(5.0)), (0.5, 1.0));
-        assert_eq!(SpeedProfile::ramp(0.4, 0.0).at(0.0), 0.4);
-    }
-
-    #[test]
-    fn bad_profiles_are_errors() {
-        for bad in ["", "1", "0:0,0:1", "2:0,1:1", "0:x", "0:nan", "-1:0"] {
-            assert!(SpeedProfile::parse(bad).is_err(), "{bad}");
-        }
-    }
-
-    #[test]
-    fn wrapping() {
-        use std::f64::consts::PI;
-        assert!((wrap_angle(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-12);
-        assert!((wrap_angle(-3.0 * PI / 2.0) - PI / 2.0).abs() < 1e-12);
-        assert!((wrap_angle(0.3) - 0.3).abs() < 1e-12);
-    }
-}
-
 /// A floating base seen in its heading frame (yaw removed): what both controllers set their
 /// speeds, wrenches and footholds in, so the same laws hold whichever way the robot faces.
 pub struct HeadingFrame {
@@ -174,5 +132,37 @@ impl HeadingFrame {
             velocity: to_heading * velocity,
             angular_velocity: to_heading * angular_velocity,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn profile_interpolates_and_holds() {
+        let p = SpeedProfile::parse("0:0, 3:0.35, 6:-0.35").unwrap();
+        assert_eq!(p.at(0.0), 0.0);
+        assert!((p.at(1.5) - 0.175).abs() < 1e-12);
+        assert!((p.at(4.5) - 0.0).abs() < 1e-12);
+        assert_eq!(p.at(10.0), -0.35);
+        let r = SpeedProfile::ramp(1.0, 2.0);
+        assert_eq!((r.at(1.0), r.at(5.0)), (0.5, 1.0));
+        assert_eq!(SpeedProfile::ramp(0.4, 0.0).at(0.0), 0.4);
+    }
+
+    #[test]
+    fn bad_profiles_are_errors() {
+        for bad in ["", "1", "0:0,0:1", "2:0,1:1", "0:x", "0:nan", "-1:0"] {
+            assert!(SpeedProfile::parse(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn wrapping() {
+        use std::f64::consts::PI;
+        assert!((wrap_angle(3.0 * PI / 2.0) + PI / 2.0).abs() < 1e-12);
+        assert!((wrap_angle(-3.0 * PI / 2.0) - PI / 2.0).abs() < 1e-12);
+        assert!((wrap_angle(0.3) - 0.3).abs() < 1e-12);
     }
 }

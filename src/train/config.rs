@@ -13,7 +13,8 @@ pub fn build_config(env: &str, algo: Algo, overrides: &[(String, String)]) -> Re
     let presets: toml::Table = PRESETS.parse().expect("shipped presets parse");
     if let Some(toml::Value::Table(env_table)) = presets.get(env) {
         for (k, v) in env_table {
-            if !matches!(k.as_str(), "td3" | "sac" | "ddpg") {
+            // Algorithm tables are read below; every other key applies to all algorithms.
+            if Algo::parse(k).is_err() {
                 table.insert(k.clone(), v.clone());
             }
         }
@@ -22,8 +23,7 @@ pub fn build_config(env: &str, algo: Algo, overrides: &[(String, String)]) -> Re
         }
     }
     apply_overrides(&mut table, overrides)?;
-    let cfg: TrainConfig =
-        toml::Value::Table(table).try_into().map_err(|e: toml::de::Error| anyhow::anyhow!("{}", e.message()))?;
+    let cfg = TrainConfig::from_table(&table)?;
     cfg.validate()?;
     Ok(cfg)
 }
