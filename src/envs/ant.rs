@@ -2,10 +2,12 @@
 //! (105), reward forward + healthy - ctrl_cost - contact_cost, terminates when unhealthy.
 use serde::{Deserialize, Serialize};
 
+use super::mujoco_env::MujocoEnv;
 use super::options::Check;
-use super::simulation::{locomotion_metrics, reset_info, EnvCore, Simulation, StepOutcome, VelocityNoise};
-use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
-use crate::mujoco::Data;
+use super::simulation::{Simulation, VelocityNoise};
+use super::task::{locomotion_metrics, planar_position, quadratic_cost, Task, TaskStep, Timing};
+use super::{BoxSpace, EnvError};
+use crate::mujoco::Model;
 
 pub const MODEL_XML: &str = include_str!("../../models/ant.xml");
 
@@ -59,112 +61,102 @@ impl AntOptions {
     }
 }
 
-pub struct Ant {
+pub struct AntTask {
     opts: AntOptions,
-    core: EnvCore,
     torso: usize,
 }
 
-impl Ant {
-    pub fn new(opts: AntOptions) -> Result<Self, EnvError> {
-        opts.validate()?;
-        let sim = Simulation::from_xml(MODEL_XML)?;
-        let m = &sim.model;
-        let spec = EnvSpec {
-            name: "ant",
-            observation_space: BoxSpace::unbounded(m.nq() - 2 + m.nv() + 6 * (m.nbody() - 1)),
-            action_space: BoxSpace::uniform(m.nu(), -1.0, 1.0),
-            dt: m.timestep() * opts.frame_skip as f64,
-            max_episode_steps: opts.max_episode_steps,
-            reward_terms: vec!["forward", "healthy", "ctrl_cost", "contact_cost"],
-        };
-        let torso = m.body_id("torso")?;
-        Ok(Ant { opts, core: EnvCore::new(sim, spec), torso })
-    }
+pub type Ant = MujocoEnv<AntTask>;
 
-    fn clipped_contact_forces(&self) -> impl Iterator<Item = f64> + '_ {
+/// The torso's x and y (of its body frame, as Gymnasium's `get_body_com("torso")`) and z.
+pub struct AntBefore {
+    xy: [f64; 2],
+    z: f64,
+}
+
+impl AntTask {
+    fn clipped_contact_forces<'a>(&self, sim: &'a Simulation) -> impl Iterator<Item = f64> + 'a {
         let [lo, hi] = self.opts.contact_force_range;
-        self.core.sim.data.cfrc_ext().iter().map(move |f| f.clamp(lo, hi))
+        sim.data.cfrc_ext().iter().map(move |f| f.clamp(lo, hi))
     }
 
-    fn observation(&self) -> Vec<f64> {
-        let d = &self.core.sim.data;
-        let mut obs: Vec<f64> = d.qpos()[2..].iter().chain(d.qvel()).copied().collect();
-        obs.extend(self.clipped_contact_forces().skip(6));
-        obs
-    }
-
-    fn is_healthy(&self) -> bool {
-        let d = &self.core.sim.data;
+    fn is_healthy(&self, sim: &Simulation) -> bool {
+        let d = &sim.data;
         let [lo, hi] = self.opts.healthy_z_range;
         let finite = d.qpos().iter().chain(d.qvel()).all(|v| v.is_finite());
         finite && d.qpos()[2] >= lo && d.qpos()[2] <= hi
     }
 
-    fn torso_xy(&self) -> [f64; 2] {
-        let p = &self.core.sim.data.xpos()[3 * self.torso..];
+    fn torso_xy(&self, sim: &Simulation) -> [f64; 2] {
+        let p = &sim.data.xpos()[3 * self.torso..];
         [p[0], p[1]]
     }
 }
 
-impl Env for Ant {
-    fn spec(&self) -> &EnvSpec {
-        &self.core.spec
+impl Task for AntTask {
+    type Options = AntOptions;
+    type Before = AntBefore;
+    const NAME: &'static str = "ant";
+    const MODEL_XML: &'static str = MODEL_XML;
+    const REWARD_TERMS: &'static [&'static str] = &["forward", "healthy", "ctrl_cost", "contact_cost"];
+
+    fn new(opts: AntOptions, model: &Model) -> Result<Self, EnvError> {
+        opts.validate()?;
+        Ok(AntTask { opts, torso: model.body_id("torso")? })
     }
 
-    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.core.reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Normal)?;
-        self.core.last_obs = self.observation();
-        Ok((self.core.last_obs.clone(), reset_info(&self.core)))
+    fn timing(&self) -> Timing {
+        Timing {
+            frame_skip: self.opts.frame_skip,
+            max_episode_steps: self.opts.max_episode_steps,
+            reset_noise_scale: self.opts.reset_noise_scale,
+            velocity_noise: VelocityNoise::Normal,
+        }
     }
 
-    fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        let start = self.core.begin_step(action)?;
-        let before = self.torso_xy();
-        let z_before = self.core.sim.data.qpos()[2];
-        let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
-            StepOutcome::Stepped(warnings) => warnings,
-            StepOutcome::BlewUp(step) => return Ok(step),
-        };
-        self.core.sim.data.rne_post_constraint()?;
-        let after = self.torso_xy();
-        let velocity = [(after[0] - before[0]) / self.core.spec.dt, (after[1] - before[1]) / self.core.spec.dt];
+    fn observation_dim(&self, m: &Model) -> usize {
+        m.nq() - 2 + m.nv() + 6 * (m.nbody() - 1)
+    }
 
-        let healthy = self.is_healthy();
-        let forward = self.opts.forward_reward_weight * velocity[0];
-        let healthy_reward = if healthy { self.opts.healthy_reward } else { 0.0 };
-        let ctrl_cost = self.opts.ctrl_cost_weight * start.action.iter().map(|a| a * a).sum::<f64>();
-        let contact_cost = self.opts.contact_cost_weight * self.clipped_contact_forces().map(|f| f * f).sum::<f64>();
-        let info = Info {
+    fn action_space(&self, model: &Model) -> BoxSpace {
+        BoxSpace::uniform(model.nu(), -1.0, 1.0)
+    }
+
+    fn observe(&self, sim: &Simulation, out: &mut Vec<f64>) {
+        out.extend_from_slice(&sim.data.qpos()[2..]);
+        out.extend_from_slice(sim.data.qvel());
+        out.extend(self.clipped_contact_forces(sim).skip(6));
+    }
+
+    fn reset_metrics(&self, sim: &Simulation) -> Vec<(&'static str, f64)> {
+        planar_position(sim)
+    }
+
+    fn before(&self, sim: &Simulation) -> AntBefore {
+        AntBefore { xy: self.torso_xy(sim), z: sim.data.qpos()[2] }
+    }
+
+    fn after(&self, sim: &mut Simulation, before: &AntBefore, action: &[f64], dt: f64) -> Result<TaskStep, EnvError> {
+        sim.data.rne_post_constraint()?;
+        let after = self.torso_xy(sim);
+        let velocity = [(after[0] - before.xy[0]) / dt, (after[1] - before.xy[1]) / dt];
+        let healthy = self.is_healthy(sim);
+        let contact_cost = self.opts.contact_cost_weight * self.clipped_contact_forces(sim).map(|f| f * f).sum::<f64>();
+        let mut metrics = locomotion_metrics(sim, velocity);
+        metrics.extend([
+            ("dy", after[1] - before.xy[1]),
+            ("dz", sim.data.qpos()[2] - before.z),
+            ("mechanical_energy", sim.last_mechanical_energy),
+        ]);
+        Ok(TaskStep {
             reward_terms: vec![
-                ("forward", forward),
-                ("healthy", healthy_reward),
-                ("ctrl_cost", -ctrl_cost),
+                ("forward", self.opts.forward_reward_weight * velocity[0]),
+                ("healthy", if healthy { self.opts.healthy_reward } else { 0.0 }),
+                ("ctrl_cost", -quadratic_cost(self.opts.ctrl_cost_weight, action)),
                 ("contact_cost", -contact_cost),
             ],
-            metrics: {
-                let d = &self.core.sim.data;
-                let mut m = locomotion_metrics(&self.core, velocity);
-                m.extend([
-                    ("dy", after[1] - before[1]),
-                    ("dz", d.qpos()[2] - z_before),
-                    ("mechanical_energy", self.core.sim.last_mechanical_energy),
-                ]);
-                m
-            },
-            clipped_actions: start.clipped,
-            unstable: false,
-            warnings,
-        };
-        let terminated = !healthy && self.opts.terminate_when_unhealthy;
-        Ok(self.core.finish_step(self.observation(), terminated, info))
-    }
-
-    fn data(&self) -> &Data {
-        &self.core.sim.data
-    }
-
-    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        Ok(self.core.sim.data.set_state(qpos, qvel)?)
+            metrics,
+            terminated: !healthy && self.opts.terminate_when_unhealthy,
+        })
     }
 }

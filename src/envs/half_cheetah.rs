@@ -2,10 +2,12 @@
 //! forward_weight * dx/dt - ctrl_weight * |a|^2, never terminates, 1000-step episodes.
 use serde::{Deserialize, Serialize};
 
+use super::mujoco_env::MujocoEnv;
 use super::options::Check;
-use super::simulation::{EnvCore, Simulation, StepOutcome, VelocityNoise};
-use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
-use crate::mujoco::Data;
+use super::simulation::{Simulation, VelocityNoise};
+use super::task::{quadratic_cost, Task, TaskStep, Timing};
+use super::{BoxSpace, EnvError};
+use crate::mujoco::Model;
 
 pub const MODEL_XML: &str = include_str!("../../models/half_cheetah.xml");
 
@@ -43,70 +45,64 @@ impl HalfCheetahOptions {
     }
 }
 
-pub struct HalfCheetah {
+pub struct HalfCheetahTask {
     opts: HalfCheetahOptions,
-    core: EnvCore,
 }
 
-impl HalfCheetah {
-    pub fn new(opts: HalfCheetahOptions) -> Result<Self, EnvError> {
+pub type HalfCheetah = MujocoEnv<HalfCheetahTask>;
+
+impl Task for HalfCheetahTask {
+    type Options = HalfCheetahOptions;
+    type Before = f64;
+    const NAME: &'static str = "half-cheetah";
+    const MODEL_XML: &'static str = MODEL_XML;
+    const REWARD_TERMS: &'static [&'static str] = &["forward", "ctrl_cost"];
+
+    fn new(opts: HalfCheetahOptions, _model: &Model) -> Result<Self, EnvError> {
         opts.validate()?;
-        let sim = Simulation::from_xml(MODEL_XML)?;
-        let spec = EnvSpec {
-            name: "half-cheetah",
-            observation_space: BoxSpace::unbounded(sim.model.nq() - 1 + sim.model.nv()),
-            action_space: BoxSpace::uniform(sim.model.nu(), -1.0, 1.0),
-            dt: sim.model.timestep() * opts.frame_skip as f64,
-            max_episode_steps: opts.max_episode_steps,
-            reward_terms: vec!["forward", "ctrl_cost"],
-        };
-        Ok(HalfCheetah { opts, core: EnvCore::new(sim, spec) })
+        Ok(HalfCheetahTask { opts })
     }
 
-    fn observation(&self) -> Vec<f64> {
-        let d = &self.core.sim.data;
-        d.qpos()[1..].iter().chain(d.qvel()).copied().collect()
-    }
-}
-
-impl Env for HalfCheetah {
-    fn spec(&self) -> &EnvSpec {
-        &self.core.spec
+    fn timing(&self) -> Timing {
+        Timing {
+            frame_skip: self.opts.frame_skip,
+            max_episode_steps: self.opts.max_episode_steps,
+            reset_noise_scale: self.opts.reset_noise_scale,
+            velocity_noise: VelocityNoise::Normal,
+        }
     }
 
-    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.core.reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Normal)?;
-        self.core.last_obs = self.observation();
-        let info = Info { metrics: vec![("x_position", self.core.sim.data.qpos()[0])], ..Info::default() };
-        Ok((self.core.last_obs.clone(), info))
+    fn observation_dim(&self, model: &Model) -> usize {
+        model.nq() - 1 + model.nv()
     }
 
-    fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        let start = self.core.begin_step(action)?;
-        let x_before = self.core.sim.data.qpos()[0];
-        let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
-            StepOutcome::Stepped(warnings) => warnings,
-            StepOutcome::BlewUp(step) => return Ok(step),
-        };
-        let x_after = self.core.sim.data.qpos()[0];
-        let x_velocity = (x_after - x_before) / self.core.spec.dt;
-        let forward = self.opts.forward_reward_weight * x_velocity;
-        let ctrl_cost = self.opts.ctrl_cost_weight * start.action.iter().map(|a| a * a).sum::<f64>();
-        let info = Info {
-            reward_terms: vec![("forward", forward), ("ctrl_cost", -ctrl_cost)],
+    fn action_space(&self, model: &Model) -> BoxSpace {
+        BoxSpace::uniform(model.nu(), -1.0, 1.0)
+    }
+
+    fn observe(&self, sim: &Simulation, out: &mut Vec<f64>) {
+        out.extend_from_slice(&sim.data.qpos()[1..]);
+        out.extend_from_slice(sim.data.qvel());
+    }
+
+    fn reset_metrics(&self, sim: &Simulation) -> Vec<(&'static str, f64)> {
+        vec![("x_position", sim.data.qpos()[0])]
+    }
+
+    fn before(&self, sim: &Simulation) -> f64 {
+        sim.data.qpos()[0]
+    }
+
+    fn after(&self, sim: &mut Simulation, x_before: &f64, action: &[f64], dt: f64) -> Result<TaskStep, EnvError> {
+        let x_after = sim.data.qpos()[0];
+        let x_velocity = (x_after - x_before) / dt;
+        Ok(TaskStep {
+            reward_terms: vec![
+                ("forward", self.opts.forward_reward_weight * x_velocity),
+                ("ctrl_cost", -quadratic_cost(self.opts.ctrl_cost_weight, action)),
+            ],
             metrics: vec![("x_position", x_after), ("x_velocity", x_velocity)],
-            clipped_actions: start.clipped,
-            unstable: false,
-            warnings,
-        };
-        Ok(self.core.finish_step(self.observation(), false, info))
-    }
-
-    fn data(&self) -> &Data {
-        &self.core.sim.data
-    }
-
-    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        Ok(self.core.sim.data.set_state(qpos, qvel)?)
+            terminated: false,
+        })
     }
 }

@@ -3,10 +3,12 @@
 //! - 0.1 |ctrl|^2 - min(5e-7 |cfrc_ext|^2, 10); terminates when the torso leaves (1, 2) m.
 use serde::{Deserialize, Serialize};
 
+use super::mujoco_env::MujocoEnv;
 use super::options::Check;
-use super::simulation::{locomotion_metrics, reset_info, EnvCore, Simulation, StepOutcome, VelocityNoise};
-use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
-use crate::mujoco::Data;
+use super::simulation::{Simulation, VelocityNoise};
+use super::task::{locomotion_metrics, planar_position, quadratic_cost, Task, TaskStep, Timing};
+use super::{BoxSpace, EnvError};
+use crate::mujoco::Model;
 
 pub const MODEL_XML: &str = include_str!("../../models/humanoid.xml");
 
@@ -60,49 +62,17 @@ impl HumanoidOptions {
     }
 }
 
-pub struct Humanoid {
+pub struct HumanoidTask {
     opts: HumanoidOptions,
-    core: EnvCore,
 }
 
-impl Humanoid {
-    pub fn new(opts: HumanoidOptions) -> Result<Self, EnvError> {
-        opts.validate()?;
-        let sim = Simulation::from_xml(MODEL_XML)?;
-        let m = &sim.model;
-        let nb = m.nbody() - 1;
-        let obs_dim = (m.nq() - 2) + m.nv() + 10 * nb + 6 * nb + (m.nv() - 6) + 6 * nb;
-        let ctrl = m.actuator_ctrlrange();
-        let spec = EnvSpec {
-            name: "humanoid",
-            observation_space: BoxSpace::unbounded(obs_dim),
-            action_space: BoxSpace::new(
-                (0..m.nu()).map(|i| ctrl[2 * i]).collect(),
-                (0..m.nu()).map(|i| ctrl[2 * i + 1]).collect(),
-            ),
-            dt: m.timestep() * opts.frame_skip as f64,
-            max_episode_steps: opts.max_episode_steps,
-            reward_terms: vec!["forward", "healthy", "ctrl_cost", "contact_cost"],
-        };
-        Ok(Humanoid { opts, core: EnvCore::new(sim, spec) })
-    }
+pub type Humanoid = MujocoEnv<HumanoidTask>;
 
-    fn observation(&self) -> Vec<f64> {
-        let d = &self.core.sim.data;
-        let mut obs = Vec::with_capacity(self.core.spec.observation_space.dim());
-        obs.extend_from_slice(&d.qpos()[2..]);
-        obs.extend_from_slice(d.qvel());
-        obs.extend_from_slice(&d.cinert()[10..]);
-        obs.extend_from_slice(&d.cvel()[6..]);
-        obs.extend_from_slice(&d.qfrc_actuator()[6..]);
-        obs.extend_from_slice(&d.cfrc_ext()[6..]);
-        obs
-    }
-
+impl HumanoidTask {
     /// Mass-weighted centre of mass, x and y.
-    fn mass_center(&self) -> [f64; 2] {
-        let mass = self.core.sim.model.body_mass();
-        let xipos = self.core.sim.data.xipos();
+    fn mass_center(sim: &Simulation) -> [f64; 2] {
+        let mass = sim.model.body_mass();
+        let xipos = sim.data.xipos();
         let total: f64 = mass.iter().sum();
         let mut c = [0.0; 2];
         for (b, m) in mass.iter().enumerate() {
@@ -112,63 +82,78 @@ impl Humanoid {
         [c[0] / total, c[1] / total]
     }
 
-    fn is_healthy(&self) -> bool {
-        let z = self.core.sim.data.qpos()[2];
+    fn is_healthy(&self, sim: &Simulation) -> bool {
+        let z = sim.data.qpos()[2];
         let [lo, hi] = self.opts.healthy_z_range;
         lo < z && z < hi
     }
 }
 
-impl Env for Humanoid {
-    fn spec(&self) -> &EnvSpec {
-        &self.core.spec
+impl Task for HumanoidTask {
+    type Options = HumanoidOptions;
+    type Before = [f64; 2];
+    const NAME: &'static str = "humanoid";
+    const MODEL_XML: &'static str = MODEL_XML;
+    const REWARD_TERMS: &'static [&'static str] = &["forward", "healthy", "ctrl_cost", "contact_cost"];
+
+    fn new(opts: HumanoidOptions, _model: &Model) -> Result<Self, EnvError> {
+        opts.validate()?;
+        Ok(HumanoidTask { opts })
     }
 
-    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.core.reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Uniform)?;
-        self.core.last_obs = self.observation();
-        Ok((self.core.last_obs.clone(), reset_info(&self.core)))
+    fn timing(&self) -> Timing {
+        Timing {
+            frame_skip: self.opts.frame_skip,
+            max_episode_steps: self.opts.max_episode_steps,
+            reset_noise_scale: self.opts.reset_noise_scale,
+            velocity_noise: VelocityNoise::Uniform,
+        }
     }
 
-    fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        let start = self.core.begin_step(action)?;
-        let before = self.mass_center();
-        let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
-            StepOutcome::Stepped(warnings) => warnings,
-            StepOutcome::BlewUp(step) => return Ok(step),
-        };
-        self.core.sim.data.rne_post_constraint()?;
-        let after = self.mass_center();
-        let velocity = [(after[0] - before[0]) / self.core.spec.dt, (after[1] - before[1]) / self.core.spec.dt];
+    fn observation_dim(&self, m: &Model) -> usize {
+        let nb = m.nbody() - 1;
+        (m.nq() - 2) + m.nv() + 10 * nb + 6 * nb + (m.nv() - 6) + 6 * nb
+    }
 
-        let d = &self.core.sim.data;
-        let healthy = self.is_healthy();
-        let forward = self.opts.forward_reward_weight * velocity[0];
-        let healthy_reward = if healthy { self.opts.healthy_reward } else { 0.0 };
-        let ctrl_cost = self.opts.ctrl_cost_weight * d.ctrl().iter().map(|a| a * a).sum::<f64>();
-        let contact_cost = (self.opts.contact_cost_weight * d.cfrc_ext().iter().map(|f| f * f).sum::<f64>())
-            .min(self.opts.contact_cost_max);
-        let info = Info {
+    fn action_space(&self, m: &Model) -> BoxSpace {
+        let ctrl = m.actuator_ctrlrange();
+        BoxSpace::new((0..m.nu()).map(|i| ctrl[2 * i]).collect(), (0..m.nu()).map(|i| ctrl[2 * i + 1]).collect())
+    }
+
+    fn observe(&self, sim: &Simulation, out: &mut Vec<f64>) {
+        let d = &sim.data;
+        out.extend_from_slice(&d.qpos()[2..]);
+        out.extend_from_slice(d.qvel());
+        out.extend_from_slice(&d.cinert()[10..]);
+        out.extend_from_slice(&d.cvel()[6..]);
+        out.extend_from_slice(&d.qfrc_actuator()[6..]);
+        out.extend_from_slice(&d.cfrc_ext()[6..]);
+    }
+
+    fn reset_metrics(&self, sim: &Simulation) -> Vec<(&'static str, f64)> {
+        planar_position(sim)
+    }
+
+    fn before(&self, sim: &Simulation) -> [f64; 2] {
+        Self::mass_center(sim)
+    }
+
+    fn after(&self, sim: &mut Simulation, before: &[f64; 2], action: &[f64], dt: f64) -> Result<TaskStep, EnvError> {
+        sim.data.rne_post_constraint()?;
+        let after = Self::mass_center(sim);
+        let velocity = [(after[0] - before[0]) / dt, (after[1] - before[1]) / dt];
+        let healthy = self.is_healthy(sim);
+        let contact_cost = quadratic_cost(self.opts.contact_cost_weight, sim.data.cfrc_ext()).min(self.opts.contact_cost_max);
+        Ok(TaskStep {
             reward_terms: vec![
-                ("forward", forward),
-                ("healthy", healthy_reward),
-                ("ctrl_cost", -ctrl_cost),
+                ("forward", self.opts.forward_reward_weight * velocity[0]),
+                ("healthy", if healthy { self.opts.healthy_reward } else { 0.0 }),
+                // The action as clipped is what `ctrl` holds (Gymnasium costs `data.ctrl`).
+                ("ctrl_cost", -quadratic_cost(self.opts.ctrl_cost_weight, action)),
                 ("contact_cost", -contact_cost),
             ],
-            metrics: locomotion_metrics(&self.core, velocity),
-            clipped_actions: start.clipped,
-            unstable: false,
-            warnings,
-        };
-        let terminated = !healthy && self.opts.terminate_when_unhealthy;
-        Ok(self.core.finish_step(self.observation(), terminated, info))
-    }
-
-    fn data(&self) -> &Data {
-        &self.core.sim.data
-    }
-
-    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        Ok(self.core.sim.data.set_state(qpos, qvel)?)
+            metrics: locomotion_metrics(sim, velocity),
+            terminated: !healthy && self.opts.terminate_when_unhealthy,
+        })
     }
 }

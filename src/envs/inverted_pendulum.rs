@@ -2,10 +2,12 @@
 //! while the pole stays within 0.2 rad and the state is finite, terminates otherwise.
 use serde::{Deserialize, Serialize};
 
+use super::mujoco_env::MujocoEnv;
 use super::options::Check;
-use super::simulation::{EnvCore, Simulation, StepOutcome, VelocityNoise};
-use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
-use crate::mujoco::Data;
+use super::simulation::{Simulation, VelocityNoise};
+use super::task::{Task, TaskStep, Timing};
+use super::{BoxSpace, EnvError};
+use crate::mujoco::Model;
 
 pub const MODEL_XML: &str = include_str!("../../models/inverted_pendulum.xml");
 
@@ -36,68 +38,56 @@ impl InvertedPendulumOptions {
     }
 }
 
-pub struct InvertedPendulum {
+pub struct InvertedPendulumTask {
     opts: InvertedPendulumOptions,
-    core: EnvCore,
 }
 
-impl InvertedPendulum {
-    pub fn new(opts: InvertedPendulumOptions) -> Result<Self, EnvError> {
+pub type InvertedPendulum = MujocoEnv<InvertedPendulumTask>;
+
+impl Task for InvertedPendulumTask {
+    type Options = InvertedPendulumOptions;
+    type Before = ();
+    const NAME: &'static str = "inverted-pendulum";
+    const MODEL_XML: &'static str = MODEL_XML;
+    const REWARD_TERMS: &'static [&'static str] = &["healthy"];
+
+    fn new(opts: InvertedPendulumOptions, _model: &Model) -> Result<Self, EnvError> {
         opts.validate()?;
-        let sim = Simulation::from_xml(MODEL_XML)?;
-        let m = &sim.model;
-        let spec = EnvSpec {
-            name: "inverted-pendulum",
-            observation_space: BoxSpace::unbounded(m.nq() + m.nv()),
-            action_space: BoxSpace::uniform(m.nu(), -3.0, 3.0),
-            dt: m.timestep() * opts.frame_skip as f64,
-            max_episode_steps: opts.max_episode_steps,
-            reward_terms: vec!["healthy"],
-        };
-        Ok(InvertedPendulum { opts, core: EnvCore::new(sim, spec) })
+        Ok(InvertedPendulumTask { opts })
     }
 
-    fn observation(&self) -> Vec<f64> {
-        let d = &self.core.sim.data;
-        d.qpos().iter().chain(d.qvel()).copied().collect()
-    }
-}
-
-impl Env for InvertedPendulum {
-    fn spec(&self) -> &EnvSpec {
-        &self.core.spec
+    fn timing(&self) -> Timing {
+        Timing {
+            frame_skip: self.opts.frame_skip,
+            max_episode_steps: self.opts.max_episode_steps,
+            reset_noise_scale: self.opts.reset_noise_scale,
+            velocity_noise: VelocityNoise::Uniform,
+        }
     }
 
-    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        self.core.reset_with_noise(seed, self.opts.reset_noise_scale, VelocityNoise::Uniform)?;
-        self.core.last_obs = self.observation();
-        Ok((self.core.last_obs.clone(), Info::default()))
+    fn observation_dim(&self, model: &Model) -> usize {
+        model.nq() + model.nv()
     }
 
-    fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
-        let start = self.core.begin_step(action)?;
-        let warnings = match self.core.advance(&start, self.opts.frame_skip)? {
-            StepOutcome::Stepped(warnings) => warnings,
-            StepOutcome::BlewUp(step) => return Ok(step),
-        };
-        let observation = self.observation();
-        let terminated = !observation.iter().all(|v| v.is_finite()) || observation[1].abs() > self.opts.max_pole_angle;
-        let q = self.core.sim.data.qpos();
-        let info = Info {
+    fn action_space(&self, model: &Model) -> BoxSpace {
+        BoxSpace::uniform(model.nu(), -3.0, 3.0)
+    }
+
+    fn observe(&self, sim: &Simulation, out: &mut Vec<f64>) {
+        out.extend_from_slice(sim.data.qpos());
+        out.extend_from_slice(sim.data.qvel());
+    }
+
+    fn before(&self, _sim: &Simulation) {}
+
+    fn after(&self, sim: &mut Simulation, _: &(), _action: &[f64], _dt: f64) -> Result<TaskStep, EnvError> {
+        let (q, v) = (sim.data.qpos(), sim.data.qvel());
+        let finite = q.iter().chain(v).all(|x| x.is_finite());
+        let terminated = !finite || q[1].abs() > self.opts.max_pole_angle;
+        Ok(TaskStep {
             reward_terms: vec![("healthy", if terminated { 0.0 } else { 1.0 })],
             metrics: vec![("cart_position", q[0]), ("pole_angle", q[1])],
-            clipped_actions: start.clipped,
-            unstable: false,
-            warnings,
-        };
-        Ok(self.core.finish_step(observation, terminated, info))
-    }
-
-    fn data(&self) -> &Data {
-        &self.core.sim.data
-    }
-
-    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        Ok(self.core.sim.data.set_state(qpos, qvel)?)
+            terminated,
+        })
     }
 }

@@ -15,9 +15,11 @@ mod half_cheetah;
 mod humanoid;
 mod inverted_pendulum;
 pub mod minitaur;
+mod mujoco_env;
 mod options;
 mod registry;
 mod simulation;
+mod task;
 
 pub use ant::{Ant, AntOptions};
 pub use error::EnvError;
@@ -25,6 +27,9 @@ pub use half_cheetah::{HalfCheetah, HalfCheetahOptions};
 pub use humanoid::{Humanoid, HumanoidOptions};
 pub use inverted_pendulum::{InvertedPendulum, InvertedPendulumOptions};
 pub use minitaur::{Minitaur, MinitaurOptions};
+pub use mujoco_env::MujocoEnv;
+pub use simulation::{Simulation, VelocityNoise};
+pub use task::{Task, TaskStep, Timing};
 pub use registry::{
     env_names, lookup, make, model_xml, parse_overrides, reward_weight_option, EnvConfig, EnvEntry, ENVS,
 };

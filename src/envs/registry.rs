@@ -4,11 +4,11 @@
 use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
-use super::{
-    ant, half_cheetah, humanoid, inverted_pendulum, minitaur, Ant, AntOptions, Env, EnvError, HalfCheetah,
-    HalfCheetahOptions, Humanoid, HumanoidOptions, InvertedPendulum, InvertedPendulumOptions, Minitaur,
-    MinitaurOptions,
-};
+use super::ant::AntTask;
+use super::half_cheetah::HalfCheetahTask;
+use super::humanoid::HumanoidTask;
+use super::inverted_pendulum::InvertedPendulumTask;
+use super::{minitaur, Env, EnvError, Minitaur, MinitaurOptions, MujocoEnv, Task};
 
 /// An environment type the registry can build from its options.
 pub trait Registered: Env + Sized + 'static {
@@ -17,18 +17,19 @@ pub trait Registered: Env + Sized + 'static {
     fn build(options: Self::Options) -> Result<Self, EnvError>;
 }
 
-macro_rules! registered {
-    ($($env:ty => $options:ty),* $(,)?) => {$(
-        impl Registered for $env {
-            type Options = $options;
-            fn build(options: $options) -> Result<Self, EnvError> {
-                <$env>::new(options)
-            }
-        }
-    )*};
+impl<T: Task> Registered for MujocoEnv<T> {
+    type Options = T::Options;
+    fn build(options: T::Options) -> Result<Self, EnvError> {
+        MujocoEnv::new(options)
+    }
 }
-registered!(HalfCheetah => HalfCheetahOptions, Ant => AntOptions, Humanoid => HumanoidOptions,
-    InvertedPendulum => InvertedPendulumOptions, Minitaur => MinitaurOptions);
+
+impl Registered for Minitaur {
+    type Options = MinitaurOptions;
+    fn build(options: MinitaurOptions) -> Result<Self, EnvError> {
+        Minitaur::new(options)
+    }
+}
 
 /// One environment's declaration.
 pub struct EnvEntry {
@@ -47,6 +48,11 @@ const fn entry<E: Registered>(
     reward_weights: &'static [(&'static str, &'static str)],
 ) -> EnvEntry {
     EnvEntry { name, model_xml, reward_weights, build: build::<E>, resolve: resolve::<E> }
+}
+
+/// The declaration of a [`Task`]: its name and model come from the task itself.
+const fn task<T: Task>(reward_weights: &'static [(&'static str, &'static str)]) -> EnvEntry {
+    entry::<MujocoEnv<T>>(T::NAME, T::MODEL_XML, reward_weights)
 }
 
 fn build<E: Registered>(c: &EnvConfig) -> Result<Box<dyn Env>, EnvError> {
@@ -73,10 +79,10 @@ const LEGGED_REWARD: &[(&str, &str)] = &[
 
 /// The registry. Adding an environment is one line here (plus its module and model file).
 pub const ENVS: &[EnvEntry] = &[
-    entry::<HalfCheetah>("half-cheetah", half_cheetah::MODEL_XML, MUJOCO_REWARD),
-    entry::<Ant>("ant", ant::MODEL_XML, LEGGED_REWARD),
-    entry::<Humanoid>("humanoid", humanoid::MODEL_XML, LEGGED_REWARD),
-    entry::<InvertedPendulum>("inverted-pendulum", inverted_pendulum::MODEL_XML, &[]),
+    task::<HalfCheetahTask>(MUJOCO_REWARD),
+    task::<AntTask>(LEGGED_REWARD),
+    task::<HumanoidTask>(LEGGED_REWARD),
+    task::<InvertedPendulumTask>(&[]),
     entry::<Minitaur>(
         "minitaur",
         minitaur::MODEL_XML,

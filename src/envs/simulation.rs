@@ -45,12 +45,12 @@ impl EnvRng {
 
 /// Outcome of advancing the physics.
 #[derive(Debug, Default)]
-pub(crate) struct Advance {
+pub struct Advance {
     pub unstable: bool,
     pub warnings: Vec<String>,
 }
 
-pub(crate) struct Simulation {
+pub struct Simulation {
     pub model: Arc<Model>,
     pub data: Data,
     /// Mechanical energy the actuators delivered during the latest `advance` (J): sum over
@@ -134,7 +134,7 @@ pub(crate) fn unstable_step(last_obs: &[f64], spec: &EnvSpec, clipped: usize, wa
 
 /// How reset noise is drawn for velocities (positions always get U(-s, s)).
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub(crate) enum VelocityNoise {
+pub enum VelocityNoise {
     /// s * N(0, 1) (HalfCheetah, Ant).
     Normal,
     /// U(-s, s) (Humanoid, InvertedPendulum).
@@ -208,22 +208,4 @@ impl EnvCore {
         let reward = info.reward_terms.iter().map(|(_, v)| v).sum();
         Step { observation, reward, terminated, truncated, info }
     }
-}
-
-/// Positions of a free-floating robot at reset (x, y of qpos).
-pub(crate) fn reset_info(core: &EnvCore) -> Info {
-    let q = core.sim.data.qpos();
-    Info { metrics: vec![("x_position", q[0]), ("y_position", q[1])], ..Info::default() }
-}
-
-/// Positions, planar velocity and torso height of a free-floating robot after a step.
-pub(crate) fn locomotion_metrics(core: &EnvCore, velocity: [f64; 2]) -> Vec<(&'static str, f64)> {
-    let q = core.sim.data.qpos();
-    vec![
-        ("x_position", q[0]),
-        ("y_position", q[1]),
-        ("x_velocity", velocity[0]),
-        ("y_velocity", velocity[1]),
-        ("torso_height", q[2]),
-    ]
 }

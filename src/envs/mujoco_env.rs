@@ -1,0 +1,75 @@
+//! The one step skeleton of the MuJoCo environments: a [`Task`] over a [`Simulation`].
+use super::simulation::{EnvCore, Simulation, StepOutcome};
+use super::task::Task;
+use super::{Env, EnvError, EnvSpec, Info, Step};
+use crate::mujoco::Data;
+
+pub struct MujocoEnv<T: Task> {
+    task: T,
+    core: EnvCore,
+}
+
+impl<T: Task> MujocoEnv<T> {
+    pub fn new(options: T::Options) -> Result<Self, EnvError> {
+        let sim = Simulation::from_xml(T::MODEL_XML)?;
+        let task = T::new(options, &sim.model)?;
+        let timing = task.timing();
+        let spec = EnvSpec {
+            name: T::NAME,
+            observation_space: super::BoxSpace::unbounded(task.observation_dim(&sim.model)),
+            action_space: task.action_space(&sim.model),
+            dt: sim.model.timestep() * timing.frame_skip as f64,
+            max_episode_steps: timing.max_episode_steps,
+            reward_terms: T::REWARD_TERMS.to_vec(),
+        };
+        Ok(MujocoEnv { task, core: EnvCore::new(sim, spec) })
+    }
+
+    fn observe(&self) -> Vec<f64> {
+        let mut observation = Vec::with_capacity(self.core.spec.observation_space.dim());
+        self.task.observe(&self.core.sim, &mut observation);
+        debug_assert_eq!(observation.len(), self.core.spec.observation_space.dim());
+        observation
+    }
+}
+
+impl<T: Task> Env for MujocoEnv<T> {
+    fn spec(&self) -> &EnvSpec {
+        &self.core.spec
+    }
+
+    fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
+        let timing = self.task.timing();
+        self.core.reset_with_noise(seed, timing.reset_noise_scale, timing.velocity_noise)?;
+        self.core.last_obs = self.observe();
+        let info = Info { metrics: self.task.reset_metrics(&self.core.sim), ..Info::default() };
+        Ok((self.core.last_obs.clone(), info))
+    }
+
+    fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
+        let start = self.core.begin_step(action)?;
+        let before = self.task.before(&self.core.sim);
+        let warnings = match self.core.advance(&start, self.task.timing().frame_skip)? {
+            StepOutcome::Stepped(warnings) => warnings,
+            StepOutcome::BlewUp(step) => return Ok(step),
+        };
+        let outcome = self.task.after(&mut self.core.sim, &before, &start.action, self.core.spec.dt)?;
+        let info = Info {
+            reward_terms: outcome.reward_terms,
+            metrics: outcome.metrics,
+            clipped_actions: start.clipped,
+            unstable: false,
+            warnings,
+        };
+        let observation = self.observe();
+        Ok(self.core.finish_step(observation, outcome.terminated, info))
+    }
+
+    fn data(&self) -> &Data {
+        &self.core.sim.data
+    }
+
+    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
+        Ok(self.core.sim.data.set_state(qpos, qvel)?)
+    }
+}

@@ -1,0 +1,76 @@
+//! What a MuJoCo task adds to the physics, in the spirit of dm_control's physics / task /
+//! environment split: its spaces, its observation, its signed reward terms and when it ends.
+//! [`super::mujoco_env::MujocoEnv`] carries everything else (reset noise, action checks,
+//! frame skip, instability detection, the time limit) once for every task.
+use super::simulation::{Simulation, VelocityNoise};
+use super::{BoxSpace, EnvError};
+use crate::mujoco::Model;
+
+/// The settings every MuJoCo task has, read from its options.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Timing {
+    /// Physics steps per `step`.
+    pub frame_skip: usize,
+    pub max_episode_steps: usize,
+    /// qpos += U(-s, s) at reset; qvel gets `velocity_noise` of the same scale.
+    pub reset_noise_scale: f64,
+    pub velocity_noise: VelocityNoise,
+}
+
+/// What a task reports after the physics of a step ran.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct TaskStep {
+    /// Signed contributions (costs negative), in the order of [`Task::REWARD_TERMS`].
+    pub reward_terms: Vec<(&'static str, f64)>,
+    pub metrics: Vec<(&'static str, f64)>,
+    pub terminated: bool,
+}
+
+pub trait Task: Send + Sized + 'static {
+    /// Its options (every field defaulted, `#[serde(default, deny_unknown_fields)]`).
+    type Options: serde::de::DeserializeOwned + serde::Serialize;
+    /// What the task measures before the physics runs (e.g. the x position), to compare after.
+    type Before;
+    const NAME: &'static str;
+    const MODEL_XML: &'static str;
+    const REWARD_TERMS: &'static [&'static str];
+
+    /// Validates the options and looks up what the task needs in the model (body ids, ...).
+    fn new(options: Self::Options, model: &Model) -> Result<Self, EnvError>;
+    fn timing(&self) -> Timing;
+    fn observation_dim(&self, model: &Model) -> usize;
+    fn action_space(&self, model: &Model) -> BoxSpace;
+    fn observe(&self, sim: &Simulation, out: &mut Vec<f64>);
+    /// Diagnostics at reset (positions).
+    fn reset_metrics(&self, _sim: &Simulation) -> Vec<(&'static str, f64)> {
+        Vec::new()
+    }
+    fn before(&self, sim: &Simulation) -> Self::Before;
+    /// Reward terms, metrics and termination once the physics ran with `action` (clipped to the
+    /// action space). May compute derived quantities first (e.g. contact forces).
+    fn after(&self, sim: &mut Simulation, before: &Self::Before, action: &[f64], dt: f64)
+        -> Result<TaskStep, EnvError>;
+}
+
+/// `weight * sum(a^2)`, the control cost every task uses.
+pub(crate) fn quadratic_cost(weight: f64, values: &[f64]) -> f64 {
+    weight * values.iter().map(|a| a * a).sum::<f64>()
+}
+
+/// Positions of a free-floating robot at reset (x, y of qpos).
+pub(crate) fn planar_position(sim: &Simulation) -> Vec<(&'static str, f64)> {
+    let q = sim.data.qpos();
+    vec![("x_position", q[0]), ("y_position", q[1])]
+}
+
+/// Positions, planar velocity and torso height of a free-floating robot after a step.
+pub(crate) fn locomotion_metrics(sim: &Simulation, velocity: [f64; 2]) -> Vec<(&'static str, f64)> {
+    let q = sim.data.qpos();
+    vec![
+        ("x_position", q[0]),
+        ("y_position", q[1]),
+        ("x_velocity", velocity[0]),
+        ("y_velocity", velocity[1]),
+        ("torso_height", q[2]),
+    ]
+}
