@@ -22,11 +22,13 @@ struct Case {
     options: &'static [(&'static str, &'static str)],
 }
 
-const CASES: [Case; 5] = [
+const CASES: [Case; 7] = [
     Case { name: "half-cheetah", frame_skip: 5, contact_forces: false, options: &[] },
     Case { name: "ant", frame_skip: 5, contact_forces: true, options: &[("terminate_when_unhealthy", "false")] },
     Case { name: "humanoid", frame_skip: 5, contact_forces: true, options: &[("terminate_when_unhealthy", "false")] },
     Case { name: "inverted-pendulum", frame_skip: 2, contact_forces: false, options: &[("max_pole_angle", "1.5707")] },
+    Case { name: "walker2d", frame_skip: 4, contact_forces: false, options: &[("terminate_when_unhealthy", "false")] },
+    Case { name: "hopper", frame_skip: 4, contact_forces: false, options: &[("terminate_when_unhealthy", "false")] },
     Case {
         name: "minitaur",
         frame_skip: 5,

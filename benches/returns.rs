@@ -75,7 +75,7 @@ fn tier(name: &str) -> Result<Vec<Block>> {
             b("humanoid", &["td3", "sac"], 300_000, 2),
             b("minitaur", &["td3", "sac"], 300_000, 2),
         ],
-        "full" => ["inverted-pendulum", "half-cheetah", "ant", "humanoid", "minitaur"]
+        "full" => ["inverted-pendulum", "half-cheetah", "ant", "humanoid", "walker2d", "hopper", "minitaur"]
             .into_iter()
             .map(|env| b(env, ALL, if env == "inverted-pendulum" { 25_000 } else { 1_000_000 }, 5))
             .collect(),

@@ -118,7 +118,7 @@ fn bad_input_fails_with_a_clear_message_and_writes_nothing() {
     let out = dir.path().join("never.csv");
     let o = out.to_str().unwrap();
     let cases: [(&[&str], &str); 5] = [
-        (&["rollout", "--env", "hopper", "--out", o], "unknown environment 'hopper'"),
+        (&["rollout", "--env", "hoppr", "--out", o], "unknown environment 'hoppr'"),
         (&["rollout", "--env", "ant", "--policy", "smart", "--out", o], "unknown policy 'smart'"),
         (&["rollout", "--env", "ant", "--policy", "actions:/no/such.csv", "--out", o], "/no/such.csv"),
         (&["rollout", "--env", "ant", "--option", "ctrl_cost_weight=-2", "--out", o], "ctrl_cost_weight"),
@@ -208,7 +208,7 @@ fn train_rejects_bad_arguments() {
     let o = o.to_str().unwrap();
     let cases: [(&[&str], &str); 6] = [
         (&["train", "--env", "ant", "--algo", "ppo", "--out", o], "unknown algorithm 'ppo'"),
-        (&["train", "--env", "hopper", "--algo", "td3", "--out", o], "unknown environment 'hopper'"),
+        (&["train", "--env", "hoppr", "--algo", "td3", "--out", o], "unknown environment 'hoppr'"),
         (&["train", "--env", "ant", "--algo", "td3", "--set", "tau=7", "--out", o], "tau"),
         (&["train", "--env", "ant", "--algo", "td3", "--reward", "wobble=1", "--out", o], "wobble"),
         (&["eval", "--checkpoint", "/no/such/run"], "no checkpoint"),

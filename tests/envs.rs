@@ -2,8 +2,8 @@
 //! health and termination, reset noise, determinism, bad input.
 use locobench::envs::Ant;
 use locobench::envs::{
-    make, AntOptions, Env, EnvConfig, EnvError, HalfCheetah, HalfCheetahOptions, Humanoid, HumanoidOptions,
-    InvertedPendulum, InvertedPendulumOptions,
+    make, AntOptions, Env, EnvConfig, EnvError, HalfCheetah, HalfCheetahOptions, Hopper, HopperOptions, Humanoid,
+    HumanoidOptions, InvertedPendulum, InvertedPendulumOptions, Walker2d, Walker2dOptions,
 };
 use locobench::mujoco::{Data, Model};
 
@@ -18,6 +18,8 @@ fn spaces_and_dt_match_gymnasium_v5() {
         ("ant", 105, 8, 0.05, 1.0),
         ("humanoid", 348, 17, 0.015, 0.4),
         ("inverted-pendulum", 4, 1, 0.04, 3.0),
+        ("walker2d", 17, 6, 0.008, 1.0),
+        ("hopper", 11, 3, 0.008, 1.0),
         ("minitaur", 28, 8, 0.01, 1.0),
     ];
     for (name, obs, act, dt, high) in expect {
@@ -143,6 +145,85 @@ fn humanoid_falls_and_terminates_under_zero_action() {
     for _ in 0..steps + 5 {
         let s = env.step(&[0.0; 17]).unwrap();
         assert!(!s.terminated);
+    }
+}
+
+/// Hopper and Walker2d: forward + healthy - 1e-3 |a|^2 recomputed from the state, the
+/// observation qpos[1:] + clip(qvel, ±10), and termination exactly when the health rule fails.
+#[test]
+fn planar_walkers_reward_by_hand_health_and_clipped_velocities() {
+    type Healthy = fn(&[f64], &[f64]) -> bool;
+    let hopper_healthy: Healthy = |q, v| {
+        q[2..].iter().chain(v).all(|x| x.abs() < 100.0) && q[1] > 0.7 && q[2].abs() < 0.2
+    };
+    let walker_healthy: Healthy = |q, _| q[1] > 0.8 && q[1] < 2.0 && q[2].abs() < 1.0;
+    let envs: [(Box<dyn Env>, Healthy); 2] = [
+        (Box::new(Hopper::new(HopperOptions::default()).unwrap()), hopper_healthy),
+        (Box::new(Walker2d::new(Walker2dOptions::default()).unwrap()), walker_healthy),
+    ];
+    for (mut env, healthy_rule) in envs {
+        let name = env.spec().name;
+        let n = env.spec().action_space.dim();
+        env.reset(Some(3)).unwrap();
+        let mut terminated = false;
+        for t in 0..1000 {
+            let x0 = env.data().qpos()[0];
+            let a = wiggle(t, n, 1.0);
+            let s = env.step(&a).unwrap();
+            let d = env.data();
+            let forward = (d.qpos()[0] - x0) / 0.008;
+            let healthy = healthy_rule(d.qpos(), d.qvel());
+            let ctrl = 1e-3 * a.iter().map(|v| v * v).sum::<f64>();
+            assert!((s.info.term("forward").unwrap() - forward).abs() < 1e-9, "{name} step {t}");
+            assert_eq!(s.info.term("healthy").unwrap(), if healthy { 1.0 } else { 0.0 }, "{name}");
+            assert!((s.info.term("ctrl_cost").unwrap() + ctrl).abs() < 1e-15, "{name}");
+            assert!((s.reward - (forward + f64::from(u8::from(healthy)) - ctrl)).abs() < 1e-9, "{name}");
+            let nq = d.qpos().len();
+            assert_eq!(&s.observation[..nq - 1], &d.qpos()[1..], "{name}");
+            for (o, v) in s.observation[nq - 1..].iter().zip(d.qvel()) {
+                assert_eq!(*o, v.clamp(-10.0, 10.0));
+            }
+            assert_eq!(s.terminated, !healthy, "{name} step {t}");
+            if s.done() {
+                terminated = s.terminated;
+                break;
+            }
+        }
+        assert!(terminated, "{name}: full-scale wiggling must make it fall");
+        // Thrown forward at 50 m/s: the observation reads 10, the reward the true speed.
+        env.reset(Some(3)).unwrap();
+        let mut qvel = vec![0.0; env.data().qvel().len()];
+        qvel[0] = 50.0;
+        env.set_state(&env.data().qpos().to_vec(), &qvel).unwrap();
+        let s = env.step(&vec![0.0; n]).unwrap();
+        let nq = env.data().qpos().len();
+        assert!(env.data().qvel()[0] > 40.0, "{name}");
+        assert_eq!(s.observation[nq - 1], 10.0, "{name}");
+        assert!(s.info.term("forward").unwrap() > 40.0, "{name}");
+    }
+}
+
+#[test]
+fn planar_walker_health_ranges_are_options() {
+    // Standing still is healthy; a height range above the standing height is not.
+    let mut env = Walker2d::new(Walker2dOptions::default()).unwrap();
+    env.reset(Some(0)).unwrap();
+    assert!(!env.step(&[0.0; 6]).unwrap().terminated);
+    let mut env = Walker2d::new(Walker2dOptions { healthy_z_range: [1.3, 2.0], ..Default::default() }).unwrap();
+    env.reset(Some(0)).unwrap();
+    assert!(env.step(&[0.0; 6]).unwrap().terminated);
+    let mut env = Hopper::new(HopperOptions { healthy_angle_range: [0.1, 0.2], ..Default::default() }).unwrap();
+    env.reset(Some(0)).unwrap();
+    assert!(env.step(&[0.0; 3]).unwrap().terminated);
+    for bad in ["healthy_z_range=[1.0,0.5]", "frame_skip=0", "ctrl_cost_weight=-1", "healthy_state_range=3"] {
+        for env in ["hopper", "walker2d"] {
+            let cfg = EnvConfig::new(env).with_overrides(&locobench::envs::parse_overrides(bad).unwrap()).unwrap();
+            if env == "walker2d" && bad.starts_with("healthy_state") {
+                assert!(make(&cfg).is_err(), "walker2d has no healthy_state_range");
+                continue;
+            }
+            assert!(matches!(make(&cfg).err(), Some(EnvError::InvalidOption { .. })), "{env} {bad}");
+        }
     }
 }
 
@@ -285,8 +366,8 @@ fn bad_actions_are_clear_errors() {
 
 #[test]
 fn unknown_env_and_invalid_options_are_clear_errors() {
-    let e = make(&EnvConfig::new("hopper")).err().unwrap();
-    assert!(e.to_string().contains("unknown environment 'hopper'") && e.to_string().contains("half-cheetah"));
+    let e = make(&EnvConfig::new("hoper")).err().unwrap();
+    assert!(e.to_string().contains("unknown environment 'hoper'") && e.to_string().contains("half-cheetah"));
     let bad = |name: &str, key: &str, value: &str| {
         let cfg = EnvConfig::new(name).with_overrides(&[(key.into(), value.into())]).unwrap();
         make(&cfg).err().map(|e| e.to_string()).unwrap_or_default()

@@ -12,6 +12,7 @@
 mod ant;
 mod error;
 mod half_cheetah;
+mod hopper;
 mod humanoid;
 mod inverted_pendulum;
 pub mod minitaur;
@@ -20,16 +21,19 @@ mod options;
 mod registry;
 mod simulation;
 mod task;
+mod walker2d;
 
 pub use ant::{Ant, AntOptions};
 pub use error::EnvError;
 pub use half_cheetah::{HalfCheetah, HalfCheetahOptions};
+pub use hopper::{Hopper, HopperOptions};
 pub use humanoid::{Humanoid, HumanoidOptions};
 pub use inverted_pendulum::{InvertedPendulum, InvertedPendulumOptions};
 pub use minitaur::{Minitaur, MinitaurOptions};
 pub use mujoco_env::MujocoEnv;
 pub use simulation::{Simulation, VelocityNoise};
 pub use task::{Task, TaskStep, Timing};
+pub use walker2d::{Walker2d, Walker2dOptions};
 pub use registry::{
     env_names, lookup, make, model_xml, parse_overrides, reward_weight_option, EnvConfig, EnvEntry, ENVS,
 };

@@ -6,8 +6,10 @@ use serde::{Deserialize, Serialize};
 
 use super::ant::AntTask;
 use super::half_cheetah::HalfCheetahTask;
+use super::hopper::HopperTask;
 use super::humanoid::HumanoidTask;
 use super::inverted_pendulum::InvertedPendulumTask;
+use super::walker2d::Walker2dTask;
 use super::{minitaur, Env, EnvError, Minitaur, MinitaurOptions, MujocoEnv, Task};
 
 /// An environment type the registry can build from its options.
@@ -76,6 +78,12 @@ const LEGGED_REWARD: &[(&str, &str)] = &[
     ("contact_cost", "contact_cost_weight"),
     ("healthy", "healthy_reward"),
 ];
+const PLANAR_WALKER_REWARD: &[(&str, &str)] = &[
+    ("forward", "forward_reward_weight"),
+    ("ctrl", "ctrl_cost_weight"),
+    ("ctrl_cost", "ctrl_cost_weight"),
+    ("healthy", "healthy_reward"),
+];
 
 /// The registry. Adding an environment is one line here (plus its module and model file).
 pub const ENVS: &[EnvEntry] = &[
@@ -83,6 +91,8 @@ pub const ENVS: &[EnvEntry] = &[
     task::<AntTask>(LEGGED_REWARD),
     task::<HumanoidTask>(LEGGED_REWARD),
     task::<InvertedPendulumTask>(&[]),
+    task::<Walker2dTask>(PLANAR_WALKER_REWARD),
+    task::<HopperTask>(PLANAR_WALKER_REWARD),
     entry::<Minitaur>(
         "minitaur",
         minitaur::MODEL_XML,
@@ -247,10 +257,11 @@ mod tests {
             }
             assert_eq!(model_xml(e.name).unwrap(), e.model_xml);
         }
-        for bad in [make(&EnvConfig::new("hopper")).err(), model_xml("hopper").err(), lookup("").err()] {
+        for bad in [make(&EnvConfig::new("hoper")).err(), model_xml("hoper").err(), lookup("").err()] {
             assert!(matches!(bad, Some(EnvError::UnknownEnv { .. })));
         }
         assert!(EnvConfig::new("walker").resolved_options().is_err());
+        assert!(EnvConfig::new("walker-2d").resolved_options().is_err());
         assert!(reward_weight_option("inverted-pendulum", "forward").is_err());
         assert!(reward_weight_option("minitaur", "forward").is_err());
     }

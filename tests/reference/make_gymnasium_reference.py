@@ -4,11 +4,14 @@ The Rust test `gymnasium_reference` replays the same actions from the same initi
 (reset noise 0) in locobench and compares observations and rewards. Regenerate with:
 
     python3 -m venv /tmp/gymref && /tmp/gymref/bin/pip install "gymnasium[mujoco]"
-    /tmp/gymref/bin/python tests/reference/make_gymnasium_reference.py
+    /tmp/gymref/bin/python tests/reference/make_gymnasium_reference.py [NAME ...]
+
+With names (e.g. `walker2d hopper`), only those files are rewritten.
 """
 import csv
 import math
 import os
+import sys
 
 import gymnasium as gym
 import mujoco
@@ -19,6 +22,8 @@ ENVS = {
     "ant": ("Ant-v5", 50, 0.5),
     "humanoid": ("Humanoid-v5", 50, 0.3),
     "inverted-pendulum": ("InvertedPendulum-v5", 200, 0.5),
+    "walker2d": ("Walker2d-v5", 100, 0.5),
+    "hopper": ("Hopper-v5", 100, 0.5),
 }
 
 
@@ -28,7 +33,9 @@ def action(t, n, scale):
 
 def main():
     here = os.path.dirname(os.path.abspath(__file__))
-    for name, (env_id, steps, scale) in ENVS.items():
+    names = sys.argv[1:] or list(ENVS)
+    for name in names:
+        env_id, steps, scale = ENVS[name]
         env = gym.make(env_id, reset_noise_scale=0.0)
         obs, _ = env.reset(seed=0)
         n = env.action_space.shape[0]
