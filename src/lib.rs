@@ -1,5 +1,6 @@
 //! locobench: legged-locomotion reinforcement learning and classical control on MuJoCo.
 pub mod agents;
+pub mod args;
 pub mod controller;
 pub mod envs;
 pub mod io;

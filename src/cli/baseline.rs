@@ -17,8 +17,8 @@ pub struct BaselineArgs {
     pub command: CommandArgs,
     #[arg(long, default_value_t = 10)]
     pub episodes: usize,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    #[command(flatten)]
+    pub seed: super::SeedArg,
     /// trot, bound or pace (Minitaur bounds by default; Ant trots).
     #[arg(long)]
     pub gait: Option<String>,
@@ -80,7 +80,7 @@ pub fn run(args: BaselineArgs) -> Result<()> {
         let speed = command.speed.final_speed();
         let profile = command.speed.clone();
         let mut controller = baseline_controller_for(&args.env, command, gait)?;
-        let eps = measure(env.as_mut(), controller.as_mut(), args.episodes, args.seed, &profile)?;
+        let eps = measure(env.as_mut(), controller.as_mut(), args.episodes, args.seed.seed, &profile)?;
         let qp_failures = eps.iter().map(|e| e.qp_failures).sum::<f64>();
         line(format!("{speed:.2}"), &summary_cells(&eps, |v| format!("{v:.2}")), qp_failures.to_string());
         if args.limits {

@@ -20,8 +20,8 @@ pub struct RecordArgs {
     pub policy: String,
     #[arg(long, default_value_t = 1)]
     pub episodes: usize,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    #[command(flatten)]
+    pub seed: super::SeedArg,
     /// Speed set-point of the Raibert controller (m/s), reached over the first second.
     #[arg(long, default_value_t = 0.35)]
     pub speed: f64,
@@ -52,7 +52,7 @@ pub fn run(args: RecordArgs) -> Result<()> {
         }
         p if p == "random" || p == "zero" || p.starts_with("actions:") => {
             let env = args.env.as_deref().with_context(|| format!("--policy {p} needs --env"))?;
-            (locobench::envs::EnvConfig::new(env), simple_policy(p, args.seed)?)
+            (locobench::envs::EnvConfig::new(env), simple_policy(p, args.seed.seed)?)
         }
         checkpoint => {
             let (run, agent) = load_policy(std::path::Path::new(checkpoint)).with_context(|| {
@@ -70,7 +70,7 @@ pub fn run(args: RecordArgs) -> Result<()> {
     let mut env = make(&cfg)?;
     let recording = Recording::create(&args.out)?;
     let mut recorder = RolloutRecorder::new(recording.stream(), env.data().model())?;
-    let summaries = run_episodes(env.as_mut(), policy.as_mut(), args.episodes, args.seed, &mut recorder)?;
+    let summaries = run_episodes(env.as_mut(), policy.as_mut(), args.episodes, args.seed.seed, &mut recorder)?;
     let frames = recorder.frames();
     drop(recorder);
     let path = recording.finish()?;

@@ -13,8 +13,8 @@ pub struct ReportArgs {
     /// Episodes per policy, seed and reward in the baseline-vs-RL comparison (0 skips it).
     #[arg(long, default_value_t = 5)]
     pub episodes: usize,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    #[command(flatten)]
+    pub seed: super::SeedArg,
     /// Baseline speed set-point on Minitaur (m/s).
     #[arg(long, default_value_t = 0.35)]
     pub minitaur_speed: f64,
@@ -24,7 +24,7 @@ pub struct ReportArgs {
 }
 
 pub fn run(args: ReportArgs) -> Result<()> {
-    let mut opts = ReportOptions { compare_episodes: args.episodes, seed: args.seed, ..Default::default() };
+    let mut opts = ReportOptions { compare_episodes: args.episodes, seed: args.seed.seed, ..Default::default() };
     opts.baseline_speed.insert("minitaur".into(), args.minitaur_speed);
     opts.baseline_speed.insert("ant".into(), args.ant_speed);
     let report = write_report(&args.runs, &args.out, &opts)?;

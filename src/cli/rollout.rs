@@ -17,8 +17,8 @@ pub struct RolloutArgs {
     pub policy: String,
     #[arg(long, default_value_t = 1)]
     pub episodes: usize,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    #[command(flatten)]
+    pub seed: super::SeedArg,
     /// Scale of the reset noise (sets the env option `reset_noise_scale`).
     #[arg(long)]
     pub reset_noise: Option<f64>,
@@ -43,7 +43,7 @@ pub fn run(args: RolloutArgs) -> Result<()> {
         cfg = cfg.with_overrides(&[("reset_noise_scale".into(), x.to_string())])?;
     }
     let mut env = make(&cfg)?;
-    let mut policy = simple_policy(&args.policy, args.seed)?;
+    let mut policy = simple_policy(&args.policy, args.seed.seed)?;
     let spec = env.spec().clone();
     let mut header: Vec<String> = vec!["episode".into(), "step".into()];
     header.extend((0..spec.action_space.dim()).map(|i| format!("action_{i}")));
@@ -56,7 +56,7 @@ pub fn run(args: RolloutArgs) -> Result<()> {
     write_atomic(&args.out, |w| {
         let mut csv = csv::Writer::from_writer(w);
         csv.write_record(&header)?;
-        summaries = run_episodes(env.as_mut(), policy.as_mut(), args.episodes, args.seed, &mut |v: &StepView| {
+        summaries = run_episodes(env.as_mut(), policy.as_mut(), args.episodes, args.seed.seed, &mut |v: &StepView| {
             let (action, step) = (v.action, v.step);
             let mut row: Vec<String> = vec![v.episode.to_string(), v.t.to_string()];
             // `{:?}` prints the shortest text that reads back as the same f64: replays are exact.

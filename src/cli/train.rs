@@ -5,58 +5,7 @@ use locobench::agents::Algo;
 use locobench::envs::EnvConfig;
 use locobench::train::{self, config::build_config, config::split_pairs, Outcome, RunControl};
 
-#[derive(clap::Args, Debug)]
-pub struct TrainArgs {
-    /// Environment name (see `locobench envs`).
-    #[arg(long, required_unless_present = "resume")]
-    pub env: Option<String>,
-    /// td3, sac or ddpg.
-    #[arg(long, required_unless_present = "resume")]
-    pub algo: Option<String>,
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
-    /// Total environment steps (same as --set total_steps=N). With --resume: raise the run's
-    /// budget to N steps and train on (a finished 100k run to 300k, say).
-    #[arg(long)]
-    pub steps: Option<u64>,
-    /// Hyperparameter overrides, e.g. `--set batch_size=256,hidden=[64,64]`.
-    #[arg(long = "set", value_name = "KEY=VALUE,...")]
-    pub set: Vec<String>,
-    #[command(flatten)]
-    pub env_options: super::EnvOptionArgs,
-    /// Run directory (default runs/<env>-<algo>-seed<seed>).
-    #[arg(long)]
-    pub out: Option<PathBuf>,
-    /// Start from a checkpoint's weights (fine-tuning); warm-up defaults to 0 steps then.
-    #[arg(long, value_name = "CHECKPOINT")]
-    pub init_from: Option<PathBuf>,
-    /// Continue a stopped run from its newest checkpoint.
-    #[arg(long, value_name = "DIR", conflicts_with_all = ["env", "algo", "set", "options", "reward", "env_config", "init_from", "out"])]
-    pub resume: Option<PathBuf>,
-    /// Replace an existing run directory.
-    #[arg(long)]
-    pub force: bool,
-    /// If --out already holds this same run (same env, options, hyperparameters and seed),
-    /// continue it instead of refusing; a finished run is left as it is. What sweep jobs use,
-    /// so that a requeued or resubmitted job never starts over.
-    #[arg(long, conflicts_with = "force")]
-    pub resume_if_exists: bool,
-    /// Hide the progress bar.
-    #[arg(long)]
-    pub quiet: bool,
-    /// Also write a rerun recording (learning curves and an evaluation rollout at every
-    /// evaluation), e.g. `--record training.rrd`.
-    #[arg(long, value_name = "FILE.rrd")]
-    pub record: Option<PathBuf>,
-    /// With --record: a rollout at every N-th evaluation only (the curves are always complete).
-    #[arg(long, default_value_t = 1, value_name = "N")]
-    pub record_every: u64,
-    /// 2: the large layers of each update run on two cores (same results, bit for bit); 1: one
-    /// core, for running several trainings side by side. Default: 2 on a machine with 2 or
-    /// more cores.
-    #[arg(long, value_name = "1|2", value_parser = clap::value_parser!(u8).range(1..=2))]
-    pub threads: Option<u8>,
-}
+pub use locobench::args::TrainArgs;
 
 fn default_threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get().min(2))
@@ -96,12 +45,12 @@ pub fn run(args: TrainArgs) -> Result<()> {
         let cfg = build_config(env, algo, &overrides)?;
         let env_cfg = args.env_options.apply(EnvConfig::new(env))?;
         let out =
-            args.out.clone().unwrap_or_else(|| PathBuf::from(format!("runs/{env}-{}-seed{}", algo.name(), args.seed)));
+            args.out.clone().unwrap_or_else(|| PathBuf::from(format!("runs/{env}-{}-seed{}", algo.name(), args.seed.seed)));
         if args.init_from.as_ref().is_some_and(|p| !p.exists()) {
             bail!("checkpoint {} does not exist", args.init_from.as_ref().unwrap().display());
         }
         if args.resume_if_exists && out.join("config.toml").exists() {
-            same_run_or_error(&out, &env_cfg, &cfg, args.seed)?;
+            same_run_or_error(&out, &env_cfg, &cfg, args.seed.seed)?;
             println!("{} holds this run already: resuming it", out.display());
             let summary = train::resume(&out, &control)?;
             return report(&args, &summary);
@@ -109,11 +58,11 @@ pub fn run(args: TrainArgs) -> Result<()> {
         println!(
             "training {} on {env}, seed {}, {} steps -> {}",
             algo.name(),
-            args.seed,
+            args.seed.seed,
             cfg.total_steps,
             out.display()
         );
-        train::train(env_cfg, cfg, args.seed, &out, args.init_from.as_deref(), args.force, &control)?
+        train::train(env_cfg, cfg, args.seed.seed, &out, args.init_from.as_deref(), args.force, &control)?
     };
     report(&args, &summary)
 }

@@ -18,6 +18,7 @@ use std::sync::Mutex;
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
+use crate::args::{EnvOptionArgs, SeedArg, TrainArgs};
 use crate::io::write_bytes_atomic;
 
 /// One axis of the grid: a reward term (e.g. `drift`), `set.<hyperparameter>` or
@@ -120,37 +121,33 @@ pub fn jobs(spec: &SweepSpec, sweep_dir: &Path) -> Result<Vec<Job>> {
                     point.iter().map(|(k, v)| format!("-{}{v}", k.rsplit('.').next().unwrap_or(k))).collect();
                 let name = format!("{algo}{tag}-seed{seed}");
                 let run_dir = sweep_dir.join("runs").join(&name);
-                let mut args: Vec<String> = ["train", "--env", &spec.env, "--algo", algo, "--seed", &seed.to_string()]
-                    .map(String::from)
-                    .to_vec();
-                if let Some(n) = spec.steps {
-                    args.extend(["--steps".into(), n.to_string()]);
-                }
-                let (mut rewards, mut sets, mut options) = (Vec::new(), spec.set.clone(), spec.options.clone());
+                let (mut rewards, mut set, mut options) = (Vec::new(), spec.set.clone(), spec.options.clone());
                 for (k, v) in point {
                     if let Some(h) = k.strip_prefix("set.") {
-                        sets.push(format!("{h}={v}"));
+                        set.push(format!("{h}={v}"));
                     } else if let Some(o) = k.strip_prefix("option.") {
                         options.push(format!("{o}={v}"));
                     } else {
                         rewards.push(format!("{k}={v}"));
                     }
                 }
-                if !rewards.is_empty() {
-                    args.extend(["--reward".into(), rewards.join(",")]);
-                }
-                for s in sets {
-                    args.extend(["--set".into(), s]);
-                }
-                for o in options {
-                    args.extend(["--option".into(), o]);
-                }
-                args.extend([
-                    "--out".into(),
-                    run_dir.display().to_string(),
-                    "--resume-if-exists".into(),
-                    "--quiet".into(),
-                ]);
+                let train = TrainArgs {
+                    env: Some(spec.env.clone()),
+                    algo: Some(algo.clone()),
+                    seed: SeedArg { seed },
+                    steps: spec.steps,
+                    set,
+                    env_options: EnvOptionArgs {
+                        env_config: None,
+                        options,
+                        reward: (!rewards.is_empty()).then(|| rewards.join(",")),
+                    },
+                    out: Some(run_dir.clone()),
+                    resume_if_exists: true,
+                    quiet: true,
+                    ..TrainArgs::default()
+                };
+                let args = train.to_args();
                 out.push(Job { name, run_dir, args });
             }
         }
@@ -286,5 +283,12 @@ mod tests {
         );
         let names: std::collections::BTreeSet<_> = jobs.iter().map(|j| j.name.clone()).collect();
         assert_eq!(names.len(), jobs.len(), "names are unique");
+        // Every line is a train command that parses back to its job.
+        for job in &jobs {
+            let train = TrainArgs::parse_from(&job.args).unwrap();
+            assert_eq!(train.to_args(), job.args);
+            assert_eq!(train.out.as_deref(), Some(job.run_dir.as_path()));
+            assert!(train.resume_if_exists && train.quiet);
+        }
     }
 }
