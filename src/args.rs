@@ -197,7 +197,8 @@ impl TrainArgs {
         if let Some(t) = self.threads {
             push("--threads", t.to_string());
         }
-        for (flag, on) in [("--force", self.force), ("--resume-if-exists", self.resume_if_exists), ("--quiet", self.quiet)]
+        for (flag, on) in
+            [("--force", self.force), ("--resume-if-exists", self.resume_if_exists), ("--quiet", self.quiet)]
         {
             if on {
                 a.push(flag.to_string());

@@ -61,7 +61,7 @@ fn ddpg_learns_inverted_pendulum() {
 fn td3_critic_target_on_a_hand_built_batch() {
     let mut cfg = TrainConfig::defaults(Algo::Td3);
     cfg.hidden = vec![8, 8];
-    cfg.policy_noise = 0.0; // smoothing noise off so the target is a plain function
+    cfg.dpg_mut().policy_noise = 0.0; // smoothing noise off so the target is a plain function
     let agent = DeterministicAgent::new(&cfg, 3, 2, &mut ChaCha8Rng::seed_from_u64(0)).unwrap();
     let mut b = Batch::new(3, 3, 2);
     b.obs = vec![0.1, 0.2, 0.3, -0.5, 0.0, 0.4, 1.0, -1.0, 0.5];
@@ -86,7 +86,7 @@ fn td3_critic_target_on_a_hand_built_batch() {
     assert!(q[2].abs() > 1e-4, "the test needs a non-zero bootstrap value");
 
     // With smoothing on, the target stays within what clipped noise allows.
-    cfg.policy_noise = 0.2;
+    cfg.dpg_mut().policy_noise = 0.2;
     let agent = DeterministicAgent::new(&cfg, 3, 2, &mut ChaCha8Rng::seed_from_u64(0)).unwrap();
     let y2 = agent
         .td_targets(&b, &mut ChaCha8Rng::seed_from_u64(1))

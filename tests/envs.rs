@@ -153,9 +153,8 @@ fn humanoid_falls_and_terminates_under_zero_action() {
 #[test]
 fn planar_walkers_reward_by_hand_health_and_clipped_velocities() {
     type Healthy = fn(&[f64], &[f64]) -> bool;
-    let hopper_healthy: Healthy = |q, v| {
-        q[2..].iter().chain(v).all(|x| x.abs() < 100.0) && q[1] > 0.7 && q[2].abs() < 0.2
-    };
+    let hopper_healthy: Healthy =
+        |q, v| q[2..].iter().chain(v).all(|x| x.abs() < 100.0) && q[1] > 0.7 && q[2].abs() < 0.2;
     let walker_healthy: Healthy = |q, _| q[1] > 0.8 && q[1] < 2.0 && q[2].abs() < 1.0;
     let envs: [(Box<dyn Env>, Healthy); 2] = [
         (Box::new(Hopper::new(HopperOptions::default()).unwrap()), hopper_healthy),

@@ -3,6 +3,7 @@
 //! committed under benches/results and models/policies still loads.
 use std::path::{Path, PathBuf};
 
+use locobench::agents::TrainConfig;
 use locobench::train::{self, Outcome, RunControl};
 
 const FIXTURE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/fixtures/run-2026-11-23");
@@ -30,7 +31,8 @@ fn a_format_1_run_directory_evaluates_and_resumes() {
     let (_, agent) = train::load_policy(fixture).unwrap();
     assert_eq!(agent.act(&[0.0; 4]).unwrap().len(), 1);
 
-    // Train it on from its checkpoint: the rewritten config is format 2 and the run finishes.
+    // Train it on from its checkpoint: the rewritten config is the current format and the run
+    // finishes.
     let dir = tempfile::tempdir().unwrap();
     let copy = dir.path().join("run");
     copy_dir(fixture, &copy);
@@ -38,7 +40,8 @@ fn a_format_1_run_directory_evaluates_and_resumes() {
     let s = train::resume(&copy, &RunControl::default()).unwrap();
     assert_eq!((s.outcome, s.steps), (Outcome::Finished, 900));
     let rewritten = std::fs::read_to_string(copy.join("config.toml")).unwrap();
-    assert!(rewritten.starts_with("format = 2"), "{rewritten}");
+    assert!(rewritten.starts_with("format = 3") && rewritten.contains("[train.td3]"), "{rewritten}");
+    assert_eq!(train::read_run_config(&copy).unwrap().train, TrainConfig { total_steps: 900, ..run.train });
 }
 
 fn configs_under(dir: &Path, out: &mut Vec<PathBuf>) {

@@ -32,6 +32,9 @@ pub enum SacVersion {
     V1,
 }
 
+/// Every hyperparameter of a training run: the settings all algorithms share, then the run's
+/// algorithm's own section (`[train.td3]`, `[train.ddpg]` or `[train.sac]` in `config.toml`).
+/// Exactly the section of `algo` is present (`validate` checks it).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrainConfig {
@@ -62,8 +65,18 @@ pub struct TrainConfig {
     pub eval_every: u64,
     pub eval_episodes: usize,
     pub checkpoint_every: u64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub td3: Option<DpgConfig>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ddpg: Option<DpgConfig>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sac: Option<SacConfig>,
+}
 
-    // TD3 and DDPG
+/// TD3's and DDPG's own settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DpgConfig {
     /// Exploration noise std in units of the action half-range (OU: its starting std).
     pub exploration_noise: f64,
     pub noise: NoiseKind,
@@ -77,29 +90,130 @@ pub struct TrainConfig {
     /// Actor and target updates happen every this many critic updates.
     pub policy_delay: u32,
     pub twin_critics: bool,
+}
 
-    // SAC
+impl DpgConfig {
+    pub const KEYS: &'static [&'static str] = &[
+        "exploration_noise",
+        "noise",
+        "ou_theta",
+        "ou_sigma_min",
+        "ou_decay_steps",
+        "ou_dt",
+        "policy_noise",
+        "noise_clip",
+        "policy_delay",
+        "twin_critics",
+    ];
+}
+
+/// SAC's own settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SacConfig {
     pub sac_version: SacVersion,
     pub autotune_alpha: bool,
     pub initial_alpha: f64,
     pub alpha_lr: f64,
-    /// Target entropy for the temperature; `None` means -dim(A).
+    /// Target entropy for the temperature; absent means -dim(A).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_entropy: Option<f64>,
+    /// SAC v1's value network.
     pub value_lr: f64,
+}
+
+impl SacConfig {
+    pub const KEYS: &'static [&'static str] =
+        &["sac_version", "autotune_alpha", "initial_alpha", "alpha_lr", "target_entropy", "value_lr"];
+}
+
+/// How [`TrainConfig::from_table`] treats a key of another algorithm's section.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum OtherAlgorithmKeys {
+    /// Config formats 1 and 2 listed every algorithm's settings flat in `[train]`: ignore them.
+    Ignore,
+    /// An error naming the key and the algorithms it belongs to.
+    Refuse,
 }
 
 impl TrainConfig {
     /// Reads a `[train]` table: keys it does not give take the algorithm's defaults (so a run
-    /// written before a hyperparameter existed still loads), an unknown key is an error naming it.
-    pub fn from_table(table: &toml::Table) -> anyhow::Result<TrainConfig> {
+    /// written before a hyperparameter existed still loads); the algorithm's settings may sit in
+    /// its section (`[train.td3]`) or, as in formats 1 and 2 and in `--set`, among the shared
+    /// keys. An unknown key is an error naming it.
+    pub fn from_table(table: &toml::Table, others: OtherAlgorithmKeys) -> anyhow::Result<TrainConfig> {
         let algo = match table.get("algo") {
             Some(toml::Value::String(name)) => Algo::parse(name)?,
             Some(other) => anyhow::bail!("algo must be a name like \"td3\", got {other}"),
             None => anyhow::bail!("no algo given"),
         };
+        let section_name = algo.name();
         let mut merged = toml::Table::try_from(TrainConfig::defaults(algo))?;
-        merged.extend(table.clone());
+        let mut section = match merged.remove(section_name) {
+            Some(toml::Value::Table(t)) => t,
+            _ => unreachable!("the defaults carry their algorithm's section"),
+        };
+        let own_keys = section_keys(algo);
+        let put = |key: &str, value: &toml::Value, merged: &mut toml::Table, section: &mut toml::Table| {
+            if own_keys.contains(&key) {
+                section.insert(key.to_string(), value.clone());
+                return Ok(());
+            }
+            if merged.contains_key(key) {
+                merged.insert(key.to_string(), value.clone());
+                return Ok(());
+            }
+            let owners: Vec<&str> =
+                super::registry::ALGOS.iter().filter(|e| section_keys(e.algo).contains(&key)).map(|e| e.name).collect();
+            match (owners.is_empty(), others) {
+                (true, _) => anyhow::bail!("unknown hyperparameter '{key}'"),
+                (false, OtherAlgorithmKeys::Ignore) => Ok(()),
+                (false, OtherAlgorithmKeys::Refuse) => {
+                    anyhow::bail!("'{key}' is a setting of {}, not of {section_name}", owners.join(" and "))
+                }
+            }
+        };
+        for (key, value) in table {
+            match (Algo::parse(key), value) {
+                (Ok(a), toml::Value::Table(entries)) if a == algo => {
+                    for (k, v) in entries {
+                        anyhow::ensure!(
+                            own_keys.contains(&k.as_str()),
+                            "unknown hyperparameter '{k}' in the [{section_name}] section"
+                        );
+                        section.insert(k.clone(), v.clone());
+                    }
+                }
+                (Ok(_), _) => anyhow::bail!("a {section_name} run has no [{key}] section"),
+                _ => put(key, value, &mut merged, &mut section)?,
+            }
+        }
+        merged.insert(section_name.to_string(), toml::Value::Table(section));
         toml::Value::Table(merged).try_into().map_err(|e: toml::de::Error| anyhow::anyhow!("{}", e.message()))
+    }
+
+    /// Every setting by name in one table, the algorithm's section lifted among the shared ones
+    /// (what `--set` takes and what reports compare).
+    pub fn to_flat_table(&self) -> toml::Table {
+        let mut table = toml::Table::try_from(self).expect("config serialises");
+        if let Some(toml::Value::Table(section)) = table.remove(self.algo.name()) {
+            table.extend(section);
+        }
+        table
+    }
+
+    /// TD3's or DDPG's section. Panics for another algorithm (agents only read their own).
+    pub fn dpg(&self) -> &DpgConfig {
+        self.td3.as_ref().or(self.ddpg.as_ref()).expect("a TD3 or DDPG config")
+    }
+
+    pub fn dpg_mut(&mut self) -> &mut DpgConfig {
+        self.td3.as_mut().or(self.ddpg.as_mut()).expect("a TD3 or DDPG config")
+    }
+
+    /// SAC's section. Panics for another algorithm.
+    pub fn sac(&self) -> &SacConfig {
+        self.sac.as_ref().expect("a SAC config")
     }
 
     /// The defaults each algorithm was published with (REFERENCE §5), from its registry entry.
@@ -107,10 +221,10 @@ impl TrainConfig {
         (super::registry::entry(algo).defaults)()
     }
 
-    /// TD3's published settings (Fujimoto et al. 2018).
-    pub fn td3_defaults() -> TrainConfig {
+    /// The settings all three algorithms share, at TD3's published values (Fujimoto et al. 2018).
+    fn shared_defaults(algo: Algo) -> TrainConfig {
         TrainConfig {
-            algo: Algo::Td3,
+            algo,
             total_steps: 1_000_000,
             warmup_steps: 10_000,
             learning_starts: 10_000,
@@ -127,47 +241,56 @@ impl TrainConfig {
             eval_every: 5000,
             eval_episodes: 10,
             checkpoint_every: 50_000,
-            exploration_noise: 0.1,
-            noise: NoiseKind::Gaussian,
-            ou_theta: 0.15,
-            ou_sigma_min: 0.05,
-            ou_decay_steps: 500_000,
-            ou_dt: 1e-2,
-            policy_noise: 0.2,
-            noise_clip: 0.5,
-            policy_delay: 2,
-            twin_critics: true,
-            sac_version: SacVersion::V2,
-            autotune_alpha: true,
-            initial_alpha: 1.0,
-            alpha_lr: 3e-4,
-            target_entropy: None,
-            value_lr: 3e-4,
+            td3: None,
+            ddpg: None,
+            sac: None,
+        }
+    }
+
+    /// TD3's published settings (Fujimoto et al. 2018).
+    pub fn td3_defaults() -> TrainConfig {
+        TrainConfig {
+            td3: Some(DpgConfig {
+                exploration_noise: 0.1,
+                noise: NoiseKind::Gaussian,
+                ou_theta: 0.15,
+                ou_sigma_min: 0.05,
+                ou_decay_steps: 500_000,
+                ou_dt: 1e-2,
+                policy_noise: 0.2,
+                noise_clip: 0.5,
+                policy_delay: 2,
+                twin_critics: true,
+            }),
+            ..TrainConfig::shared_defaults(Algo::Td3)
         }
     }
 
     /// "Our DDPG" of the TD3 paper: TD3's settings without its three changes.
     pub fn ddpg_defaults() -> TrainConfig {
+        let td3 = TrainConfig::td3_defaults().td3.expect("TD3's section");
         TrainConfig {
-            algo: Algo::Ddpg,
-            policy_noise: 0.0,
-            noise_clip: 0.0,
-            policy_delay: 1,
-            twin_critics: false,
-            ..TrainConfig::td3_defaults()
+            ddpg: Some(DpgConfig { policy_noise: 0.0, noise_clip: 0.0, policy_delay: 1, twin_critics: false, ..td3 }),
+            ..TrainConfig::shared_defaults(Algo::Ddpg)
         }
     }
 
     /// SAC v2's (Haarnoja et al. 2018b): 256-256, Adam 3e-4, batch 256.
     pub fn sac_defaults() -> TrainConfig {
         TrainConfig {
-            algo: Algo::Sac,
             batch_size: 256,
             hidden: vec![256, 256],
             actor_lr: 3e-4,
             critic_lr: 3e-4,
-            policy_delay: 1,
-            ..TrainConfig::td3_defaults()
+            sac: Some(SacConfig {
+                sac_version: SacVersion::V2,
+                autotune_alpha: true,
+                initial_alpha: 1.0,
+                alpha_lr: 3e-4,
+                target_entropy: None,
+                value_lr: 3e-4,
+            }),
+            ..TrainConfig::shared_defaults(Algo::Sac)
         }
     }
 
@@ -176,11 +299,17 @@ impl TrainConfig {
             anyhow::ensure!(v.is_finite() && v > 0.0, "{name} must be a finite number > 0, got {v}");
             Ok(())
         };
+        let sections = [("td3", self.td3.is_some()), ("ddpg", self.ddpg.is_some()), ("sac", self.sac.is_some())];
+        for (name, present) in sections {
+            anyhow::ensure!(
+                present == (name == self.algo.name()),
+                "a {} config must carry exactly its own [{}] section",
+                self.algo.name(),
+                self.algo.name()
+            );
+        }
         positive("actor_lr", self.actor_lr)?;
         positive("critic_lr", self.critic_lr)?;
-        positive("alpha_lr", self.alpha_lr)?;
-        positive("value_lr", self.value_lr)?;
-        positive("initial_alpha", self.initial_alpha)?;
         positive("reward_scale", self.reward_scale)?;
         anyhow::ensure!(
             !self.normalize_observations || self.learning_starts >= self.batch_size.max(2) as u64,
@@ -197,17 +326,68 @@ impl TrainConfig {
             !self.hidden.is_empty() && self.hidden.iter().all(|&h| h > 0),
             "hidden needs at least one layer size > 0"
         );
-        anyhow::ensure!(self.policy_delay >= 1, "policy_delay must be at least 1");
         anyhow::ensure!(self.updates_per_step >= 1, "updates_per_step must be at least 1");
         anyhow::ensure!(
             self.eval_every > 0 && self.eval_episodes > 0,
             "eval_every and eval_episodes must be at least 1"
         );
         anyhow::ensure!(self.checkpoint_every > 0, "checkpoint_every must be at least 1");
-        anyhow::ensure!(
-            self.exploration_noise >= 0.0 && self.policy_noise >= 0.0 && self.noise_clip >= 0.0,
-            "noise scales must be >= 0"
-        );
+        if let Some(d) = self.td3.as_ref().or(self.ddpg.as_ref()) {
+            anyhow::ensure!(d.policy_delay >= 1, "policy_delay must be at least 1");
+            anyhow::ensure!(
+                d.exploration_noise >= 0.0 && d.policy_noise >= 0.0 && d.noise_clip >= 0.0,
+                "noise scales must be >= 0"
+            );
+        }
+        if let Some(s) = &self.sac {
+            positive("alpha_lr", s.alpha_lr)?;
+            positive("value_lr", s.value_lr)?;
+            positive("initial_alpha", s.initial_alpha)?;
+        }
         Ok(())
+    }
+}
+
+/// The keys of an algorithm's own section, from its registry entry.
+pub fn section_keys(algo: Algo) -> &'static [&'static str] {
+    super::registry::entry(algo).settings
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sections_hold_exactly_their_algorithms_settings() {
+        for algo in [Algo::Td3, Algo::Ddpg, Algo::Sac] {
+            let d = TrainConfig::defaults(algo);
+            d.validate().unwrap();
+            let table = toml::Table::try_from(&d).unwrap();
+            let section = table[algo.name()].as_table().unwrap();
+            // Every serialised key is declared (target_entropy is absent while None).
+            assert!(section.keys().all(|k| section_keys(algo).contains(&k.as_str())), "{algo:?}");
+            assert_eq!(section.len() + usize::from(algo == Algo::Sac), section_keys(algo).len());
+            for other in ["td3", "ddpg", "sac"].into_iter().filter(|o| *o != algo.name()) {
+                assert!(!table.contains_key(other));
+            }
+            // Flat and sectioned spellings read the same.
+            let flat = d.to_flat_table();
+            assert_eq!(TrainConfig::from_table(&flat, OtherAlgorithmKeys::Refuse).unwrap(), d);
+            assert_eq!(TrainConfig::from_table(&table, OtherAlgorithmKeys::Refuse).unwrap(), d);
+        }
+        let mut t = toml::Table::new();
+        t.insert("algo".into(), "td3".into());
+        t.insert("alpha_lr".into(), 0.1.into());
+        let err = TrainConfig::from_table(&t, OtherAlgorithmKeys::Refuse).unwrap_err().to_string();
+        assert!(err.contains("alpha_lr") && err.contains("sac"), "{err}");
+        assert_eq!(TrainConfig::from_table(&t, OtherAlgorithmKeys::Ignore).unwrap(), TrainConfig::td3_defaults());
+        let mut t = toml::Table::new();
+        t.insert("algo".into(), "td3".into());
+        t.insert("sac".into(), toml::Value::Table(toml::Table::new()));
+        assert!(TrainConfig::from_table(&t, OtherAlgorithmKeys::Ignore).is_err());
+        let mut t = toml::Table::new();
+        t.insert("algo".into(), "sac".into());
+        t.insert("target_entropy".into(), (-3.0).into());
+        assert_eq!(TrainConfig::from_table(&t, OtherAlgorithmKeys::Refuse).unwrap().sac().target_entropy, Some(-3.0));
     }
 }

@@ -35,21 +35,22 @@ pub struct DeterministicAgent {
 impl DeterministicAgent {
     pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
         let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), Output::Tanh, rng)?;
-        let n_critics = if cfg.twin_critics { 2 } else { 1 };
+        let dpg = cfg.dpg();
+        let n_critics = if dpg.twin_critics { 2 } else { 1 };
         let critics = Critics::new(n_critics, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), rng)?;
         let actor_target = actor.deep_copy()?;
         let critic_targets = critics.deep_copy()?;
         let actor_opt = Adam::new(actor.vars(), cfg.actor_lr);
         let critic_opt = Adam::new(critics.vars(), cfg.critic_lr);
-        let noise = match cfg.noise {
-            NoiseKind::Gaussian => Noise::Gaussian { sigma: cfg.exploration_noise },
+        let noise = match dpg.noise {
+            NoiseKind::Gaussian => Noise::Gaussian { sigma: dpg.exploration_noise },
             NoiseKind::OrnsteinUhlenbeck => Noise::ornstein_uhlenbeck(
                 act_dim,
-                cfg.ou_theta,
-                cfg.exploration_noise,
-                cfg.ou_sigma_min,
-                cfg.ou_decay_steps,
-                cfg.ou_dt,
+                dpg.ou_theta,
+                dpg.exploration_noise,
+                dpg.ou_sigma_min,
+                dpg.ou_decay_steps,
+                dpg.ou_dt,
             ),
         };
         Ok(DeterministicAgent {
@@ -58,9 +59,9 @@ impl DeterministicAgent {
             obs_dim,
             gamma: cfg.gamma,
             tau: cfg.tau,
-            policy_noise: cfg.policy_noise,
-            noise_clip: cfg.noise_clip,
-            policy_delay: cfg.policy_delay as u64,
+            policy_noise: dpg.policy_noise,
+            noise_clip: dpg.noise_clip,
+            policy_delay: dpg.policy_delay as u64,
             actor,
             actor_target,
             critics,

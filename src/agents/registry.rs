@@ -1,9 +1,10 @@
 //! The algorithm registry: each algorithm is declared once, in [`ALGOS`] (name, published
-//! defaults, constructor); parsing names, defaults and `make_agent` all go through it.
+//! defaults, its config section's keys, constructor); parsing names, defaults, config sections
+//! and `make_agent` all go through it.
 use candle_core::Result;
 use rand_chacha::ChaCha8Rng;
 
-use super::{Agent, Algo, DeterministicAgent, SacAgent, TrainConfig};
+use super::{Agent, Algo, DeterministicAgent, DpgConfig, SacAgent, SacConfig, TrainConfig};
 
 pub struct AlgoEntry {
     pub algo: Algo,
@@ -11,14 +12,34 @@ pub struct AlgoEntry {
     pub name: &'static str,
     /// The settings it was published with.
     pub defaults: fn() -> TrainConfig,
+    /// The keys of its own `config.toml` section (`[train.<name>]`).
+    pub settings: &'static [&'static str],
     /// Builds the agent for observation and action sizes, initialised from the RNG.
     pub build: fn(&TrainConfig, usize, usize, &mut ChaCha8Rng) -> Result<Box<dyn Agent>>,
 }
 
 pub const ALGOS: &[AlgoEntry] = &[
-    AlgoEntry { algo: Algo::Td3, name: "td3", defaults: TrainConfig::td3_defaults, build: deterministic },
-    AlgoEntry { algo: Algo::Sac, name: "sac", defaults: TrainConfig::sac_defaults, build: sac },
-    AlgoEntry { algo: Algo::Ddpg, name: "ddpg", defaults: TrainConfig::ddpg_defaults, build: deterministic },
+    AlgoEntry {
+        algo: Algo::Td3,
+        name: "td3",
+        defaults: TrainConfig::td3_defaults,
+        settings: DpgConfig::KEYS,
+        build: deterministic,
+    },
+    AlgoEntry {
+        algo: Algo::Sac,
+        name: "sac",
+        defaults: TrainConfig::sac_defaults,
+        settings: SacConfig::KEYS,
+        build: sac,
+    },
+    AlgoEntry {
+        algo: Algo::Ddpg,
+        name: "ddpg",
+        defaults: TrainConfig::ddpg_defaults,
+        settings: DpgConfig::KEYS,
+        build: deterministic,
+    },
 ];
 
 /// The entry of an algorithm (every `Algo` has one; tested).

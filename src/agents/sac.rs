@@ -58,17 +58,18 @@ impl SacAgent {
         let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 2 * act_dim), Output::Linear, rng)?;
         let critics = Critics::new(2, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), rng)?;
         let critic_targets = critics.deep_copy()?;
-        let value = match cfg.sac_version {
+        let settings = cfg.sac();
+        let value = match settings.sac_version {
             SacVersion::V2 => None,
             SacVersion::V1 => {
                 let net = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 1), Output::Linear, rng)?;
                 let target = net.deep_copy()?;
-                let opt = Adam::new(net.vars(), cfg.value_lr);
+                let opt = Adam::new(net.vars(), settings.value_lr);
                 Some(ValueNet { net, target, opt })
             }
         };
-        let log_alpha = scalar_var(cfg.initial_alpha.ln() as f32)?;
-        let autotune = cfg.autotune_alpha && cfg.sac_version == SacVersion::V2;
+        let log_alpha = scalar_var(settings.initial_alpha.ln() as f32)?;
+        let autotune = settings.autotune_alpha && settings.sac_version == SacVersion::V2;
         Ok(SacAgent {
             obs_dim,
             act_dim,
@@ -76,13 +77,13 @@ impl SacAgent {
             tau: cfg.tau,
             actor_opt: Adam::new(actor.vars(), cfg.actor_lr),
             critic_opt: Adam::new(critics.vars(), cfg.critic_lr),
-            alpha_opt: autotune.then(|| Adam::new(vec![log_alpha.clone()], cfg.alpha_lr)),
+            alpha_opt: autotune.then(|| Adam::new(vec![log_alpha.clone()], settings.alpha_lr)),
             actor,
             critics,
             critic_targets,
             value,
             log_alpha,
-            target_entropy: cfg.target_entropy.unwrap_or(-(act_dim as f64)),
+            target_entropy: settings.target_entropy.unwrap_or(-(act_dim as f64)),
             updates: 0,
         })
     }

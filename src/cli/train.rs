@@ -44,8 +44,10 @@ pub fn run(args: TrainArgs) -> Result<()> {
         }
         let cfg = build_config(env, algo, &overrides)?;
         let env_cfg = args.env_options.apply(EnvConfig::new(env))?;
-        let out =
-            args.out.clone().unwrap_or_else(|| PathBuf::from(format!("runs/{env}-{}-seed{}", algo.name(), args.seed.seed)));
+        let out = args
+            .out
+            .clone()
+            .unwrap_or_else(|| PathBuf::from(format!("runs/{env}-{}-seed{}", algo.name(), args.seed.seed)));
         if args.init_from.as_ref().is_some_and(|p| !p.exists()) {
             bail!("checkpoint {} does not exist", args.init_from.as_ref().unwrap().display());
         }

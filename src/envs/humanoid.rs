@@ -143,7 +143,8 @@ impl Task for HumanoidTask {
         let after = Self::mass_center(sim);
         let velocity = [(after[0] - before[0]) / dt, (after[1] - before[1]) / dt];
         let healthy = self.is_healthy(sim);
-        let contact_cost = quadratic_cost(self.opts.contact_cost_weight, sim.data.cfrc_ext()).min(self.opts.contact_cost_max);
+        let contact_cost =
+            quadratic_cost(self.opts.contact_cost_weight, sim.data.cfrc_ext()).min(self.opts.contact_cost_max);
         Ok(TaskStep {
             reward_terms: vec![
                 ("forward", self.opts.forward_reward_weight * velocity[0]),

@@ -31,12 +31,12 @@ pub use humanoid::{Humanoid, HumanoidOptions};
 pub use inverted_pendulum::{InvertedPendulum, InvertedPendulumOptions};
 pub use minitaur::{Minitaur, MinitaurOptions};
 pub use mujoco_env::MujocoEnv;
-pub use simulation::{Simulation, VelocityNoise};
-pub use task::{Task, TaskStep, Timing};
-pub use walker2d::{Walker2d, Walker2dOptions};
 pub use registry::{
     env_names, lookup, make, model_xml, parse_overrides, reward_weight_option, EnvConfig, EnvEntry, ENVS,
 };
+pub use simulation::{Simulation, VelocityNoise};
+pub use task::{Task, TaskStep, Timing};
+pub use walker2d::{Walker2d, Walker2dOptions};
 
 use crate::mujoco::Data;
 

@@ -80,6 +80,7 @@ mod tests {
         let a = super::bundled_anchors();
         assert!(a.len() >= 9);
         assert!(a.iter().all(|x| !x.source.is_empty() && x.steps > 0 && x.value.is_finite()));
+        assert!(a.iter().all(|x| crate::envs::lookup(&x.env).is_ok()), "every anchor names a registered env");
         let td3 = a.iter().find(|x| x.env == "half-cheetah" && x.algo == "td3" && x.steps == 1_000_000).unwrap();
         assert_eq!(td3.value, 9636.95);
     }
@@ -87,14 +88,16 @@ mod tests {
     #[test]
     fn bundled_curves_have_the_five_marks_and_a_source() {
         let curves = super::bundled_curves();
-        assert_eq!(curves.len(), 5);
+        assert_eq!(curves.len(), 9);
         for c in &curves {
+            assert!(crate::envs::lookup(&c.env).is_ok() && crate::agents::Algo::parse(&c.algo).is_ok(), "{}", c.env);
             assert_eq!(c.steps, vec![100_000, 200_000, 300_000, 500_000, 1_000_000]);
             assert!(!c.source.is_empty());
         }
         let sac = super::published_curve("half-cheetah", "sac").unwrap();
         assert_eq!(sac.at(100_000), Some((5794.0, 437.0)));
         assert_eq!(sac.at(150_000), None);
+        assert_eq!(super::published_curve("hopper", "td3").unwrap().at(300_000), Some((2410.0, 900.0)));
         assert!(super::published_curve("minitaur", "sac").is_none());
     }
 }

@@ -67,8 +67,7 @@ impl Run {
         const BOOKKEEPING: [&str; 4] = ["total_steps", "eval_every", "eval_episodes", "checkpoint_every"];
         let mut changed = Vec::new();
         if let Ok(preset) = crate::train::config::build_config(self.env(), self.config.train.algo, &[]) {
-            let ours = toml::Table::try_from(&self.config.train).unwrap_or_default();
-            let theirs = toml::Table::try_from(&preset).unwrap_or_default();
+            let (ours, theirs) = (self.config.train.to_flat_table(), preset.to_flat_table());
             for (k, v) in &ours {
                 if !BOOKKEEPING.contains(&k.as_str()) && theirs.get(k) != Some(v) {
                     changed.push(format!("{k}={v}"));

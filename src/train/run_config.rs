@@ -6,16 +6,19 @@
 //! - 2: adds `format`. Hyperparameters added later (`reward_scale`, `normalize_observations`,
 //!   ...) take their algorithm's default when a file does not name them, so a new field never
 //!   makes an old run unreadable; an unknown key is still an error naming it.
+//! - 3: each algorithm's own settings move to its section (`[train.td3]`, `[train.ddpg]`,
+//!   `[train.sac]`); formats 1 and 2 listed every algorithm's settings flat in `[train]`, and
+//!   reading them ignores the settings of the algorithms the run did not use.
 use std::path::Path;
 
 use anyhow::{bail, Context, Result};
 use serde::{Deserialize, Serialize};
 
-use crate::agents::TrainConfig;
+use crate::agents::{OtherAlgorithmKeys, TrainConfig};
 use crate::envs::EnvConfig;
 
 /// The format this version writes.
-pub const FORMAT: u32 = 2;
+pub const FORMAT: u32 = 3;
 
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RunConfig {
@@ -63,7 +66,8 @@ impl RunConfig {
                 stored.format
             );
         }
-        let train = TrainConfig::from_table(&stored.train)
+        let others = if stored.format < 3 { OtherAlgorithmKeys::Ignore } else { OtherAlgorithmKeys::Refuse };
+        let train = TrainConfig::from_table(&stored.train, others)
             .with_context(|| format!("{}: in the [train] table", path.display()))?;
         Ok(RunConfig {
             format: FORMAT,
@@ -111,10 +115,22 @@ total_steps = 1000
         let defaults = TrainConfig::defaults(crate::agents::Algo::Sac);
         assert_eq!(run.train, TrainConfig { total_steps: 1000, ..defaults });
         assert_eq!(run.format, FORMAT);
-        // Written back, it is format 2 and reads the same.
-        let again = RunConfig::parse(&run.to_toml().unwrap(), Path::new("x")).unwrap();
+        // Written back, it is the current format and reads the same.
+        let text = run.to_toml().unwrap();
+        let again = RunConfig::parse(&text, Path::new("x")).unwrap();
         assert_eq!(again, run);
-        assert!(run.to_toml().unwrap().starts_with("format = 2"));
+        assert!(text.starts_with("format = 3") && text.contains("[train.sac]"), "{text}");
+        assert!(!text.contains("policy_delay"), "no other algorithm's settings: {text}");
+    }
+
+    #[test]
+    fn a_format_2_file_lists_every_algorithm_flat_and_loads_its_own() {
+        let flat = FORMAT_1.replace("total_steps = 1000", "total_steps = 1000\nalpha_lr = 0.001\npolicy_delay = 2");
+        let run = RunConfig::parse(&format!("format = 2\n{flat}"), Path::new("c")).unwrap();
+        assert_eq!(run.train.sac().alpha_lr, 0.001);
+        // In the current format another algorithm's key is an error.
+        let err = format!("{:#}", RunConfig::parse(&format!("format = 3\n{flat}"), Path::new("c")).unwrap_err());
+        assert!(err.contains("policy_delay") && err.contains("td3"), "{err}");
     }
 
     #[test]
