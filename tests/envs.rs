@@ -125,6 +125,31 @@ fn humanoid_reward_by_hand() {
 }
 
 #[test]
+fn humanoid_observation_parts_can_be_left_out_as_in_gymnasium_v5() {
+    let full = |o: HumanoidOptions| {
+        let mut env = Humanoid::new(o).unwrap();
+        let (obs, _) = env.reset(Some(1)).unwrap();
+        let s = env.step(&[0.1; 17]).unwrap();
+        assert_eq!(obs.len(), env.spec().observation_space.dim());
+        (s.observation, s.reward)
+    };
+    let (all, reward) = full(HumanoidOptions::default());
+    let (no_contact, reward_no_contact) =
+        full(HumanoidOptions { include_cfrc_ext_in_observation: false, ..Default::default() });
+    assert_eq!((all.len(), no_contact.len()), (348, 270));
+    assert_eq!(&all[..270], &no_contact[..], "the same state, its contact forces left out");
+    assert_eq!(reward, reward_no_contact, "the contact cost still counts");
+    let (bare, _) = full(HumanoidOptions {
+        include_cinert_in_observation: false,
+        include_cvel_in_observation: false,
+        include_qfrc_actuator_in_observation: false,
+        include_cfrc_ext_in_observation: false,
+        ..Default::default()
+    });
+    assert_eq!(&bare[..], &all[..45]);
+}
+
+#[test]
 fn humanoid_falls_and_terminates_under_zero_action() {
     let mut env = Humanoid::new(HumanoidOptions::default()).unwrap();
     env.reset(Some(0)).unwrap();

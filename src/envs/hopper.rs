@@ -5,10 +5,9 @@ use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
 use super::options::Check;
-use super::simulation::{Simulation, VelocityNoise};
-use super::task::{planar_walker_observation, planar_walker_step, Task, TaskStep, Timing};
-use super::{BoxSpace, EnvError};
-use crate::mujoco::Model;
+use super::planar_walker::{inside, PlanarWalker, WalkerSettings};
+use super::simulation::Simulation;
+use super::EnvError;
 
 pub const MODEL_XML: &str = include_str!("../../models/hopper.xml");
 
@@ -69,61 +68,33 @@ pub struct HopperTask {
 
 pub type Hopper = MujocoEnv<HopperTask>;
 
-impl HopperTask {
-    fn is_healthy(&self, sim: &Simulation) -> bool {
-        let (q, v) = (sim.data.qpos(), sim.data.qvel());
-        let inside = |[lo, hi]: [f64; 2], x: f64| lo < x && x < hi;
-        q[2..].iter().chain(v).all(|&x| inside(self.opts.healthy_state_range, x))
-            && inside(self.opts.healthy_z_range, q[1])
-            && inside(self.opts.healthy_angle_range, q[2])
-    }
-}
-
-impl Task for HopperTask {
+impl PlanarWalker for HopperTask {
     type Options = HopperOptions;
-    type Before = f64;
     const NAME: &'static str = "hopper";
     const MODEL_XML: &'static str = MODEL_XML;
-    const REWARD_TERMS: &'static [&'static str] = &["forward", "healthy", "ctrl_cost"];
 
-    fn new(opts: HopperOptions, _model: &Model) -> Result<Self, EnvError> {
+    fn new(opts: HopperOptions) -> Result<Self, EnvError> {
         opts.validate()?;
         Ok(HopperTask { opts })
     }
 
-    fn timing(&self) -> Timing {
-        Timing {
-            frame_skip: self.opts.frame_skip,
-            max_episode_steps: self.opts.max_episode_steps,
-            reset_noise_scale: self.opts.reset_noise_scale,
-            velocity_noise: VelocityNoise::Uniform,
+    fn settings(&self) -> WalkerSettings {
+        let o = &self.opts;
+        WalkerSettings {
+            forward_reward_weight: o.forward_reward_weight,
+            healthy_reward: o.healthy_reward,
+            ctrl_cost_weight: o.ctrl_cost_weight,
+            terminate_when_unhealthy: o.terminate_when_unhealthy,
+            reset_noise_scale: o.reset_noise_scale,
+            max_episode_steps: o.max_episode_steps,
+            frame_skip: o.frame_skip,
         }
     }
 
-    fn observation_dim(&self, model: &Model) -> usize {
-        model.nq() - 1 + model.nv()
-    }
-
-    fn action_space(&self, model: &Model) -> BoxSpace {
-        BoxSpace::uniform(model.nu(), -1.0, 1.0)
-    }
-
-    fn observe(&self, sim: &Simulation, out: &mut Vec<f64>) {
-        planar_walker_observation(sim, out)
-    }
-
-    fn reset_metrics(&self, sim: &Simulation) -> Vec<(&'static str, f64)> {
-        vec![("x_position", sim.data.qpos()[0])]
-    }
-
-    fn before(&self, sim: &Simulation) -> f64 {
-        sim.data.qpos()[0]
-    }
-
-    fn after(&self, sim: &mut Simulation, x_before: &f64, action: &[f64], dt: f64) -> Result<TaskStep, EnvError> {
-        let healthy = self.is_healthy(sim);
-        let o = &self.opts;
-        let weights = [o.forward_reward_weight, o.healthy_reward, o.ctrl_cost_weight];
-        Ok(planar_walker_step(sim, *x_before, action, dt, healthy, weights, o.terminate_when_unhealthy))
+    fn is_healthy(&self, sim: &Simulation) -> bool {
+        let (q, v) = (sim.data.qpos(), sim.data.qvel());
+        q[2..].iter().chain(v).all(|&x| inside(self.opts.healthy_state_range, x))
+            && inside(self.opts.healthy_z_range, q[1])
+            && inside(self.opts.healthy_angle_range, q[2])
     }
 }

@@ -28,6 +28,13 @@ pub struct HumanoidOptions {
     pub reset_noise_scale: f64,
     pub max_episode_steps: usize,
     pub frame_skip: usize,
+    /// Gymnasium v5's switches for the observation's parts after qpos[2:] and qvel. Gymnasium
+    /// v4, on which most published Humanoid results ran, read `cfrc_ext` as zeros (a bug fixed
+    /// in v5); `include_cfrc_ext_in_observation = false` drops what v4 could not see.
+    pub include_cinert_in_observation: bool,
+    pub include_cvel_in_observation: bool,
+    pub include_qfrc_actuator_in_observation: bool,
+    pub include_cfrc_ext_in_observation: bool,
 }
 
 impl Default for HumanoidOptions {
@@ -43,6 +50,10 @@ impl Default for HumanoidOptions {
             reset_noise_scale: 1e-2,
             max_episode_steps: 1000,
             frame_skip: 5,
+            include_cinert_in_observation: true,
+            include_cvel_in_observation: true,
+            include_qfrc_actuator_in_observation: true,
+            include_cfrc_ext_in_observation: true,
         }
     }
 }
@@ -111,8 +122,14 @@ impl Task for HumanoidTask {
     }
 
     fn observation_dim(&self, m: &Model) -> usize {
-        let nb = m.nbody() - 1;
-        (m.nq() - 2) + m.nv() + 10 * nb + 6 * nb + (m.nv() - 6) + 6 * nb
+        let (nb, o) = (m.nbody() - 1, &self.opts);
+        let part = |include: bool, n: usize| if include { n } else { 0 };
+        (m.nq() - 2)
+            + m.nv()
+            + part(o.include_cinert_in_observation, 10 * nb)
+            + part(o.include_cvel_in_observation, 6 * nb)
+            + part(o.include_qfrc_actuator_in_observation, m.nv() - 6)
+            + part(o.include_cfrc_ext_in_observation, 6 * nb)
     }
 
     fn action_space(&self, m: &Model) -> BoxSpace {
@@ -124,10 +141,19 @@ impl Task for HumanoidTask {
         let d = &sim.data;
         out.extend_from_slice(&d.qpos()[2..]);
         out.extend_from_slice(d.qvel());
-        out.extend_from_slice(&d.cinert()[10..]);
-        out.extend_from_slice(&d.cvel()[6..]);
-        out.extend_from_slice(&d.qfrc_actuator()[6..]);
-        out.extend_from_slice(&d.cfrc_ext()[6..]);
+        let o = &self.opts;
+        if o.include_cinert_in_observation {
+            out.extend_from_slice(&d.cinert()[10..]);
+        }
+        if o.include_cvel_in_observation {
+            out.extend_from_slice(&d.cvel()[6..]);
+        }
+        if o.include_qfrc_actuator_in_observation {
+            out.extend_from_slice(&d.qfrc_actuator()[6..]);
+        }
+        if o.include_cfrc_ext_in_observation {
+            out.extend_from_slice(&d.cfrc_ext()[6..]);
+        }
     }
 
     fn reset_metrics(&self, sim: &Simulation) -> Vec<(&'static str, f64)> {

@@ -18,6 +18,7 @@ mod inverted_pendulum;
 pub mod minitaur;
 mod mujoco_env;
 mod options;
+mod planar_walker;
 mod registry;
 mod simulation;
 mod task;

@@ -74,34 +74,3 @@ pub(crate) fn locomotion_metrics(sim: &Simulation, velocity: [f64; 2]) -> Vec<(&
         ("torso_height", q[2]),
     ]
 }
-
-/// The observation of Gymnasium's planar walkers (Hopper, Walker2d): qpos without the x
-/// position, then qvel clipped to ±10.
-pub(crate) fn planar_walker_observation(sim: &Simulation, out: &mut Vec<f64>) {
-    out.extend_from_slice(&sim.data.qpos()[1..]);
-    out.extend(sim.data.qvel().iter().map(|v| v.clamp(-10.0, 10.0)));
-}
-
-/// The planar walkers' step: `forward * dx/dt + healthy (while healthy) - ctrl * |a|^2`, with
-/// `weights = [forward, healthy, ctrl]`; terminated when unhealthy if `terminate`.
-pub(crate) fn planar_walker_step(
-    sim: &Simulation,
-    x_before: f64,
-    action: &[f64],
-    dt: f64,
-    healthy: bool,
-    [forward, healthy_reward, ctrl]: [f64; 3],
-    terminate: bool,
-) -> TaskStep {
-    let q = sim.data.qpos();
-    let x_velocity = (q[0] - x_before) / dt;
-    TaskStep {
-        reward_terms: vec![
-            ("forward", forward * x_velocity),
-            ("healthy", if healthy { healthy_reward } else { 0.0 }),
-            ("ctrl_cost", -quadratic_cost(ctrl, action)),
-        ],
-        metrics: vec![("x_position", q[0]), ("x_velocity", x_velocity), ("torso_height", q[1]), ("torso_angle", q[2])],
-        terminated: !healthy && terminate,
-    }
-}

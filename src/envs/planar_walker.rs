@@ -1,0 +1,95 @@
+//! What Gymnasium's planar walkers (Hopper, Walker2d) share, once: observation qpos[1:] +
+//! clip(qvel, ±10), reward forward * dx/dt + healthy (while healthy) - ctrl * |a|^2, reset noise
+//! U(-s, s) on qpos and qvel. Each walker adds its model, its options and its health rule.
+use serde::de::DeserializeOwned;
+use serde::Serialize;
+
+use super::simulation::{Simulation, VelocityNoise};
+use super::task::{quadratic_cost, Task, TaskStep, Timing};
+use super::{BoxSpace, EnvError};
+use crate::mujoco::Model;
+
+/// The reward weights and settings every planar walker's options carry.
+pub struct WalkerSettings {
+    pub forward_reward_weight: f64,
+    pub healthy_reward: f64,
+    pub ctrl_cost_weight: f64,
+    pub terminate_when_unhealthy: bool,
+    pub reset_noise_scale: f64,
+    pub max_episode_steps: usize,
+    pub frame_skip: usize,
+}
+
+pub trait PlanarWalker: Send + Sized + 'static {
+    type Options: DeserializeOwned + Serialize;
+    const NAME: &'static str;
+    const MODEL_XML: &'static str;
+    /// Validates the options.
+    fn new(options: Self::Options) -> Result<Self, EnvError>;
+    fn settings(&self) -> WalkerSettings;
+    fn is_healthy(&self, sim: &Simulation) -> bool;
+}
+
+impl<W: PlanarWalker> Task for W {
+    type Options = W::Options;
+    type Before = f64;
+    const NAME: &'static str = W::NAME;
+    const MODEL_XML: &'static str = W::MODEL_XML;
+    const REWARD_TERMS: &'static [&'static str] = &["forward", "healthy", "ctrl_cost"];
+
+    fn new(options: W::Options, _model: &Model) -> Result<Self, EnvError> {
+        W::new(options)
+    }
+
+    fn timing(&self) -> Timing {
+        let s = self.settings();
+        Timing {
+            frame_skip: s.frame_skip,
+            max_episode_steps: s.max_episode_steps,
+            reset_noise_scale: s.reset_noise_scale,
+            velocity_noise: VelocityNoise::Uniform,
+        }
+    }
+
+    fn observation_dim(&self, model: &Model) -> usize {
+        model.nq() - 1 + model.nv()
+    }
+
+    fn action_space(&self, model: &Model) -> BoxSpace {
+        BoxSpace::uniform(model.nu(), -1.0, 1.0)
+    }
+
+    fn observe(&self, sim: &Simulation, out: &mut Vec<f64>) {
+        out.extend_from_slice(&sim.data.qpos()[1..]);
+        out.extend(sim.data.qvel().iter().map(|v| v.clamp(-10.0, 10.0)));
+    }
+
+    fn reset_metrics(&self, sim: &Simulation) -> Vec<(&'static str, f64)> {
+        vec![("x_position", sim.data.qpos()[0])]
+    }
+
+    fn before(&self, sim: &Simulation) -> f64 {
+        sim.data.qpos()[0]
+    }
+
+    fn after(&self, sim: &mut Simulation, x_before: &f64, action: &[f64], dt: f64) -> Result<TaskStep, EnvError> {
+        let s = self.settings();
+        let healthy = self.is_healthy(sim);
+        let q = sim.data.qpos();
+        let x_velocity = (q[0] - x_before) / dt;
+        Ok(TaskStep {
+            reward_terms: vec![
+                ("forward", s.forward_reward_weight * x_velocity),
+                ("healthy", if healthy { s.healthy_reward } else { 0.0 }),
+                ("ctrl_cost", -quadratic_cost(s.ctrl_cost_weight, action)),
+            ],
+            metrics: vec![("x_position", q[0]), ("x_velocity", x_velocity), ("torso_height", q[1]), ("torso_angle", q[2])],
+            terminated: !healthy && s.terminate_when_unhealthy,
+        })
+    }
+}
+
+/// `lo < x < hi`, Gymnasium's open health intervals.
+pub(crate) fn inside([lo, hi]: [f64; 2], x: f64) -> bool {
+    lo < x && x < hi
+}
