@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
-use super::options::Check;
+use super::options::check_by_name;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{locomotion_metrics, planar_position, quadratic_cost, Task, TaskStep, Timing};
 use super::{BoxSpace, EnvError};
@@ -47,17 +47,10 @@ impl Default for AntOptions {
 }
 
 impl AntOptions {
+    /// Every option is checked by its name (`options::check_by_name`: weights >= 0, ranges with
+    /// low < high, counts >= 1).
     pub fn validate(&self) -> Result<(), EnvError> {
-        let c = Check { env: "ant" };
-        c.non_negative("forward_reward_weight", self.forward_reward_weight)?;
-        c.non_negative("ctrl_cost_weight", self.ctrl_cost_weight)?;
-        c.non_negative("contact_cost_weight", self.contact_cost_weight)?;
-        c.non_negative("healthy_reward", self.healthy_reward)?;
-        c.range("healthy_z_range", self.healthy_z_range)?;
-        c.range("contact_force_range", self.contact_force_range)?;
-        c.non_negative("reset_noise_scale", self.reset_noise_scale)?;
-        c.positive_count("max_episode_steps", self.max_episode_steps)?;
-        c.positive_count("frame_skip", self.frame_skip)
+        check_by_name("ant", self)
     }
 }
 

@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
-use super::options::Check;
+use super::options::check_by_name;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{quadratic_cost, Task, TaskStep, Timing};
 use super::{BoxSpace, EnvError};
@@ -35,13 +35,10 @@ impl Default for HalfCheetahOptions {
 }
 
 impl HalfCheetahOptions {
+    /// Every option is checked by its name (`options::check_by_name`: weights >= 0, ranges with
+    /// low < high, counts >= 1).
     pub fn validate(&self) -> Result<(), EnvError> {
-        let c = Check { env: "half-cheetah" };
-        c.non_negative("forward_reward_weight", self.forward_reward_weight)?;
-        c.non_negative("ctrl_cost_weight", self.ctrl_cost_weight)?;
-        c.non_negative("reset_noise_scale", self.reset_noise_scale)?;
-        c.positive_count("max_episode_steps", self.max_episode_steps)?;
-        c.positive_count("frame_skip", self.frame_skip)
+        check_by_name("half-cheetah", self)
     }
 }
 

@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
-use super::options::Check;
+use super::options::{check_by_name, Check};
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{Task, TaskStep, Timing};
 use super::{BoxSpace, EnvError};
@@ -29,12 +29,10 @@ impl Default for InvertedPendulumOptions {
 }
 
 impl InvertedPendulumOptions {
+    /// Its own checks; the ones every task shares run by name (`options::check_by_name`).
     pub fn validate(&self) -> Result<(), EnvError> {
-        let c = Check { env: "inverted-pendulum" };
-        c.within("max_pole_angle", self.max_pole_angle, 0.0, std::f64::consts::FRAC_PI_2)?;
-        c.non_negative("reset_noise_scale", self.reset_noise_scale)?;
-        c.positive_count("max_episode_steps", self.max_episode_steps)?;
-        c.positive_count("frame_skip", self.frame_skip)
+        check_by_name("inverted-pendulum", self)?;
+        Check { env: "inverted-pendulum" }.within("max_pole_angle", self.max_pole_angle, 0.0, std::f64::consts::FRAC_PI_2)
     }
 }
 

@@ -38,3 +38,33 @@ impl Check<'_> {
         }
     }
 }
+
+/// The checks every MuJoCo task's options get by their names, so that no env restates them:
+/// weights, rewards, scales and maxima (`*_weight`, `*_reward`, `*_scale`, `*_max`) are finite
+/// and >= 0, ranges (`*_range`) have low < high, step counts (`*_steps`, `frame_skip`) are >= 1.
+/// A task checks only what is its own on top (InvertedPendulum's angle limit, say).
+pub(crate) fn check_by_name<T: serde::Serialize>(env: &str, options: &T) -> Result<(), EnvError> {
+    let c = Check { env };
+    let table = toml::Table::try_from(options).expect("options serialise to a table");
+    for (key, value) in &table {
+        let number = value.as_float().or_else(|| value.as_integer().map(|i| i as f64));
+        let name = key.as_str();
+        if ["_weight", "_reward", "_scale", "_max"].iter().any(|s| name.ends_with(s)) {
+            if let Some(v) = number {
+                c.non_negative(name, v)?;
+            }
+        } else if name.ends_with("_range") {
+            if let Some([Some(lo), Some(hi)]) = value.as_array().map(|a| {
+                let f = |i: usize| a.get(i).and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)));
+                [f(0), f(1)]
+            }) {
+                c.range(name, [lo, hi])?;
+            }
+        } else if name.ends_with("_steps") || name == "frame_skip" {
+            if let Some(n) = value.as_integer() {
+                c.positive_count(name, n.max(0) as usize)?;
+            }
+        }
+    }
+    Ok(())
+}

@@ -9,7 +9,8 @@ use super::task::{quadratic_cost, Task, TaskStep, Timing};
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
-/// The reward weights and settings every planar walker's options carry.
+/// The reward weights and settings every planar walker's options carry, read from them by name.
+#[derive(Debug, Clone, serde::Deserialize)]
 pub struct WalkerSettings {
     pub forward_reward_weight: f64,
     pub healthy_reward: f64,
@@ -20,13 +21,21 @@ pub struct WalkerSettings {
     pub frame_skip: usize,
 }
 
+impl WalkerSettings {
+    /// The shared fields of a walker's options.
+    pub fn of<T: Serialize>(options: &T) -> WalkerSettings {
+        let table = toml::Value::try_from(options).expect("options serialise");
+        table.try_into().expect("a planar walker's options carry the shared fields")
+    }
+}
+
 pub trait PlanarWalker: Send + Sized + 'static {
     type Options: DeserializeOwned + Serialize;
     const NAME: &'static str;
     const MODEL_XML: &'static str;
     /// Validates the options.
     fn new(options: Self::Options) -> Result<Self, EnvError>;
-    fn settings(&self) -> WalkerSettings;
+    fn settings(&self) -> &WalkerSettings;
     fn is_healthy(&self, sim: &Simulation) -> bool;
 }
 

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
-use super::options::Check;
+use super::options::check_by_name;
 use super::planar_walker::{inside, PlanarWalker, WalkerSettings};
 use super::simulation::Simulation;
 use super::EnvError;
@@ -45,21 +45,16 @@ impl Default for Walker2dOptions {
 }
 
 impl Walker2dOptions {
+    /// Every option is checked by its name (`options::check_by_name`: weights >= 0, ranges with
+    /// low < high, counts >= 1).
     pub fn validate(&self) -> Result<(), EnvError> {
-        let c = Check { env: "walker2d" };
-        c.non_negative("forward_reward_weight", self.forward_reward_weight)?;
-        c.non_negative("ctrl_cost_weight", self.ctrl_cost_weight)?;
-        c.non_negative("healthy_reward", self.healthy_reward)?;
-        c.range("healthy_z_range", self.healthy_z_range)?;
-        c.range("healthy_angle_range", self.healthy_angle_range)?;
-        c.non_negative("reset_noise_scale", self.reset_noise_scale)?;
-        c.positive_count("max_episode_steps", self.max_episode_steps)?;
-        c.positive_count("frame_skip", self.frame_skip)
+        check_by_name("walker2d", self)
     }
 }
 
 pub struct Walker2dTask {
     opts: Walker2dOptions,
+    settings: WalkerSettings,
 }
 
 pub type Walker2d = MujocoEnv<Walker2dTask>;
@@ -71,20 +66,11 @@ impl PlanarWalker for Walker2dTask {
 
     fn new(opts: Walker2dOptions) -> Result<Self, EnvError> {
         opts.validate()?;
-        Ok(Walker2dTask { opts })
+        Ok(Walker2dTask { settings: WalkerSettings::of(&opts), opts })
     }
 
-    fn settings(&self) -> WalkerSettings {
-        let o = &self.opts;
-        WalkerSettings {
-            forward_reward_weight: o.forward_reward_weight,
-            healthy_reward: o.healthy_reward,
-            ctrl_cost_weight: o.ctrl_cost_weight,
-            terminate_when_unhealthy: o.terminate_when_unhealthy,
-            reset_noise_scale: o.reset_noise_scale,
-            max_episode_steps: o.max_episode_steps,
-            frame_skip: o.frame_skip,
-        }
+    fn settings(&self) -> &WalkerSettings {
+        &self.settings
     }
 
     fn is_healthy(&self, sim: &Simulation) -> bool {
