@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use super::mujoco_env::MujocoEnv;
 use super::options::check_by_name;
 use super::simulation::{Simulation, VelocityNoise};
-use super::task::{locomotion_metrics, planar_position, quadratic_cost, Task, TaskStep, Timing};
+use super::task::{legged_step, locomotion_metrics, planar_position, LeggedWeights, Task, TaskStep, Timing};
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
@@ -141,15 +141,13 @@ impl Task for AntTask {
             ("dz", sim.data.qpos()[2] - before.z),
             ("mechanical_energy", sim.last_mechanical_energy),
         ]);
-        Ok(TaskStep {
-            reward_terms: vec![
-                ("forward", self.opts.forward_reward_weight * velocity[0]),
-                ("healthy", if healthy { self.opts.healthy_reward } else { 0.0 }),
-                ("ctrl_cost", -quadratic_cost(self.opts.ctrl_cost_weight, action)),
-                ("contact_cost", -contact_cost),
-            ],
-            metrics,
-            terminated: !healthy && self.opts.terminate_when_unhealthy,
-        })
+        let o = &self.opts;
+        let weights = LeggedWeights {
+            forward: o.forward_reward_weight,
+            healthy: o.healthy_reward,
+            ctrl: o.ctrl_cost_weight,
+            terminate_when_unhealthy: o.terminate_when_unhealthy,
+        };
+        Ok(legged_step(weights, velocity[0], healthy, action, contact_cost, metrics))
     }
 }

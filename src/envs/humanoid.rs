@@ -6,7 +6,9 @@ use serde::{Deserialize, Serialize};
 use super::mujoco_env::MujocoEnv;
 use super::options::check_by_name;
 use super::simulation::{Simulation, VelocityNoise};
-use super::task::{locomotion_metrics, planar_position, quadratic_cost, Task, TaskStep, Timing};
+use super::task::{
+    legged_step, locomotion_metrics, planar_position, quadratic_cost, LeggedWeights, Task, TaskStep, Timing,
+};
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
@@ -164,16 +166,13 @@ impl Task for HumanoidTask {
         let healthy = self.is_healthy(sim);
         let contact_cost =
             quadratic_cost(self.opts.contact_cost_weight, sim.data.cfrc_ext()).min(self.opts.contact_cost_max);
-        Ok(TaskStep {
-            reward_terms: vec![
-                ("forward", self.opts.forward_reward_weight * velocity[0]),
-                ("healthy", if healthy { self.opts.healthy_reward } else { 0.0 }),
-                // The action as clipped is what `ctrl` holds (Gymnasium costs `data.ctrl`).
-                ("ctrl_cost", -quadratic_cost(self.opts.ctrl_cost_weight, action)),
-                ("contact_cost", -contact_cost),
-            ],
-            metrics: locomotion_metrics(sim, velocity),
-            terminated: !healthy && self.opts.terminate_when_unhealthy,
-        })
+        let o = &self.opts;
+        let weights = LeggedWeights {
+            forward: o.forward_reward_weight,
+            healthy: o.healthy_reward,
+            ctrl: o.ctrl_cost_weight,
+            terminate_when_unhealthy: o.terminate_when_unhealthy,
+        };
+        Ok(legged_step(weights, velocity[0], healthy, action, contact_cost, locomotion_metrics(sim, velocity)))
     }
 }

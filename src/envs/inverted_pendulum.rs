@@ -32,7 +32,12 @@ impl InvertedPendulumOptions {
     /// Its own checks; the ones every task shares run by name (`options::check_by_name`).
     pub fn validate(&self) -> Result<(), EnvError> {
         check_by_name("inverted-pendulum", self)?;
-        Check { env: "inverted-pendulum" }.within("max_pole_angle", self.max_pole_angle, 0.0, std::f64::consts::FRAC_PI_2)
+        Check { env: "inverted-pendulum" }.within(
+            "max_pole_angle",
+            self.max_pole_angle,
+            0.0,
+            std::f64::consts::FRAC_PI_2,
+        )
     }
 }
 

@@ -92,7 +92,12 @@ impl<W: PlanarWalker> Task for W {
                 ("healthy", if healthy { s.healthy_reward } else { 0.0 }),
                 ("ctrl_cost", -quadratic_cost(s.ctrl_cost_weight, action)),
             ],
-            metrics: vec![("x_position", q[0]), ("x_velocity", x_velocity), ("torso_height", q[1]), ("torso_angle", q[2])],
+            metrics: vec![
+                ("x_position", q[0]),
+                ("x_velocity", x_velocity),
+                ("torso_height", q[1]),
+                ("torso_angle", q[2]),
+            ],
             terminated: !healthy && s.terminate_when_unhealthy,
         })
     }

@@ -74,3 +74,33 @@ pub(crate) fn locomotion_metrics(sim: &Simulation, velocity: [f64; 2]) -> Vec<(&
         ("torso_height", q[2]),
     ]
 }
+
+/// The weights of Gymnasium's legged rewards (Ant, Humanoid).
+pub(crate) struct LeggedWeights {
+    pub forward: f64,
+    pub healthy: f64,
+    pub ctrl: f64,
+    pub terminate_when_unhealthy: bool,
+}
+
+/// Ant's and Humanoid's step: forward * vx + healthy (while healthy) - ctrl * |a|^2 - contact
+/// cost, terminated when unhealthy if asked.
+pub(crate) fn legged_step(
+    w: LeggedWeights,
+    x_velocity: f64,
+    healthy: bool,
+    action: &[f64],
+    contact_cost: f64,
+    metrics: Vec<(&'static str, f64)>,
+) -> TaskStep {
+    TaskStep {
+        reward_terms: vec![
+            ("forward", w.forward * x_velocity),
+            ("healthy", if healthy { w.healthy } else { 0.0 }),
+            ("ctrl_cost", -quadratic_cost(w.ctrl, action)),
+            ("contact_cost", -contact_cost),
+        ],
+        metrics,
+        terminated: !healthy && w.terminate_when_unhealthy,
+    }
+}
