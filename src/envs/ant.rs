@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use super::mujoco_env::MujocoEnv;
 use super::options::check_by_name;
 use super::simulation::{Simulation, VelocityNoise};
-use super::task::{legged_step, locomotion_metrics, planar_position, LeggedWeights, Task, TaskStep, Timing};
+use super::task::{legged_step, locomotion_metrics, planar_position, LeggedWeights, Task, TaskStep};
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
@@ -55,6 +55,7 @@ impl AntOptions {
 }
 
 pub struct AntTask {
+    weights: LeggedWeights,
     opts: AntOptions,
     torso: usize,
 }
@@ -91,20 +92,16 @@ impl Task for AntTask {
     type Before = AntBefore;
     const NAME: &'static str = "ant";
     const MODEL_XML: &'static str = MODEL_XML;
+    const VELOCITY_NOISE: VelocityNoise = VelocityNoise::Normal;
     const REWARD_TERMS: &'static [&'static str] = &["forward", "healthy", "ctrl_cost", "contact_cost"];
 
     fn new(opts: AntOptions, model: &Model) -> Result<Self, EnvError> {
         opts.validate()?;
-        Ok(AntTask { opts, torso: model.body_id("torso")? })
+        Ok(AntTask { weights: LeggedWeights::of(&opts), opts, torso: model.body_id("torso")? })
     }
 
-    fn timing(&self) -> Timing {
-        Timing {
-            frame_skip: self.opts.frame_skip,
-            max_episode_steps: self.opts.max_episode_steps,
-            reset_noise_scale: self.opts.reset_noise_scale,
-            velocity_noise: VelocityNoise::Normal,
-        }
+    fn options(&self) -> &Self::Options {
+        &self.opts
     }
 
     fn observation_dim(&self, m: &Model) -> usize {
@@ -141,13 +138,6 @@ impl Task for AntTask {
             ("dz", sim.data.qpos()[2] - before.z),
             ("mechanical_energy", sim.last_mechanical_energy),
         ]);
-        let o = &self.opts;
-        let weights = LeggedWeights {
-            forward: o.forward_reward_weight,
-            healthy: o.healthy_reward,
-            ctrl: o.ctrl_cost_weight,
-            terminate_when_unhealthy: o.terminate_when_unhealthy,
-        };
-        Ok(legged_step(weights, velocity[0], healthy, action, contact_cost, metrics))
+        Ok(legged_step(&self.weights, velocity[0], healthy, action, contact_cost, metrics))
     }
 }

@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use super::mujoco_env::MujocoEnv;
 use super::options::check_by_name;
 use super::simulation::{Simulation, VelocityNoise};
-use super::task::{quadratic_cost, Task, TaskStep, Timing};
+use super::task::{quadratic_cost, Task, TaskStep};
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
@@ -53,6 +53,7 @@ impl Task for HalfCheetahTask {
     type Before = f64;
     const NAME: &'static str = "half-cheetah";
     const MODEL_XML: &'static str = MODEL_XML;
+    const VELOCITY_NOISE: VelocityNoise = VelocityNoise::Normal;
     const REWARD_TERMS: &'static [&'static str] = &["forward", "ctrl_cost"];
 
     fn new(opts: HalfCheetahOptions, _model: &Model) -> Result<Self, EnvError> {
@@ -60,13 +61,8 @@ impl Task for HalfCheetahTask {
         Ok(HalfCheetahTask { opts })
     }
 
-    fn timing(&self) -> Timing {
-        Timing {
-            frame_skip: self.opts.frame_skip,
-            max_episode_steps: self.opts.max_episode_steps,
-            reset_noise_scale: self.opts.reset_noise_scale,
-            velocity_noise: VelocityNoise::Normal,
-        }
+    fn options(&self) -> &Self::Options {
+        &self.opts
     }
 
     fn observation_dim(&self, model: &Model) -> usize {

@@ -72,6 +72,10 @@ impl PlanarWalker for HopperTask {
         Ok(HopperTask { settings: WalkerSettings::of(&opts), opts })
     }
 
+    fn options(&self) -> &Self::Options {
+        &self.opts
+    }
+
     fn settings(&self) -> &WalkerSettings {
         &self.settings
     }

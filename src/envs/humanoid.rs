@@ -6,9 +6,7 @@ use serde::{Deserialize, Serialize};
 use super::mujoco_env::MujocoEnv;
 use super::options::check_by_name;
 use super::simulation::{Simulation, VelocityNoise};
-use super::task::{
-    legged_step, locomotion_metrics, planar_position, quadratic_cost, LeggedWeights, Task, TaskStep, Timing,
-};
+use super::task::{legged_step, locomotion_metrics, planar_position, quadratic_cost, LeggedWeights, Task, TaskStep};
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
@@ -69,6 +67,7 @@ impl HumanoidOptions {
 }
 
 pub struct HumanoidTask {
+    weights: LeggedWeights,
     opts: HumanoidOptions,
 }
 
@@ -100,20 +99,16 @@ impl Task for HumanoidTask {
     type Before = [f64; 2];
     const NAME: &'static str = "humanoid";
     const MODEL_XML: &'static str = MODEL_XML;
+    const VELOCITY_NOISE: VelocityNoise = VelocityNoise::Uniform;
     const REWARD_TERMS: &'static [&'static str] = &["forward", "healthy", "ctrl_cost", "contact_cost"];
 
     fn new(opts: HumanoidOptions, _model: &Model) -> Result<Self, EnvError> {
         opts.validate()?;
-        Ok(HumanoidTask { opts })
+        Ok(HumanoidTask { weights: LeggedWeights::of(&opts), opts })
     }
 
-    fn timing(&self) -> Timing {
-        Timing {
-            frame_skip: self.opts.frame_skip,
-            max_episode_steps: self.opts.max_episode_steps,
-            reset_noise_scale: self.opts.reset_noise_scale,
-            velocity_noise: VelocityNoise::Uniform,
-        }
+    fn options(&self) -> &Self::Options {
+        &self.opts
     }
 
     fn observation_dim(&self, m: &Model) -> usize {
@@ -166,13 +161,6 @@ impl Task for HumanoidTask {
         let healthy = self.is_healthy(sim);
         let contact_cost =
             quadratic_cost(self.opts.contact_cost_weight, sim.data.cfrc_ext()).min(self.opts.contact_cost_max);
-        let o = &self.opts;
-        let weights = LeggedWeights {
-            forward: o.forward_reward_weight,
-            healthy: o.healthy_reward,
-            ctrl: o.ctrl_cost_weight,
-            terminate_when_unhealthy: o.terminate_when_unhealthy,
-        };
-        Ok(legged_step(weights, velocity[0], healthy, action, contact_cost, locomotion_metrics(sim, velocity)))
+        Ok(legged_step(&self.weights, velocity[0], healthy, action, contact_cost, locomotion_metrics(sim, velocity)))
     }
 }

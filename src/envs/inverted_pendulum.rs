@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use super::mujoco_env::MujocoEnv;
 use super::options::{check_by_name, Check};
 use super::simulation::{Simulation, VelocityNoise};
-use super::task::{Task, TaskStep, Timing};
+use super::task::{Task, TaskStep};
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
@@ -52,6 +52,7 @@ impl Task for InvertedPendulumTask {
     type Before = ();
     const NAME: &'static str = "inverted-pendulum";
     const MODEL_XML: &'static str = MODEL_XML;
+    const VELOCITY_NOISE: VelocityNoise = VelocityNoise::Uniform;
     const REWARD_TERMS: &'static [&'static str] = &["healthy"];
 
     fn new(opts: InvertedPendulumOptions, _model: &Model) -> Result<Self, EnvError> {
@@ -59,13 +60,8 @@ impl Task for InvertedPendulumTask {
         Ok(InvertedPendulumTask { opts })
     }
 
-    fn timing(&self) -> Timing {
-        Timing {
-            frame_skip: self.opts.frame_skip,
-            max_episode_steps: self.opts.max_episode_steps,
-            reset_noise_scale: self.opts.reset_noise_scale,
-            velocity_noise: VelocityNoise::Uniform,
-        }
+    fn options(&self) -> &Self::Options {
+        &self.opts
     }
 
     fn observation_dim(&self, model: &Model) -> usize {

@@ -1,11 +1,12 @@
 //! The one step skeleton of the MuJoCo environments: a [`Task`] over a [`Simulation`].
 use super::simulation::{EnvCore, Simulation, StepOutcome};
-use super::task::Task;
+use super::task::{Task, Timing};
 use super::{Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
 pub struct MujocoEnv<T: Task> {
     task: T,
+    timing: Timing,
     core: EnvCore,
 }
 
@@ -13,7 +14,7 @@ impl<T: Task> MujocoEnv<T> {
     pub fn new(options: T::Options) -> Result<Self, EnvError> {
         let sim = Simulation::from_xml(T::MODEL_XML)?;
         let task = T::new(options, &sim.model)?;
-        let timing = task.timing();
+        let timing = Timing::of(task.options());
         let spec = EnvSpec {
             name: T::NAME,
             observation_space: super::BoxSpace::unbounded(task.observation_dim(&sim.model)),
@@ -22,7 +23,7 @@ impl<T: Task> MujocoEnv<T> {
             max_episode_steps: timing.max_episode_steps,
             reward_terms: T::REWARD_TERMS.to_vec(),
         };
-        Ok(MujocoEnv { task, core: EnvCore::new(sim, spec) })
+        Ok(MujocoEnv { task, timing, core: EnvCore::new(sim, spec) })
     }
 
     fn observe(&self) -> Vec<f64> {
@@ -39,8 +40,7 @@ impl<T: Task> Env for MujocoEnv<T> {
     }
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
-        let timing = self.task.timing();
-        self.core.reset_with_noise(seed, timing.reset_noise_scale, timing.velocity_noise)?;
+        self.core.reset_with_noise(seed, self.timing.reset_noise_scale, T::VELOCITY_NOISE)?;
         self.core.last_obs = self.observe();
         let info = Info { metrics: self.task.reset_metrics(&self.core.sim), ..Info::default() };
         Ok((self.core.last_obs.clone(), info))
@@ -49,7 +49,7 @@ impl<T: Task> Env for MujocoEnv<T> {
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
         let start = self.core.begin_step(action)?;
         let before = self.task.before(&self.core.sim);
-        let warnings = match self.core.advance(&start, self.task.timing().frame_skip)? {
+        let warnings = match self.core.advance(&start, self.timing.frame_skip)? {
             StepOutcome::Stepped(warnings) => warnings,
             StepOutcome::BlewUp(step) => return Ok(step),
         };

@@ -5,7 +5,7 @@ use serde::de::DeserializeOwned;
 use serde::Serialize;
 
 use super::simulation::{Simulation, VelocityNoise};
-use super::task::{quadratic_cost, Task, TaskStep, Timing};
+use super::task::{quadratic_cost, Task, TaskStep};
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
@@ -16,9 +16,6 @@ pub struct WalkerSettings {
     pub healthy_reward: f64,
     pub ctrl_cost_weight: f64,
     pub terminate_when_unhealthy: bool,
-    pub reset_noise_scale: f64,
-    pub max_episode_steps: usize,
-    pub frame_skip: usize,
 }
 
 impl WalkerSettings {
@@ -35,6 +32,7 @@ pub trait PlanarWalker: Send + Sized + 'static {
     const MODEL_XML: &'static str;
     /// Validates the options.
     fn new(options: Self::Options) -> Result<Self, EnvError>;
+    fn options(&self) -> &Self::Options;
     fn settings(&self) -> &WalkerSettings;
     fn is_healthy(&self, sim: &Simulation) -> bool;
 }
@@ -45,19 +43,14 @@ impl<W: PlanarWalker> Task for W {
     const NAME: &'static str = W::NAME;
     const MODEL_XML: &'static str = W::MODEL_XML;
     const REWARD_TERMS: &'static [&'static str] = &["forward", "healthy", "ctrl_cost"];
+    const VELOCITY_NOISE: VelocityNoise = VelocityNoise::Uniform;
 
     fn new(options: W::Options, _model: &Model) -> Result<Self, EnvError> {
         W::new(options)
     }
 
-    fn timing(&self) -> Timing {
-        let s = self.settings();
-        Timing {
-            frame_skip: s.frame_skip,
-            max_episode_steps: s.max_episode_steps,
-            reset_noise_scale: s.reset_noise_scale,
-            velocity_noise: VelocityNoise::Uniform,
-        }
+    fn options(&self) -> &W::Options {
+        PlanarWalker::options(self)
     }
 
     fn observation_dim(&self, model: &Model) -> usize {

@@ -6,15 +6,21 @@ use super::simulation::{Simulation, VelocityNoise};
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
-/// The settings every MuJoCo task has, read from its options.
-#[derive(Debug, Clone, Copy, PartialEq)]
+/// The settings every MuJoCo task's options carry, read from them by name once.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Deserialize)]
 pub struct Timing {
     /// Physics steps per `step`.
     pub frame_skip: usize,
     pub max_episode_steps: usize,
-    /// qpos += U(-s, s) at reset; qvel gets `velocity_noise` of the same scale.
+    /// qpos += U(-s, s) at reset; qvel gets the task's `VELOCITY_NOISE` of the same scale.
     pub reset_noise_scale: f64,
-    pub velocity_noise: VelocityNoise,
+}
+
+impl Timing {
+    pub fn of<O: serde::Serialize>(options: &O) -> Timing {
+        let value = toml::Value::try_from(options).expect("options serialise");
+        value.try_into().expect("a MuJoCo task's options carry frame_skip, max_episode_steps and reset_noise_scale")
+    }
 }
 
 /// What a task reports after the physics of a step ran.
@@ -34,10 +40,12 @@ pub trait Task: Send + Sized + 'static {
     const NAME: &'static str;
     const MODEL_XML: &'static str;
     const REWARD_TERMS: &'static [&'static str];
+    /// How reset noise is drawn for velocities.
+    const VELOCITY_NOISE: VelocityNoise;
 
     /// Validates the options and looks up what the task needs in the model (body ids, ...).
     fn new(options: Self::Options, model: &Model) -> Result<Self, EnvError>;
-    fn timing(&self) -> Timing;
+    fn options(&self) -> &Self::Options;
     fn observation_dim(&self, model: &Model) -> usize;
     fn action_space(&self, model: &Model) -> BoxSpace;
     fn observe(&self, sim: &Simulation, out: &mut Vec<f64>);
@@ -75,18 +83,29 @@ pub(crate) fn locomotion_metrics(sim: &Simulation, velocity: [f64; 2]) -> Vec<(&
     ]
 }
 
-/// The weights of Gymnasium's legged rewards (Ant, Humanoid).
+/// The weights of Gymnasium's legged rewards (Ant, Humanoid), read from the options by name.
+#[derive(Debug, Clone, serde::Deserialize)]
 pub(crate) struct LeggedWeights {
+    #[serde(rename = "forward_reward_weight")]
     pub forward: f64,
+    #[serde(rename = "healthy_reward")]
     pub healthy: f64,
+    #[serde(rename = "ctrl_cost_weight")]
     pub ctrl: f64,
     pub terminate_when_unhealthy: bool,
+}
+
+impl LeggedWeights {
+    pub fn of<O: serde::Serialize>(options: &O) -> LeggedWeights {
+        let value = toml::Value::try_from(options).expect("options serialise");
+        value.try_into().expect("a legged task's options carry its reward weights")
+    }
 }
 
 /// Ant's and Humanoid's step: forward * vx + healthy (while healthy) - ctrl * |a|^2 - contact
 /// cost, terminated when unhealthy if asked.
 pub(crate) fn legged_step(
-    w: LeggedWeights,
+    w: &LeggedWeights,
     x_velocity: f64,
     healthy: bool,
     action: &[f64],

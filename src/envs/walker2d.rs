@@ -69,6 +69,10 @@ impl PlanarWalker for Walker2dTask {
         Ok(Walker2dTask { settings: WalkerSettings::of(&opts), opts })
     }
 
+    fn options(&self) -> &Self::Options {
+        &self.opts
+    }
+
     fn settings(&self) -> &WalkerSettings {
         &self.settings
     }
