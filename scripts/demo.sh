@@ -2,7 +2,7 @@
 # The main job, a short real demo (a few minutes on 2 cores once built):
 #   1. SAC learns to balance InvertedPendulum, recorded into a rerun file as it learns;
 #   2. a sweep: TD3 and DDPG learn it too, two seeds each, two processes side by side;
-#   3. two Minitaur walking policies trained with SAC and TD3 (300k steps each, shipped in
+#   3. two Minitaur walking policies (trained with SAC for 300k steps and TD3 for 1M, shipped in
 #      models/policies/, retrain them with the commands in their READMEs) are evaluated and
 #      recorded, beside the Raibert/QP baseline controller at 0.35 m/s;
 #   4. a report compares everything: learning curves, baseline vs RL under three rewards.
