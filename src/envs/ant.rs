@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
-use super::options::check_by_name;
+use super::options::read_by_name;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{legged_step, locomotion_metrics, planar_position, LeggedWeights, Task, TaskStep};
 use super::{BoxSpace, EnvError};
@@ -43,14 +43,6 @@ impl Default for AntOptions {
             max_episode_steps: 1000,
             frame_skip: 5,
         }
-    }
-}
-
-impl AntOptions {
-    /// Every option is checked by its name (`options::check_by_name`: weights >= 0, ranges with
-    /// low < high, counts >= 1).
-    pub fn validate(&self) -> Result<(), EnvError> {
-        check_by_name("ant", self)
     }
 }
 
@@ -96,8 +88,7 @@ impl Task for AntTask {
     const REWARD_TERMS: &'static [&'static str] = &["forward", "healthy", "ctrl_cost", "contact_cost"];
 
     fn new(opts: AntOptions, model: &Model) -> Result<Self, EnvError> {
-        opts.validate()?;
-        Ok(AntTask { weights: LeggedWeights::of(&opts), opts, torso: model.body_id("torso")? })
+        Ok(AntTask { weights: read_by_name(&opts), opts, torso: model.body_id("torso")? })
     }
 
     fn options(&self) -> &Self::Options {

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
-use super::options::check_by_name;
+use super::options::read_by_name;
 use super::planar_walker::{inside, PlanarWalker, WalkerSettings};
 use super::simulation::Simulation;
 use super::EnvError;
@@ -47,14 +47,6 @@ impl Default for HopperOptions {
     }
 }
 
-impl HopperOptions {
-    /// Every option is checked by its name (`options::check_by_name`: weights >= 0, ranges with
-    /// low < high, counts >= 1).
-    pub fn validate(&self) -> Result<(), EnvError> {
-        check_by_name("hopper", self)
-    }
-}
-
 pub struct HopperTask {
     opts: HopperOptions,
     settings: WalkerSettings,
@@ -68,8 +60,7 @@ impl PlanarWalker for HopperTask {
     const MODEL_XML: &'static str = MODEL_XML;
 
     fn new(opts: HopperOptions) -> Result<Self, EnvError> {
-        opts.validate()?;
-        Ok(HopperTask { settings: WalkerSettings::of(&opts), opts })
+        Ok(HopperTask { settings: read_by_name(&opts), opts })
     }
 
     fn options(&self) -> &Self::Options {

@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
-use super::options::check_by_name;
+use super::options::read_by_name;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{legged_step, locomotion_metrics, planar_position, quadratic_cost, LeggedWeights, Task, TaskStep};
 use super::{BoxSpace, EnvError};
@@ -58,14 +58,6 @@ impl Default for HumanoidOptions {
     }
 }
 
-impl HumanoidOptions {
-    /// Every option is checked by its name (`options::check_by_name`: weights >= 0, ranges with
-    /// low < high, counts >= 1).
-    pub fn validate(&self) -> Result<(), EnvError> {
-        check_by_name("humanoid", self)
-    }
-}
-
 pub struct HumanoidTask {
     weights: LeggedWeights,
     opts: HumanoidOptions,
@@ -103,8 +95,7 @@ impl Task for HumanoidTask {
     const REWARD_TERMS: &'static [&'static str] = &["forward", "healthy", "ctrl_cost", "contact_cost"];
 
     fn new(opts: HumanoidOptions, _model: &Model) -> Result<Self, EnvError> {
-        opts.validate()?;
-        Ok(HumanoidTask { weights: LeggedWeights::of(&opts), opts })
+        Ok(HumanoidTask { weights: read_by_name(&opts), opts })
     }
 
     fn options(&self) -> &Self::Options {

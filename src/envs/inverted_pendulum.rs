@@ -3,7 +3,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
-use super::options::{check_by_name, Check};
+use super::options::Check;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{Task, TaskStep};
 use super::{BoxSpace, EnvError};
@@ -29,9 +29,8 @@ impl Default for InvertedPendulumOptions {
 }
 
 impl InvertedPendulumOptions {
-    /// Its own checks; the ones every task shares run by name (`options::check_by_name`).
+    /// Its own check; the ones every task shares run by name (`options::check_by_name`).
     pub fn validate(&self) -> Result<(), EnvError> {
-        check_by_name("inverted-pendulum", self)?;
         Check { env: "inverted-pendulum" }.within(
             "max_pole_angle",
             self.max_pole_angle,

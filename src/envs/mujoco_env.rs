@@ -1,4 +1,5 @@
 //! The one step skeleton of the MuJoCo environments: a [`Task`] over a [`Simulation`].
+use super::options::{check_by_name, read_by_name};
 use super::simulation::{EnvCore, Simulation, StepOutcome};
 use super::task::{Task, Timing};
 use super::{Env, EnvError, EnvSpec, Info, Step};
@@ -12,9 +13,10 @@ pub struct MujocoEnv<T: Task> {
 
 impl<T: Task> MujocoEnv<T> {
     pub fn new(options: T::Options) -> Result<Self, EnvError> {
+        check_by_name(T::NAME, &options)?;
         let sim = Simulation::from_xml(T::MODEL_XML)?;
         let task = T::new(options, &sim.model)?;
-        let timing = Timing::of(task.options());
+        let timing: Timing = read_by_name(task.options());
         let spec = EnvSpec {
             name: T::NAME,
             observation_space: super::BoxSpace::unbounded(task.observation_dim(&sim.model)),

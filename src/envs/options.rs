@@ -43,21 +43,20 @@ impl Check<'_> {
 /// weights, rewards, scales and maxima (`*_weight`, `*_reward`, `*_scale`, `*_max`) are finite
 /// and >= 0, ranges (`*_range`) have low < high, step counts (`*_steps`, `frame_skip`) are >= 1.
 /// A task checks only what is its own on top (InvertedPendulum's angle limit, say).
+/// `MujocoEnv::new` runs it on every task's options before the task is built.
 pub(crate) fn check_by_name<T: serde::Serialize>(env: &str, options: &T) -> Result<(), EnvError> {
     let c = Check { env };
+    let number = |v: &toml::Value| v.as_float().or_else(|| v.as_integer().map(|i| i as f64));
     let table = toml::Table::try_from(options).expect("options serialise to a table");
     for (key, value) in &table {
-        let number = value.as_float().or_else(|| value.as_integer().map(|i| i as f64));
         let name = key.as_str();
         if ["_weight", "_reward", "_scale", "_max"].iter().any(|s| name.ends_with(s)) {
-            if let Some(v) = number {
+            if let Some(v) = number(value) {
                 c.non_negative(name, v)?;
             }
         } else if name.ends_with("_range") {
-            if let Some([Some(lo), Some(hi)]) = value.as_array().map(|a| {
-                let f = |i: usize| a.get(i).and_then(|v| v.as_float().or_else(|| v.as_integer().map(|i| i as f64)));
-                [f(0), f(1)]
-            }) {
+            let bounds = value.as_array().map(|a| [a.first().and_then(number), a.get(1).and_then(number)]);
+            if let Some([Some(lo), Some(hi)]) = bounds {
                 c.range(name, [lo, hi])?;
             }
         } else if name.ends_with("_steps") || name == "frame_skip" {
@@ -67,4 +66,12 @@ pub(crate) fn check_by_name<T: serde::Serialize>(env: &str, options: &T) -> Resu
         }
     }
     Ok(())
+}
+
+/// The fields named in `T` read from a task's options (the timing every task has, the reward
+/// weights a family of tasks shares), so that no task copies them over by hand. Done once, when
+/// the environment is built.
+pub(crate) fn read_by_name<T: serde::de::DeserializeOwned, O: serde::Serialize>(options: &O) -> T {
+    let value = toml::Value::try_from(options).expect("options serialise");
+    value.try_into().unwrap_or_else(|e| panic!("the options lack a field {}: {e}", std::any::type_name::<T>()))
 }

@@ -18,14 +18,6 @@ pub struct WalkerSettings {
     pub terminate_when_unhealthy: bool,
 }
 
-impl WalkerSettings {
-    /// The shared fields of a walker's options.
-    pub fn of<T: Serialize>(options: &T) -> WalkerSettings {
-        let table = toml::Value::try_from(options).expect("options serialise");
-        table.try_into().expect("a planar walker's options carry the shared fields")
-    }
-}
-
 pub trait PlanarWalker: Send + Sized + 'static {
     type Options: DeserializeOwned + Serialize;
     const NAME: &'static str;

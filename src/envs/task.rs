@@ -16,13 +16,6 @@ pub struct Timing {
     pub reset_noise_scale: f64,
 }
 
-impl Timing {
-    pub fn of<O: serde::Serialize>(options: &O) -> Timing {
-        let value = toml::Value::try_from(options).expect("options serialise");
-        value.try_into().expect("a MuJoCo task's options carry frame_skip, max_episode_steps and reset_noise_scale")
-    }
-}
-
 /// What a task reports after the physics of a step ran.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct TaskStep {
@@ -43,7 +36,8 @@ pub trait Task: Send + Sized + 'static {
     /// How reset noise is drawn for velocities.
     const VELOCITY_NOISE: VelocityNoise;
 
-    /// Validates the options and looks up what the task needs in the model (body ids, ...).
+    /// Looks up what the task needs in the model (body ids, ...) and checks what is its own in
+    /// the options (the checks every task shares ran by name before: `options::check_by_name`).
     fn new(options: Self::Options, model: &Model) -> Result<Self, EnvError>;
     fn options(&self) -> &Self::Options;
     fn observation_dim(&self, model: &Model) -> usize;
@@ -93,13 +87,6 @@ pub(crate) struct LeggedWeights {
     #[serde(rename = "ctrl_cost_weight")]
     pub ctrl: f64,
     pub terminate_when_unhealthy: bool,
-}
-
-impl LeggedWeights {
-    pub fn of<O: serde::Serialize>(options: &O) -> LeggedWeights {
-        let value = toml::Value::try_from(options).expect("options serialise");
-        value.try_into().expect("a legged task's options carry its reward weights")
-    }
 }
 
 /// Ant's and Humanoid's step: forward * vx + healthy (while healthy) - ctrl * |a|^2 - contact

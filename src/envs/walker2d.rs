@@ -4,7 +4,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
-use super::options::check_by_name;
+use super::options::read_by_name;
 use super::planar_walker::{inside, PlanarWalker, WalkerSettings};
 use super::simulation::Simulation;
 use super::EnvError;
@@ -44,14 +44,6 @@ impl Default for Walker2dOptions {
     }
 }
 
-impl Walker2dOptions {
-    /// Every option is checked by its name (`options::check_by_name`: weights >= 0, ranges with
-    /// low < high, counts >= 1).
-    pub fn validate(&self) -> Result<(), EnvError> {
-        check_by_name("walker2d", self)
-    }
-}
-
 pub struct Walker2dTask {
     opts: Walker2dOptions,
     settings: WalkerSettings,
@@ -65,8 +57,7 @@ impl PlanarWalker for Walker2dTask {
     const MODEL_XML: &'static str = MODEL_XML;
 
     fn new(opts: Walker2dOptions) -> Result<Self, EnvError> {
-        opts.validate()?;
-        Ok(Walker2dTask { settings: WalkerSettings::of(&opts), opts })
+        Ok(Walker2dTask { settings: read_by_name(&opts), opts })
     }
 
     fn options(&self) -> &Self::Options {
