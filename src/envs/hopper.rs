@@ -4,10 +4,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
-use super::options::read_by_name;
-use super::planar_walker::{inside, PlanarWalker, WalkerSettings};
+use super::planar_walker::{inside, PlanarWalkerTask, WalkerRule};
 use super::simulation::Simulation;
-use super::EnvError;
 
 pub const MODEL_XML: &str = include_str!("../../models/hopper.xml");
 
@@ -47,34 +45,21 @@ impl Default for HopperOptions {
     }
 }
 
-pub struct HopperTask {
-    opts: HopperOptions,
-    settings: WalkerSettings,
-}
+/// Hopper's health rule; the rest of the task is every planar walker's.
+pub struct HopperRule;
 
+pub type HopperTask = PlanarWalkerTask<HopperRule>;
 pub type Hopper = MujocoEnv<HopperTask>;
 
-impl PlanarWalker for HopperTask {
+impl WalkerRule for HopperRule {
     type Options = HopperOptions;
     const NAME: &'static str = "hopper";
     const MODEL_XML: &'static str = MODEL_XML;
 
-    fn new(opts: HopperOptions) -> Result<Self, EnvError> {
-        Ok(HopperTask { settings: read_by_name(&opts), opts })
-    }
-
-    fn options(&self) -> &Self::Options {
-        &self.opts
-    }
-
-    fn settings(&self) -> &WalkerSettings {
-        &self.settings
-    }
-
-    fn is_healthy(&self, sim: &Simulation) -> bool {
+    fn is_healthy(o: &HopperOptions, sim: &Simulation) -> bool {
         let (q, v) = (sim.data.qpos(), sim.data.qvel());
-        q[2..].iter().chain(v).all(|&x| inside(self.opts.healthy_state_range, x))
-            && inside(self.opts.healthy_z_range, q[1])
-            && inside(self.opts.healthy_angle_range, q[2])
+        q[2..].iter().chain(v).all(|&x| inside(o.healthy_state_range, x))
+            && inside(o.healthy_z_range, q[1])
+            && inside(o.healthy_angle_range, q[2])
     }
 }

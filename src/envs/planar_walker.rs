@@ -4,6 +4,7 @@
 use serde::de::DeserializeOwned;
 use serde::Serialize;
 
+use super::options::read_by_name;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{quadratic_cost, Task, TaskStep};
 use super::{BoxSpace, EnvError};
@@ -18,31 +19,35 @@ pub struct WalkerSettings {
     pub terminate_when_unhealthy: bool,
 }
 
-pub trait PlanarWalker: Send + Sized + 'static {
-    type Options: DeserializeOwned + Serialize;
+/// What one planar walker adds: its name, model, options and health rule.
+pub trait WalkerRule: Send + 'static {
+    type Options: DeserializeOwned + Serialize + Send;
     const NAME: &'static str;
     const MODEL_XML: &'static str;
-    /// Validates the options.
-    fn new(options: Self::Options) -> Result<Self, EnvError>;
-    fn options(&self) -> &Self::Options;
-    fn settings(&self) -> &WalkerSettings;
-    fn is_healthy(&self, sim: &Simulation) -> bool;
+    fn is_healthy(options: &Self::Options, sim: &Simulation) -> bool;
 }
 
-impl<W: PlanarWalker> Task for W {
-    type Options = W::Options;
+/// A planar walker as a task: `HopperTask = PlanarWalkerTask<HopperRule>`.
+pub struct PlanarWalkerTask<R: WalkerRule> {
+    opts: R::Options,
+    /// Read from `opts` once, as the step needs them.
+    settings: WalkerSettings,
+}
+
+impl<R: WalkerRule> Task for PlanarWalkerTask<R> {
+    type Options = R::Options;
     type Before = f64;
-    const NAME: &'static str = W::NAME;
-    const MODEL_XML: &'static str = W::MODEL_XML;
+    const NAME: &'static str = R::NAME;
+    const MODEL_XML: &'static str = R::MODEL_XML;
     const REWARD_TERMS: &'static [&'static str] = &["forward", "healthy", "ctrl_cost"];
     const VELOCITY_NOISE: VelocityNoise = VelocityNoise::Uniform;
 
-    fn new(options: W::Options, _model: &Model) -> Result<Self, EnvError> {
-        W::new(options)
+    fn new(opts: R::Options, _model: &Model) -> Result<Self, EnvError> {
+        Ok(PlanarWalkerTask { settings: read_by_name(&opts), opts })
     }
 
-    fn options(&self) -> &W::Options {
-        PlanarWalker::options(self)
+    fn options(&self) -> &R::Options {
+        &self.opts
     }
 
     fn observation_dim(&self, model: &Model) -> usize {
@@ -67,8 +72,8 @@ impl<W: PlanarWalker> Task for W {
     }
 
     fn after(&self, sim: &mut Simulation, x_before: &f64, action: &[f64], dt: f64) -> Result<TaskStep, EnvError> {
-        let s = self.settings();
-        let healthy = self.is_healthy(sim);
+        let s = &self.settings;
+        let healthy = R::is_healthy(&self.opts, sim);
         let q = sim.data.qpos();
         let x_velocity = (q[0] - x_before) / dt;
         Ok(TaskStep {

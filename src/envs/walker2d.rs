@@ -4,10 +4,8 @@
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
-use super::options::read_by_name;
-use super::planar_walker::{inside, PlanarWalker, WalkerSettings};
+use super::planar_walker::{inside, PlanarWalkerTask, WalkerRule};
 use super::simulation::Simulation;
-use super::EnvError;
 
 pub const MODEL_XML: &str = include_str!("../../models/walker2d.xml");
 
@@ -44,32 +42,19 @@ impl Default for Walker2dOptions {
     }
 }
 
-pub struct Walker2dTask {
-    opts: Walker2dOptions,
-    settings: WalkerSettings,
-}
+/// Walker2d's health rule; the rest of the task is every planar walker's.
+pub struct Walker2dRule;
 
+pub type Walker2dTask = PlanarWalkerTask<Walker2dRule>;
 pub type Walker2d = MujocoEnv<Walker2dTask>;
 
-impl PlanarWalker for Walker2dTask {
+impl WalkerRule for Walker2dRule {
     type Options = Walker2dOptions;
     const NAME: &'static str = "walker2d";
     const MODEL_XML: &'static str = MODEL_XML;
 
-    fn new(opts: Walker2dOptions) -> Result<Self, EnvError> {
-        Ok(Walker2dTask { settings: read_by_name(&opts), opts })
-    }
-
-    fn options(&self) -> &Self::Options {
-        &self.opts
-    }
-
-    fn settings(&self) -> &WalkerSettings {
-        &self.settings
-    }
-
-    fn is_healthy(&self, sim: &Simulation) -> bool {
+    fn is_healthy(o: &Walker2dOptions, sim: &Simulation) -> bool {
         let q = sim.data.qpos();
-        inside(self.opts.healthy_z_range, q[1]) && inside(self.opts.healthy_angle_range, q[2])
+        inside(o.healthy_z_range, q[1]) && inside(o.healthy_angle_range, q[2])
     }
 }
