@@ -148,31 +148,10 @@ impl TrainConfig {
             None => anyhow::bail!("no algo given"),
         };
         let section_name = algo.name();
-        let mut merged = toml::Table::try_from(TrainConfig::defaults(algo))?;
-        let mut section = match merged.remove(section_name) {
-            Some(toml::Value::Table(t)) => t,
-            _ => unreachable!("the defaults carry their algorithm's section"),
-        };
         let own_keys = section_keys(algo);
-        let put = |key: &str, value: &toml::Value, merged: &mut toml::Table, section: &mut toml::Table| {
-            if own_keys.contains(&key) {
-                section.insert(key.to_string(), value.clone());
-                return Ok(());
-            }
-            if merged.contains_key(key) {
-                merged.insert(key.to_string(), value.clone());
-                return Ok(());
-            }
-            let owners: Vec<&str> =
-                super::registry::ALGOS.iter().filter(|e| section_keys(e.algo).contains(&key)).map(|e| e.name).collect();
-            match (owners.is_empty(), others) {
-                (true, _) => anyhow::bail!("unknown hyperparameter '{key}'"),
-                (false, OtherAlgorithmKeys::Ignore) => Ok(()),
-                (false, OtherAlgorithmKeys::Refuse) => {
-                    anyhow::bail!("'{key}' is a setting of {}, not of {section_name}", owners.join(" and "))
-                }
-            }
-        };
+        // Work on the flat view (every setting by name), then put the algorithm's own back in
+        // its section.
+        let mut flat = TrainConfig::defaults(algo).to_flat_table();
         for (key, value) in table {
             match (Algo::parse(key), value) {
                 (Ok(a), toml::Value::Table(entries)) if a == algo => {
@@ -181,15 +160,33 @@ impl TrainConfig {
                             own_keys.contains(&k.as_str()),
                             "unknown hyperparameter '{k}' in the [{section_name}] section"
                         );
-                        section.insert(k.clone(), v.clone());
+                        flat.insert(k.clone(), v.clone());
                     }
                 }
                 (Ok(_), _) => anyhow::bail!("a {section_name} run has no [{key}] section"),
-                _ => put(key, value, &mut merged, &mut section)?,
+                _ if flat.contains_key(key) || own_keys.contains(&key.as_str()) => {
+                    flat.insert(key.clone(), value.clone());
+                }
+                _ => {
+                    let owners: Vec<&str> = super::registry::ALGOS
+                        .iter()
+                        .filter(|e| section_keys(e.algo).contains(&key.as_str()))
+                        .map(|e| e.name)
+                        .collect();
+                    match (owners.is_empty(), others) {
+                        (true, _) => anyhow::bail!("unknown hyperparameter '{key}'"),
+                        (false, OtherAlgorithmKeys::Ignore) => {}
+                        (false, OtherAlgorithmKeys::Refuse) => {
+                            anyhow::bail!("'{key}' is a setting of {}, not of {section_name}", owners.join(" and "))
+                        }
+                    }
+                }
             }
         }
-        merged.insert(section_name.to_string(), toml::Value::Table(section));
-        toml::Value::Table(merged).try_into().map_err(|e: toml::de::Error| anyhow::anyhow!("{}", e.message()))
+        let section: toml::Table =
+            own_keys.iter().filter_map(|&k| flat.remove(k).map(|v| (k.to_string(), v))).collect();
+        flat.insert(section_name.to_string(), toml::Value::Table(section));
+        toml::Value::Table(flat).try_into().map_err(|e: toml::de::Error| anyhow::anyhow!("{}", e.message()))
     }
 
     /// Every setting by name in one table, the algorithm's section lifted among the shared ones
