@@ -210,7 +210,7 @@ impl TrainArgs {
     /// Parses `train ...` arguments (as `to_args` writes them) without the rest of the CLI.
     pub fn parse_from(args: &[String]) -> Result<TrainArgs> {
         use clap::{Args, FromArgMatches};
-        let command = TrainArgs::augment_args(clap::Command::new("train").no_binary_name(false));
+        let command = TrainArgs::augment_args(clap::Command::new("train"));
         let matches = command.try_get_matches_from(args)?;
         Ok(TrainArgs::from_arg_matches(&matches)?)
     }
