@@ -32,6 +32,19 @@ pub enum SacVersion {
     V1,
 }
 
+/// How SAC's log-density accounts for the tanh squashing, log(1 - tanh(u)^2).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum TanhCorrection {
+    /// Exact and stable, 2 (log 2 - u - softplus(-2u)): the SAC paper's formula (Haarnoja et al.
+    /// 2018, appendix C) as jaxrl's tanh bijector computes it.
+    #[default]
+    Exact,
+    /// log(1 - a^2 + 1e-6) with a = tanh(u) in f32, as Stable-Baselines3 and CleanRL compute it:
+    /// bounded below by log(1e-6), so a saturated action costs at most 13.8 nats per dimension.
+    Epsilon,
+}
+
 /// Every hyperparameter of a training run: the settings all algorithms share, then the run's
 /// algorithm's own section (`[train.td3]`, `[train.ddpg]` or `[train.sac]` in `config.toml`).
 /// Exactly the section of `algo` is present (`validate` checks it).
@@ -120,11 +133,13 @@ pub struct SacConfig {
     pub target_entropy: Option<f64>,
     /// SAC v1's value network.
     pub value_lr: f64,
+    #[serde(default)]
+    pub tanh_correction: TanhCorrection,
 }
 
 impl SacConfig {
     pub const KEYS: &'static [&'static str] =
-        &["sac_version", "autotune_alpha", "initial_alpha", "alpha_lr", "target_entropy", "value_lr"];
+        &["sac_version", "autotune_alpha", "initial_alpha", "alpha_lr", "target_entropy", "value_lr", "tanh_correction"];
 }
 
 /// How [`TrainConfig::from_table`] treats a key of another algorithm's section.
@@ -286,6 +301,7 @@ impl TrainConfig {
                 alpha_lr: 3e-4,
                 target_entropy: None,
                 value_lr: 3e-4,
+                tanh_correction: TanhCorrection::Exact,
             }),
             ..TrainConfig::shared_defaults(Algo::Sac)
         }

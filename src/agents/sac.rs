@@ -6,7 +6,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::buffer::Batch;
-use super::config::{Algo, SacVersion, TrainConfig};
+use super::config::{Algo, SacVersion, TanhCorrection, TrainConfig};
 use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
 use super::optim::Adam;
@@ -32,6 +32,7 @@ pub struct SacAgent {
     value: Option<ValueNet>,
     log_alpha: Var,
     target_entropy: f64,
+    tanh_correction: TanhCorrection,
     actor_opt: Adam,
     critic_opt: Adam,
     alpha_opt: Option<Adam>,
@@ -46,11 +47,25 @@ pub fn log_one_minus_tanh_sq(u: &Tensor) -> Result<Tensor> {
     ((u.neg()? - softplus)? + 2f64.ln())?.affine(2.0, 0.0)
 }
 
+/// Stable-Baselines3's and CleanRL's log(1 - a^2 + 1e-6), a = tanh(u).
+pub fn log_one_minus_sq_plus_epsilon(a: &Tensor) -> Result<Tensor> {
+    a.sqr()?.affine(-1.0, 1.0 + 1e-6)?.log()
+}
+
 /// Log-density of a = tanh(u), u = mean + std * eps, summed over action dimensions.
-pub fn squashed_gaussian_log_prob(u: &Tensor, eps: &Tensor, log_std: &Tensor) -> Result<Tensor> {
+pub fn squashed_gaussian_log_prob(
+    u: &Tensor,
+    eps: &Tensor,
+    log_std: &Tensor,
+    correction: TanhCorrection,
+) -> Result<Tensor> {
     let half_log_2pi = 0.5 * (2.0 * std::f64::consts::PI).ln();
     let gaussian = ((eps.sqr()?.affine(-0.5, -half_log_2pi))? - log_std)?;
-    (gaussian - log_one_minus_tanh_sq(u)?)?.sum_keepdim(D::Minus1)
+    let squash = match correction {
+        TanhCorrection::Exact => log_one_minus_tanh_sq(u)?,
+        TanhCorrection::Epsilon => log_one_minus_sq_plus_epsilon(&u.tanh()?)?,
+    };
+    (gaussian - squash)?.sum_keepdim(D::Minus1)
 }
 
 impl SacAgent {
@@ -84,6 +99,7 @@ impl SacAgent {
             value,
             log_alpha,
             target_entropy: settings.target_entropy.unwrap_or(-(act_dim as f64)),
+            tanh_correction: settings.tanh_correction,
             updates: 0,
         })
     }
@@ -106,7 +122,7 @@ impl SacAgent {
         let eps: Vec<f32> = (0..n * self.act_dim).map(|_| StandardNormal.sample(rng)).collect();
         let eps = Tensor::from_vec(eps, (n, self.act_dim), &Device::Cpu)?;
         let u = (mean + (log_std.exp()? * &eps)?)?;
-        let log_prob = squashed_gaussian_log_prob(&u, &eps, &log_std)?;
+        let log_prob = squashed_gaussian_log_prob(&u, &eps, &log_std, self.tanh_correction)?;
         Ok((u.tanh()?, log_prob))
     }
 
@@ -239,11 +255,25 @@ mod tests {
             Tensor::from_vec(v.iter().map(|x| *x as f32).collect::<Vec<_>>(), (1, 3), &Device::Cpu).unwrap()
         };
         let log_std: Vec<f64> = s.iter().map(|x| x.ln()).collect();
-        let got = squashed_gaussian_log_prob(&t(&u), &t(&eps), &t(&log_std)).unwrap().to_vec2::<f32>().unwrap()[0][0];
+        let got = squashed_gaussian_log_prob(&t(&u), &t(&eps), &t(&log_std), TanhCorrection::Exact)
+            .unwrap()
+            .to_vec2::<f32>()
+            .unwrap()[0][0];
         assert!((got as f64 - expected).abs() < 1e-4, "{got} vs {expected}");
+        // Away from saturation the epsilon form differs from the exact one by about 1e-6 / (1 - a^2).
+        let eps_form = squashed_gaussian_log_prob(&t(&u), &t(&eps), &t(&log_std), TanhCorrection::Epsilon)
+            .unwrap()
+            .to_vec2::<f32>()
+            .unwrap()[0][0];
+        assert!((eps_form - got).abs() < 1e-3, "{eps_form} vs {got}");
         // Far in the tails the naive formula overflows; the stable one does not.
         let big = log_one_minus_tanh_sq(&t(&[30.0, -30.0, 0.0])).unwrap().to_vec2::<f32>().unwrap();
         assert!(big[0].iter().all(|v| v.is_finite()));
         assert!((big[0][0] as f64 - (4f64.ln() - 60.0)).abs() < 1e-3);
+        // Saturated in f32, the epsilon form stops at log(1e-6) where the exact one goes on.
+        let a = t(&[30.0, -30.0, 0.0]).tanh().unwrap();
+        let capped = log_one_minus_sq_plus_epsilon(&a).unwrap().to_vec2::<f32>().unwrap();
+        assert!((capped[0][0] as f64 - 1e-6f64.ln()).abs() < 0.05, "{:?}", capped);
+        assert!(capped[0][2].abs() < 1e-5);
     }
 }
