@@ -221,9 +221,17 @@ fn run_directory_contents_and_protection() {
     }
     let metrics = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
     assert!(metrics.starts_with(
-        "kind,step,episode_return,episode_length,eval_mean,eval_std,critic_loss,actor_loss,alpha,steps_per_s,wall_time"
+        "kind,step,episode_return,episode_length,eval_mean,eval_std,critic_loss,actor_loss,alpha,steps_per_s,wall_time,eval_saturation"
     ));
     assert!(metrics.lines().any(|l| l.starts_with("eval,800,")));
+    // Every evaluation row says how much of its actions sat at the bounds; training rows do not.
+    let rows = train::metrics::read(&run.join("metrics.csv")).unwrap();
+    for r in &rows {
+        match r.kind {
+            "eval" => assert!(r.eval_saturation.is_some_and(|s| (0.0..=1.0).contains(&s)), "{r:?}"),
+            _ => assert_eq!(r.eval_saturation, None),
+        }
+    }
     let ckpt = train::checkpoint::latest(&run).unwrap();
     for f in ["model.safetensors", "optim.safetensors", "buffer.safetensors", "state.toml"] {
         assert!(ckpt.join(f).exists(), "{f}");

@@ -38,6 +38,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     for (term, v) in &e.term_means {
         println!("  {term:<14} {v:>12.3}");
     }
+    println!("  {:<14} {:>12.3}  (share of action components at |a| >= 0.99)", "saturated", e.saturation);
     if e.unstable_episodes > 0 {
         println!("  {} episode(s) ended by a physics blow-up", e.unstable_episodes);
     }

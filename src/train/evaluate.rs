@@ -17,7 +17,12 @@ pub struct Evaluation {
     pub term_means: Vec<(&'static str, f64)>,
     /// Episodes ended by a physics blow-up.
     pub unstable_episodes: usize,
+    /// Share of action components with |a| >= SATURATED over all steps.
+    pub saturation: f64,
 }
+
+/// An action component this close to the bound of [-1, 1] counts as saturated.
+pub const SATURATED: f64 = 0.99;
 
 impl Evaluation {
     pub fn mean(&self) -> f64 {
@@ -39,11 +44,18 @@ pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed:
         lengths: Vec::with_capacity(episodes),
         term_means: terms.iter().map(|&t| (t, 0.0)).collect(),
         unstable_episodes: 0,
+        saturation: 0.0,
     };
+    let (mut components, mut saturated) = (0usize, 0usize);
     let mut policy = AgentPolicy { agent, label: agent.algo().name().to_string() };
     for i in 0..episodes {
         let seed = eval_episode_seed(run_seed, i as u64);
-        let s = run_episode(env, &mut policy, i, Some(seed), &mut |_: &StepView| Ok(()))?;
+        let mut count = |v: &StepView| {
+            components += v.action.len();
+            saturated += v.action.iter().filter(|a| a.abs() >= SATURATED).count();
+            Ok(())
+        };
+        let s = run_episode(env, &mut policy, i, Some(seed), &mut count)?;
         for ((_, mean), (_, total)) in eval.term_means.iter_mut().zip(&s.term_totals) {
             *mean += total / episodes as f64;
         }
@@ -51,5 +63,6 @@ pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed:
         eval.returns.push(s.episode_return);
         eval.lengths.push(s.length);
     }
+    eval.saturation = saturated as f64 / components.max(1) as f64;
     Ok(eval)
 }

@@ -20,6 +20,10 @@ pub struct MetricsRow {
     pub alpha: Option<f64>,
     pub steps_per_s: f64,
     pub wall_time: f64,
+    /// Evaluation rows: share of action components at the bounds (|a| >= 0.99) over every
+    /// evaluation step, the sign of a deterministic actor pushed into saturation. Absent in
+    /// files written before the column existed.
+    pub eval_saturation: Option<f64>,
 }
 
 impl MetricsRow {
@@ -44,7 +48,7 @@ impl MetricsRow {
     }
 }
 
-pub const HEADER: [&str; 11] = [
+pub const HEADER: [&str; 12] = [
     "kind",
     "step",
     "episode_return",
@@ -56,6 +60,7 @@ pub const HEADER: [&str; 11] = [
     "alpha",
     "steps_per_s",
     "wall_time",
+    "eval_saturation",
 ];
 
 fn opt<T: ToString>(v: Option<T>) -> String {
@@ -79,6 +84,7 @@ pub fn write(path: &Path, rows: &[MetricsRow]) -> Result<()> {
                 opt(r.alpha),
                 format!("{:.1}", r.steps_per_s),
                 format!("{:.3}", r.wall_time),
+                opt(r.eval_saturation),
             ])?;
         }
         csv.flush()?;
@@ -88,7 +94,8 @@ pub fn write(path: &Path, rows: &[MetricsRow]) -> Result<()> {
 
 pub fn read(path: &Path) -> Result<Vec<MetricsRow>> {
     let mut rows = Vec::new();
-    let mut reader = csv::Reader::from_path(path)?;
+    // Flexible: files from before the eval_saturation column have one field fewer.
+    let mut reader = csv::ReaderBuilder::new().flexible(true).from_path(path)?;
     for rec in reader.records() {
         let rec = rec?;
         let f = |i: usize| rec.get(i).filter(|s| !s.is_empty()).map(|s| s.parse::<f64>()).transpose();
@@ -104,7 +111,41 @@ pub fn read(path: &Path) -> Result<Vec<MetricsRow>> {
             alpha: f(8)?,
             steps_per_s: f(9)?.unwrap_or(0.0),
             wall_time: f(10)?.unwrap_or(0.0),
+            eval_saturation: f(11)?,
         });
     }
     Ok(rows)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn saturation_round_trips_and_older_files_still_read() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("metrics.csv");
+        let rows = vec![
+            MetricsRow { kind: "episode", step: 7, episode_return: Some(1.5), episode_length: Some(7), ..Default::default() },
+            MetricsRow {
+                kind: "eval",
+                step: 10,
+                eval_mean: Some(2.0),
+                eval_std: Some(0.5),
+                eval_saturation: Some(0.25),
+                ..Default::default()
+            },
+        ];
+        write(&path, &rows).unwrap();
+        assert_eq!(read(&path).unwrap(), rows);
+        // A file from before the column: one field fewer per row.
+        std::fs::write(
+            &path,
+            "kind,step,episode_return,episode_length,eval_mean,eval_std,critic_loss,actor_loss,alpha,steps_per_s,wall_time\n\
+             eval,10,,,2,0.5,,,,0.0,0.000\n",
+        )
+        .unwrap();
+        let old = read(&path).unwrap();
+        assert_eq!((old[0].eval_mean, old[0].eval_saturation), (Some(2.0), None));
+    }
 }

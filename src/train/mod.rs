@@ -330,6 +330,7 @@ impl Trainer {
                 self.metrics.push(MetricsRow {
                     eval_mean: Some(e.mean()),
                     eval_std: Some(e.std()),
+                    eval_saturation: Some(e.saturation),
                     ..MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset))
                 });
                 metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;

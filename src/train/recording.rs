@@ -20,6 +20,7 @@ pub fn log_training_row(rec: &RecordingStream, row: &MetricsRow) -> Result<()> {
         ("training/episode_length", row.episode_length.map(|l| l as f64)),
         ("training/eval_mean", row.eval_mean),
         ("training/eval_std", row.eval_std),
+        ("training/eval_saturation", row.eval_saturation),
         ("training/critic_loss", row.critic_loss),
         ("training/actor_loss", row.actor_loss),
         ("training/alpha", row.alpha),
