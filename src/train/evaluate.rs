@@ -3,7 +3,7 @@
 use anyhow::Result;
 
 use crate::agents::Agent;
-use crate::envs::Env;
+use crate::envs::{BoxSpace, Env};
 use crate::policy::AgentPolicy;
 use crate::rollout::{run_episode, StepView};
 
@@ -21,8 +21,18 @@ pub struct Evaluation {
     pub saturation: f64,
 }
 
-/// An action component this close to the bound of [-1, 1] counts as saturated.
+/// An action component this close to its bound (normalised to [-1, 1]) counts as saturated.
 pub const SATURATED: f64 = 0.99;
+
+/// How many components of `action` (in the env's units) sit at their bounds: |a| >= SATURATED
+/// once normalised to [-1, 1] (Humanoid's torques span ±0.4, Minitaur's angles their own range).
+pub fn saturated_components(space: &BoxSpace, action: &[f64]) -> usize {
+    action
+        .iter()
+        .zip(space.low.iter().zip(&space.high))
+        .filter(|&(&a, (&l, &h))| (2.0 * (a - l) / (h - l) - 1.0).abs() >= SATURATED)
+        .count()
+}
 
 impl Evaluation {
     pub fn mean(&self) -> f64 {
@@ -52,7 +62,7 @@ pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed:
         let seed = eval_episode_seed(run_seed, i as u64);
         let mut count = |v: &StepView| {
             components += v.action.len();
-            saturated += v.action.iter().filter(|a| a.abs() >= SATURATED).count();
+            saturated += saturated_components(&v.env.spec().action_space, v.action);
             Ok(())
         };
         let s = run_episode(env, &mut policy, i, Some(seed), &mut count)?;
@@ -65,4 +75,19 @@ pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed:
     }
     eval.saturation = saturated as f64 / components.max(1) as f64;
     Ok(eval)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn saturation_is_measured_against_each_components_bounds() {
+        let space = BoxSpace { low: vec![-0.4, -0.4, 0.0], high: vec![0.4, 0.4, 2.0] };
+        // -0.4 and 1.99 are at their bounds; 0.39 is 0.975 of the way (not saturated); 0.0 of
+        // [0, 2] is at its lower bound.
+        assert_eq!(saturated_components(&space, &[-0.4, 0.39, 1.99]), 2);
+        assert_eq!(saturated_components(&space, &[0.0, 0.0, 1.0]), 0);
+        assert_eq!(saturated_components(&space, &[0.4, -0.3999, 0.0]), 3);
+    }
 }
