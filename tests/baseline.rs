@@ -91,13 +91,14 @@ fn minitaur_follows_pybullets_speed_profile_forwards_then_backwards() {
 
 #[test]
 fn minitaur_turns_at_the_commanded_yaw_rate_both_ways() {
-    for yaw_rate in [0.2, -0.2] {
+    for yaw_rate in [0.2, -0.2, 0.3, -0.3] {
         let eps = ten_seeds("minitaur", Command { speed: SpeedProfile::ramp(0.35, RAMP_TIME), yaw_rate });
         for (seed, e) in eps.iter().enumerate() {
             assert!(!e.fell, "{yaw_rate} rad/s, seed {seed}: fell after {} steps", e.length);
-            // The heading lags the commanded one at first: within 20% over the episode.
+            // The mean rate over the whole episode, start included, within 10% of the command
+            // (the heading integral makes up the lag of the first seconds).
             assert!(
-                (e.yaw_rate - yaw_rate).abs() <= 0.2 * yaw_rate.abs(),
+                (e.yaw_rate - yaw_rate).abs() <= 0.1 * yaw_rate.abs(),
                 "{yaw_rate} rad/s, seed {seed}: turned at {:.3}",
                 e.yaw_rate
             );
