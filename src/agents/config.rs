@@ -138,8 +138,15 @@ pub struct SacConfig {
 }
 
 impl SacConfig {
-    pub const KEYS: &'static [&'static str] =
-        &["sac_version", "autotune_alpha", "initial_alpha", "alpha_lr", "target_entropy", "value_lr", "tanh_correction"];
+    pub const KEYS: &'static [&'static str] = &[
+        "sac_version",
+        "autotune_alpha",
+        "initial_alpha",
+        "alpha_lr",
+        "target_entropy",
+        "value_lr",
+        "tanh_correction",
+    ];
 }
 
 /// How [`TrainConfig::from_table`] treats a key of another algorithm's section.

@@ -126,7 +126,13 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("metrics.csv");
         let rows = vec![
-            MetricsRow { kind: "episode", step: 7, episode_return: Some(1.5), episode_length: Some(7), ..Default::default() },
+            MetricsRow {
+                kind: "episode",
+                step: 7,
+                episode_return: Some(1.5),
+                episode_length: Some(7),
+                ..Default::default()
+            },
             MetricsRow {
                 kind: "eval",
                 step: 10,
