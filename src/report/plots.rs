@@ -100,6 +100,17 @@ pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band], mark
             x1 = x0 + 1.0;
         }
         let pad = ((y1 - y0) * 0.05).max(1e-6);
+        // Headroom above the data for the legend (about 18 px per entry in a plot area of about
+        // 320 px), so that it never hides a curve.
+        let mut legend_labels: Vec<&str> = bands.iter().map(|b| b.label.as_str()).collect();
+        for m in markers {
+            if !legend_labels.contains(&m.label.as_str()) {
+                legend_labels.push(&m.label);
+            }
+        }
+        let legend_share = ((legend_labels.len() as f64 * 18.0 + 16.0) / 320.0).min(0.6);
+        let (bottom, data_top) = (y0 - pad, y1 + pad);
+        let top = bottom + (data_top - bottom) / (1.0 - legend_share);
         // Room for the right-most tick label, which plotters centres on the last tick.
         let x1 = x1 + (x1 - x0) * 0.02;
         let mut chart = ChartBuilder::on(&root)
@@ -108,7 +119,7 @@ pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band], mark
             .margin_right(28)
             .x_label_area_size(40)
             .y_label_area_size(72)
-            .build_cartesian_2d(x0..x1, (y0 - pad)..(y1 + pad))
+            .build_cartesian_2d(x0..x1, bottom..top)
             .map_err(err)?;
         chart
             .configure_mesh()
@@ -156,7 +167,7 @@ pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band], mark
             .configure_series_labels()
             .background_style(WHITE.mix(0.85))
             .border_style(BLACK)
-            .position(SeriesLabelPosition::LowerRight)
+            .position(SeriesLabelPosition::UpperLeft)
             .draw()
             .map_err(err)?;
         root.present().map_err(err)?;
