@@ -33,12 +33,11 @@ pub enum SacVersion {
 }
 
 /// How SAC's log-density accounts for the tanh squashing, log(1 - tanh(u)^2).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum TanhCorrection {
     /// Exact and stable, 2 (log 2 - u - softplus(-2u)): the SAC paper's formula (Haarnoja et al.
     /// 2018, appendix C) as jaxrl's tanh bijector computes it.
-    #[default]
     Exact,
     /// log(1 - a^2 + 1e-6) with a = tanh(u) in f32, as Stable-Baselines3 and CleanRL compute it:
     /// bounded below by log(1e-6), so a saturated action costs at most 13.8 nats per dimension.
@@ -133,7 +132,6 @@ pub struct SacConfig {
     pub target_entropy: Option<f64>,
     /// SAC v1's value network.
     pub value_lr: f64,
-    #[serde(default)]
     pub tanh_correction: TanhCorrection,
 }
 
