@@ -102,13 +102,10 @@ pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band], mark
         let pad = ((y1 - y0) * 0.05).max(1e-6);
         // Headroom above the data for the legend (about 18 px per entry in a plot area of about
         // 320 px), so that it never hides a curve.
-        let mut legend_labels: Vec<&str> = bands.iter().map(|b| b.label.as_str()).collect();
-        for m in markers {
-            if !legend_labels.contains(&m.label.as_str()) {
-                legend_labels.push(&m.label);
-            }
-        }
-        let legend_share = ((legend_labels.len() as f64 * 18.0 + 16.0) / 320.0).min(0.6);
+        // Markers sharing a label (one published curve) have one legend entry, on the first.
+        let first_of_its_label = |i: usize| markers.iter().position(|o| o.label == markers[i].label) == Some(i);
+        let legend_entries = bands.len() + (0..markers.len()).filter(|&i| first_of_its_label(i)).count();
+        let legend_share = ((legend_entries as f64 * 18.0 + 16.0) / 320.0).min(0.6);
         let (bottom, data_top) = (y0 - pad, y1 + pad);
         let top = bottom + (data_top - bottom) / (1.0 - legend_share);
         // Room for the right-most tick label, which plotters centres on the last tick.
@@ -150,16 +147,14 @@ pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band], mark
                 .label(b.label.clone())
                 .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 18, y)], color.stroke_width(2)));
         }
-        let mut labelled = Vec::new();
-        for m in markers {
+        for (i, m) in markers.iter().enumerate() {
             let (red, green, blue) = COLORS[m.color_of % COLORS.len()];
             let color = RGBColor(red, green, blue).to_rgba();
             let bar = PathElement::new(vec![(m.x, m.y - m.err), (m.x, m.y + m.err)], color.stroke_width(2));
             chart.draw_series(std::iter::once(bar)).map_err(err)?;
             let dot =
                 chart.draw_series(std::iter::once(Circle::new((m.x, m.y), 5, color.stroke_width(2)))).map_err(err)?;
-            if !labelled.contains(&m.label) {
-                labelled.push(m.label.clone());
+            if first_of_its_label(i) {
                 dot.label(m.label.clone()).legend(move |(x, y)| Circle::new((x + 9, y), 5, color.stroke_width(2)));
             }
         }
