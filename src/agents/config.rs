@@ -44,6 +44,19 @@ pub enum TanhCorrection {
     Epsilon,
 }
 
+/// How every network's weights are drawn (biases: see each variant).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum WeightInit {
+    /// PyTorch's `nn.Linear` default, U(-1/sqrt(fan_in), 1/sqrt(fan_in)) for weights and biases:
+    /// what Stable-Baselines3, CleanRL and the TD3 authors' code start from.
+    Uniform,
+    /// Orthogonal weights with gain sqrt(2) and zero biases, as jaxrl's `default_init` (the code
+    /// behind the published SAC curves of REFERENCE §5b); SAC's log-std rows get gain 1, as
+    /// jaxrl's `log_std_scale`.
+    Orthogonal,
+}
+
 /// Every hyperparameter of a training run: the settings all algorithms share, then the run's
 /// algorithm's own section (`[train.td3]`, `[train.ddpg]` or `[train.sac]` in `config.toml`).
 /// Exactly the section of `algo` is present (`validate` checks it).
@@ -70,6 +83,8 @@ pub struct TrainConfig {
     /// Feed the networks observations standardised by the warm-up transitions' mean and std,
     /// frozen from then on (`agents::normalize`). Off unless a preset says otherwise.
     pub normalize_observations: bool,
+    /// How the networks' initial weights are drawn.
+    pub weight_init: WeightInit,
     /// Polyak coefficient of the target networks.
     pub tau: f64,
     pub actor_lr: f64,
@@ -252,6 +267,7 @@ impl TrainConfig {
             gamma: 0.99,
             reward_scale: 1.0,
             normalize_observations: false,
+            weight_init: WeightInit::Uniform,
             tau: 0.005,
             actor_lr: 1e-3,
             critic_lr: 1e-3,

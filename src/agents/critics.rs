@@ -4,6 +4,7 @@
 use candle_core::{Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 
+use super::config::WeightInit;
 use super::nets::{run_layers, DenseStack, Mlp, Output};
 
 pub struct Critics {
@@ -14,8 +15,8 @@ pub struct Critics {
 impl Critics {
     /// `k` networks `sizes[0] -> ... -> 1`, initialised exactly as `k` consecutive `Mlp::new`
     /// calls on `rng` would (same draws, same order), so a seed gives the same critics either way.
-    pub fn new(k: usize, sizes: &[usize], rng: &mut ChaCha8Rng) -> Result<Critics> {
-        let members = (0..k).map(|_| Mlp::new(sizes, Output::Linear, rng)).collect::<Result<Vec<_>>>()?;
+    pub fn new(k: usize, sizes: &[usize], init: WeightInit, rng: &mut ChaCha8Rng) -> Result<Critics> {
+        let members = (0..k).map(|_| Mlp::new(sizes, Output::Linear, init, rng)).collect::<Result<Vec<_>>>()?;
         let layers = sizes.len() - 1;
         let mut params = Vec::with_capacity(layers);
         for l in 0..layers {
@@ -95,10 +96,12 @@ mod tests {
     #[test]
     fn stacked_critics_equal_separate_networks_in_value_and_gradient() {
         let sizes = [5, 16, 8, 1];
-        let critics = Critics::new(2, &sizes, &mut ChaCha8Rng::seed_from_u64(4)).unwrap();
+        let critics = Critics::new(2, &sizes, WeightInit::Uniform, &mut ChaCha8Rng::seed_from_u64(4)).unwrap();
         let mut rng = ChaCha8Rng::seed_from_u64(4);
-        let separate =
-            [Mlp::new(&sizes, Output::Linear, &mut rng).unwrap(), Mlp::new(&sizes, Output::Linear, &mut rng).unwrap()];
+        let separate = [
+            Mlp::new(&sizes, Output::Linear, WeightInit::Uniform, &mut rng).unwrap(),
+            Mlp::new(&sizes, Output::Linear, WeightInit::Uniform, &mut rng).unwrap(),
+        ];
         let x = Tensor::new(
             &[[0.1f32, -0.4, 0.3, 2.0, -1.0], [1.0, 0.5, -0.5, 0.0, 0.2], [0.0, 0.0, 1.0, -2.0, 0.7]],
             &Device::Cpu,
@@ -136,7 +139,7 @@ mod tests {
         let g = critics.min_frozen(&x).unwrap().sum_all().unwrap().backward().unwrap();
         assert!(critics.vars().iter().all(|v| g.get(v.as_tensor()).is_none()));
 
-        let target = Critics::new(2, &sizes, &mut ChaCha8Rng::seed_from_u64(9)).unwrap();
+        let target = Critics::new(2, &sizes, WeightInit::Uniform, &mut ChaCha8Rng::seed_from_u64(9)).unwrap();
         assert_ne!(target.forward(&x).unwrap().to_vec3::<f32>().unwrap(), q.to_vec3::<f32>().unwrap());
         polyak_update_critics(&critics, &target, 1.0).unwrap();
         assert_eq!(

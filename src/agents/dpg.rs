@@ -34,10 +34,10 @@ pub struct DeterministicAgent {
 
 impl DeterministicAgent {
     pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
-        let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), Output::Tanh, rng)?;
+        let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), Output::Tanh, cfg.weight_init, rng)?;
         let dpg = cfg.dpg();
         let n_critics = if dpg.twin_critics { 2 } else { 1 };
-        let critics = Critics::new(n_critics, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), rng)?;
+        let critics = Critics::new(n_critics, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), cfg.weight_init, rng)?;
         let actor_target = actor.deep_copy()?;
         let critic_targets = critics.deep_copy()?;
         let actor_opt = Adam::new(actor.vars(), cfg.actor_lr);

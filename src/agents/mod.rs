@@ -24,7 +24,7 @@ use rand_chacha::ChaCha8Rng;
 
 pub use allocator::keep_freed_memory;
 pub use buffer::{Batch, ReplayBuffer};
-pub use config::{Algo, DpgConfig, OtherAlgorithmKeys, SacConfig, SacVersion, TanhCorrection, TrainConfig};
+pub use config::{Algo, DpgConfig, OtherAlgorithmKeys, SacConfig, SacVersion, TanhCorrection, TrainConfig, WeightInit};
 pub use denormals::{float_mode, flush_denormals_to_zero, set_float_mode};
 pub use dpg::DeterministicAgent;
 pub use normalize::NormalizedAgent;

@@ -1,8 +1,11 @@
 //! Multi-layer perceptrons on candle-nn, initialised from the run's own seeded RNG.
 use candle_core::{DType, Device, Result, Tensor, Var};
+use nalgebra::DMatrix;
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
 
+use super::config::WeightInit;
 use super::dense::dense;
 use super::kernels::{Activation, Polyak};
 
@@ -88,20 +91,37 @@ pub struct Mlp {
 }
 
 impl Mlp {
-    /// PyTorch's default initialisation (U(-1/sqrt(fan_in), 1/sqrt(fan_in)) for weights and
-    /// biases), drawn from `rng` so that a seed reproduces the network.
-    pub fn new(sizes: &[usize], output: Output, rng: &mut ChaCha8Rng) -> Result<Mlp> {
+    /// Weights and biases drawn by `init` from `rng`, layer by layer, so that a seed reproduces
+    /// the network.
+    pub fn new(sizes: &[usize], output: Output, init: WeightInit, rng: &mut ChaCha8Rng) -> Result<Mlp> {
         let mut params = Vec::new();
         for w in sizes.windows(2) {
             let (fan_in, fan_out) = (w[0], w[1]);
-            let bound = 1.0 / (fan_in as f32).sqrt();
-            let weight: Vec<f32> = (0..fan_in * fan_out).map(|_| rng.random_range(-bound..bound)).collect();
-            let bias: Vec<f32> = (0..fan_out).map(|_| rng.random_range(-bound..bound)).collect();
+            let (weight, bias) = match init {
+                WeightInit::Uniform => {
+                    let bound = 1.0 / (fan_in as f32).sqrt();
+                    let weight: Vec<f32> = (0..fan_in * fan_out).map(|_| rng.random_range(-bound..bound)).collect();
+                    let bias: Vec<f32> = (0..fan_out).map(|_| rng.random_range(-bound..bound)).collect();
+                    (weight, bias)
+                }
+                WeightInit::Orthogonal => {
+                    (orthogonal(fan_out, fan_in, std::f64::consts::SQRT_2, rng), vec![0.0; fan_out])
+                }
+            };
             let weight = Var::from_tensor(&Tensor::from_vec(weight, (fan_out, fan_in), &Device::Cpu)?)?;
             let bias = Var::from_tensor(&Tensor::from_vec(bias, fan_out, &Device::Cpu)?)?;
             params.push((weight, bias));
         }
         Ok(Mlp { body: DenseStack::new(params), output })
+    }
+
+    /// Multiplies rows `rows` of the last layer's weights by `factor` (SAC gives its log-std
+    /// rows a smaller orthogonal gain than its mean rows).
+    pub fn scale_output_rows(&self, rows: std::ops::Range<usize>, factor: f64) -> Result<()> {
+        let (weight, _) = self.body.layers().last().expect("at least one layer");
+        let w = weight.as_tensor();
+        let scaled = w.narrow(0, rows.start, rows.len())?.affine(factor, 0.0)?;
+        weight.set(&w.slice_assign(&[rows, 0..w.dims()[1]], &scaled)?)
     }
 
     /// An independent copy with equal weights (for target networks).
@@ -140,6 +160,24 @@ impl Mlp {
     }
 }
 
+/// A `rows x cols` matrix (row-major) whose rows (if rows <= cols) or columns are orthonormal,
+/// times `gain`, uniformly distributed over such matrices: the QR factors of a Gaussian matrix
+/// with R's diagonal made positive (Saxe et al. 2014; the construction of flax's and PyTorch's
+/// `orthogonal` initialisers).
+pub fn orthogonal(rows: usize, cols: usize, gain: f64, rng: &mut ChaCha8Rng) -> Vec<f32> {
+    let (tall, narrow) = (rows.max(cols), rows.min(cols));
+    let a = DMatrix::<f64>::from_fn(tall, narrow, |_, _| StandardNormal.sample(rng));
+    let qr = a.qr();
+    let mut q = qr.q();
+    for (j, d) in qr.r().diagonal().iter().enumerate() {
+        if *d < 0.0 {
+            q.column_mut(j).neg_mut();
+        }
+    }
+    let w = if rows >= cols { q } else { q.transpose() };
+    (0..rows).flat_map(|i| (0..cols).map(move |j| (i, j))).map(|(i, j)| (gain * w[(i, j)]) as f32).collect()
+}
+
 /// target <- tau * online + (1 - tau) * target, parameter by parameter.
 pub fn polyak_update(online: &Mlp, target: &Mlp, tau: f64) -> Result<()> {
     online.body.polyak_into(&target.body, tau)
@@ -161,9 +199,9 @@ mod tests {
 
     #[test]
     fn same_seed_same_weights_and_polyak() {
-        let a = Mlp::new(&[3, 8, 2], Output::Tanh, &mut ChaCha8Rng::seed_from_u64(1)).unwrap();
-        let b = Mlp::new(&[3, 8, 2], Output::Tanh, &mut ChaCha8Rng::seed_from_u64(1)).unwrap();
-        let c = Mlp::new(&[3, 8, 2], Output::Tanh, &mut ChaCha8Rng::seed_from_u64(2)).unwrap();
+        let a = Mlp::new(&[3, 8, 2], Output::Tanh, WeightInit::Uniform, &mut ChaCha8Rng::seed_from_u64(1)).unwrap();
+        let b = Mlp::new(&[3, 8, 2], Output::Tanh, WeightInit::Uniform, &mut ChaCha8Rng::seed_from_u64(1)).unwrap();
+        let c = Mlp::new(&[3, 8, 2], Output::Tanh, WeightInit::Uniform, &mut ChaCha8Rng::seed_from_u64(2)).unwrap();
         let flat = |m: &Mlp| {
             m.vars().iter().flat_map(|v| v.flatten_all().unwrap().to_vec1::<f32>().unwrap()).collect::<Vec<_>>()
         };
@@ -186,8 +224,31 @@ mod tests {
     }
 
     #[test]
+    fn orthogonal_weights_have_orthonormal_rows_or_columns_times_the_gain() {
+        for (rows, cols) in [(8, 3), (3, 8), (5, 5)] {
+            let w = orthogonal(rows, cols, 2.0, &mut ChaCha8Rng::seed_from_u64(5));
+            let m = DMatrix::from_row_slice(rows, cols, &w.iter().map(|&x| x as f64).collect::<Vec<_>>());
+            let gram = if rows <= cols { &m * m.transpose() } else { m.transpose() * &m };
+            let expected = DMatrix::<f64>::identity(gram.nrows(), gram.nrows()) * 4.0;
+            assert!((gram - expected).abs().max() < 1e-5, "{rows}x{cols}");
+            assert_eq!(w, orthogonal(rows, cols, 2.0, &mut ChaCha8Rng::seed_from_u64(5)));
+        }
+        let net =
+            Mlp::new(&[3, 8, 2], Output::Linear, WeightInit::Orthogonal, &mut ChaCha8Rng::seed_from_u64(1)).unwrap();
+        let bias = net.layer(0).1.to_vec1::<f32>().unwrap();
+        assert!(bias.iter().all(|&b| b == 0.0));
+        let w = net.layer(1).0.to_vec2::<f32>().unwrap();
+        let row_norm = |r: &[f32]| r.iter().map(|x| x * x).sum::<f32>().sqrt();
+        assert!((row_norm(&w[0]) - 2f32.sqrt()).abs() < 1e-5);
+        net.scale_output_rows(1..2, 0.5).unwrap();
+        let scaled = net.layer(1).0.to_vec2::<f32>().unwrap();
+        assert_eq!(scaled[0], w[0]);
+        assert!(scaled[1].iter().zip(&w[1]).all(|(s, o)| (s - 0.5 * o).abs() < 1e-7));
+    }
+
+    #[test]
     fn frozen_forward_gives_the_same_values_and_input_gradient_but_no_weight_gradients() {
-        let net = Mlp::new(&[3, 8, 1], Output::Linear, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
+        let net = Mlp::new(&[3, 8, 1], Output::Linear, WeightInit::Uniform, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
         let x =
             Var::from_tensor(&Tensor::new(&[[0.5f32, -1.0, 2.0], [0.1, 0.2, -0.3]], &Device::Cpu).unwrap()).unwrap();
         let live = net.body.forward(x.as_tensor()).unwrap().sum_all().unwrap();

@@ -6,7 +6,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::buffer::Batch;
-use super::config::{Algo, SacVersion, TanhCorrection, TrainConfig};
+use super::config::{Algo, SacVersion, TanhCorrection, TrainConfig, WeightInit};
 use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
 use super::optim::Adam;
@@ -70,14 +70,18 @@ pub fn squashed_gaussian_log_prob(
 
 impl SacAgent {
     pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
-        let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 2 * act_dim), Output::Linear, rng)?;
-        let critics = Critics::new(2, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), rng)?;
+        let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 2 * act_dim), Output::Linear, cfg.weight_init, rng)?;
+        if cfg.weight_init == WeightInit::Orthogonal {
+            // jaxrl: mean head gain sqrt(2), log-std head gain 1 (`log_std_scale`).
+            actor.scale_output_rows(act_dim..2 * act_dim, std::f64::consts::FRAC_1_SQRT_2)?;
+        }
+        let critics = Critics::new(2, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), cfg.weight_init, rng)?;
         let critic_targets = critics.deep_copy()?;
         let settings = cfg.sac();
         let value = match settings.sac_version {
             SacVersion::V2 => None,
             SacVersion::V1 => {
-                let net = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 1), Output::Linear, rng)?;
+                let net = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 1), Output::Linear, cfg.weight_init, rng)?;
                 let target = net.deep_copy()?;
                 let opt = Adam::new(net.vars(), settings.value_lr);
                 Some(ValueNet { net, target, opt })
