@@ -10,6 +10,7 @@ use std::time::Duration;
 use criterion::{criterion_group, criterion_main, Criterion};
 use locobench::controller::baseline::{baseline_controller, baseline_env};
 use locobench::controller::force_qp::{Dimension, ForceQp, QpMethod};
+use locobench::controller::gait::GaitKind;
 use locobench::envs::make;
 use nalgebra::Vector3;
 
@@ -72,16 +73,19 @@ fn bench(c: &mut Criterion) {
 
     // The whole controller tick (state estimate, gait, QP, kinematics), without the physics.
     // A control tick is 10 ms of robot time on Minitaur and 50 ms on Ant.
-    for (env_name, speed) in [("minitaur", 0.35), ("ant", 0.5)] {
+    for (env_name, gait, label) in
+        [("minitaur", None, "minitaur"), ("ant", None, "ant (rowing)"), ("ant", Some(GaitKind::Trot), "ant (trot, QP)")]
+    {
+        let speed = if env_name == "ant" { 0.5 } else { 0.35 };
         let mut env = make(&baseline_env(env_name).unwrap()).unwrap();
-        let mut controller = baseline_controller(env_name, speed, None).unwrap();
+        let mut controller = baseline_controller(env_name, speed, gait).unwrap();
         let (obs, _) = env.reset(Some(0)).unwrap();
         controller.begin_episode(0);
         for _ in 0..50 {
             let a = controller.act(env.as_ref(), &obs).unwrap();
             env.step(&a).unwrap();
         }
-        group.bench_function(format!("{env_name} controller tick"), |b| {
+        group.bench_function(format!("{label} controller tick"), |b| {
             b.iter(|| black_box(controller.act(env.as_ref(), &obs).unwrap()))
         });
     }

@@ -21,6 +21,12 @@ pub trait Policy {
     fn diagnostics(&self) -> Vec<(&'static str, f64)> {
         Vec::new()
     }
+    /// The angle (rad, positive left) from the body's heading to the direction the policy walks
+    /// in, for a gait that walks crabwise on purpose (Ant's rowing): speeds are measured along
+    /// the body's heading turned by it.
+    fn heading_offset(&self) -> f64 {
+        0.0
+    }
     /// What the policy decided on its latest `act`, for recorders (gait phases, foot targets).
     fn telemetry(&self) -> Telemetry {
         Telemetry::default()

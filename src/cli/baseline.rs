@@ -19,7 +19,7 @@ pub struct BaselineArgs {
     pub episodes: usize,
     #[command(flatten)]
     pub seed: super::SeedArg,
-    /// trot, bound or pace (Minitaur bounds by default; Ant trots).
+    /// trot, bound or pace for Minitaur (bound by default); row (default) or trot for Ant.
     #[arg(long)]
     pub gait: Option<String>,
     /// Options over the baseline's environment (Minitaur in torque mode), e.g. `--reward drift=1`.

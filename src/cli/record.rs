@@ -27,7 +27,7 @@ pub struct RecordArgs {
     pub speed: f64,
     #[command(flatten)]
     pub command: super::baseline::CommandArgs,
-    /// Gait of the Raibert controller (trot, bound, pace).
+    /// Gait of the Raibert controller (Minitaur: bound, trot, pace; Ant: row, trot).
     #[arg(long)]
     pub gait: Option<String>,
     /// Options over the policy's environment, e.g. `--option max_episode_steps=200`.

@@ -3,6 +3,7 @@
 use anyhow::{bail, Result};
 
 use super::ant::{AntController, AntGaitParams};
+use super::ant_row::{AntRowController, AntRowParams};
 use super::command::Command;
 use super::gait::GaitKind;
 use super::minitaur::{MinitaurController, MinitaurGaitParams};
@@ -32,7 +33,7 @@ pub fn baseline_env_like(cfg: &EnvConfig) -> Result<EnvConfig> {
 pub const RAMP_TIME: f64 = 1.0;
 
 /// A controller for `env` walking straight at `speed` (reached over `RAMP_TIME`); `gait`
-/// overrides Minitaur's default bound.
+/// overrides the default (Minitaur bounds, Ant rows).
 pub fn baseline_controller(env: &str, speed: f64, gait: Option<GaitKind>) -> Result<Box<dyn Policy>> {
     anyhow::ensure!(speed.is_finite(), "speed must be a finite number");
     baseline_controller_for(env, Command::straight(speed, RAMP_TIME), gait)
@@ -50,12 +51,11 @@ pub fn baseline_controller_for(env: &str, command: Command, gait: Option<GaitKin
                 ..defaults
             })?)
         }
-        "ant" => {
-            if gait.is_some_and(|g| g != GaitKind::Trot) {
-                bail!("the Ant controller trots only");
-            }
-            Box::new(AntController::new(AntGaitParams { command, ..Default::default() })?)
-        }
+        "ant" => match gait.unwrap_or(GaitKind::Row) {
+            GaitKind::Row => Box::new(AntRowController::new(AntRowParams { command, ..Default::default() })?),
+            GaitKind::Trot => Box::new(AntController::new(AntGaitParams { command, ..Default::default() })?),
+            other => bail!("the Ant controller rows (default) or trots, it does not {other:?}"),
+        },
         other => bail!("the Raibert baseline exists for minitaur and ant, not '{other}'"),
     })
 }
@@ -65,6 +65,7 @@ pub fn parse_gait(name: &str) -> Result<GaitKind> {
         "trot" => Ok(GaitKind::Trot),
         "bound" => Ok(GaitKind::Bound),
         "pace" => Ok(GaitKind::Pace),
-        other => bail!("unknown gait '{other}': use trot, bound or pace"),
+        "row" => Ok(GaitKind::Row),
+        other => bail!("unknown gait '{other}': use trot, bound, pace or row (Ant)"),
     }
 }

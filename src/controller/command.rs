@@ -53,6 +53,11 @@ impl SpeedProfile {
         k[k.len() - 1].1
     }
 
+    /// The largest |speed| the profile asks for (its extremes are at knots).
+    pub fn peak_speed(&self) -> f64 {
+        self.knots.iter().map(|&(_, v)| v.abs()).fold(0.0, f64::max)
+    }
+
     /// The speed the profile settles at.
     pub fn final_speed(&self) -> f64 {
         self.knots[self.knots.len() - 1].1
@@ -149,6 +154,8 @@ mod tests {
         let r = SpeedProfile::ramp(1.0, 2.0);
         assert_eq!((r.at(1.0), r.at(5.0)), (0.5, 1.0));
         assert_eq!(SpeedProfile::ramp(0.4, 0.0).at(0.0), 0.4);
+        assert_eq!(p.peak_speed(), 0.35);
+        assert_eq!(SpeedProfile::parse("0:0.2,2:-0.9,4:0.5").unwrap().peak_speed(), 0.9);
     }
 
     #[test]

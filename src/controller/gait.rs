@@ -16,13 +16,16 @@ pub enum GaitKind {
     Bound,
     /// Left pair, then right pair.
     Pace,
+    /// Ant only (`controller::ant_row`): the two legs across the direction of travel push
+    /// together while the two along it slide as skids; scheduled as a trot, whose pairs they are.
+    Row,
 }
 
 impl GaitKind {
     /// Phase offset of each leg (FL, BL, FR, BR) as a fraction of the cycle.
     pub fn offsets(self) -> [f64; LEGS] {
         match self {
-            GaitKind::Trot => [0.0, 0.5, 0.5, 0.0],
+            GaitKind::Trot | GaitKind::Row => [0.0, 0.5, 0.5, 0.0],
             GaitKind::Bound => [0.0, 0.5, 0.0, 0.5],
             GaitKind::Pace => [0.0, 0.0, 0.5, 0.5],
         }

@@ -69,7 +69,8 @@ impl Observer for GaitObserver<'_> {
     }
 
     fn step(&mut self, v: &StepView) -> Result<()> {
-        let (p, yaw) = base_pose(v.env);
+        let (p, body_yaw) = base_pose(v.env);
+        let yaw = wrap_angle(body_yaw + v.policy.heading_offset());
         let (p0, yaw0) = self.pose;
         let step = [p[0] - p0[0], p[1] - p0[1]];
         let mid = yaw0 + 0.5 * wrap_angle(yaw - yaw0);

@@ -146,6 +146,7 @@ pub struct MinitaurController {
 
 impl MinitaurController {
     pub fn new(params: MinitaurGaitParams) -> Result<MinitaurController> {
+        anyhow::ensure!(params.gait != GaitKind::Row, "rowing is a gait of Ant's, not Minitaur's");
         let gait = GaitScheduler::new(params.gait, params.stance_duration, params.duty_factor)?;
         params.command.validate()?;
         let qp = ForceQp::new(Dimension::Planar, params.friction, 2.0, 80.0, vec![1.0, 1.0, 20.0, 20.0, 20.0], 1e-4);

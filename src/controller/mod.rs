@@ -4,6 +4,7 @@
 //! interface as every other policy and run through the same `Env`, scored by the same reward.
 pub mod active_set;
 pub mod ant;
+pub mod ant_row;
 pub mod baseline;
 pub mod command;
 pub mod force_qp;

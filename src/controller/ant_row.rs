@@ -1,0 +1,409 @@
+//! A rowing gait for Ant: walk straight with the hips alone.
+//!
+//! Ant's hips turn about the vertical and its legs sit on the body's diagonals, so a trot moves
+//! the body at 45° to its heading, and pinned feet cannot carry it straight without pitching it
+//! (README, "What is not there yet"). Turned -45°, legs 2 and 4 point across the direction of
+//! travel: their hip strokes move the feet along the travel line at almost constant reach, so
+//! they row the body straight ahead, while legs 1 and 3, along the travel line, hold one pose
+//! and slide as skids. The controller first turns on the spot into that pose (both diagonal
+//! pairs stroking the same way round), then rows. Speed: the stroke amplitude, a feed-forward
+//! term plus an integral of each cycle's speed error. Heading: the two side strokes differ in
+//! proportion to the yaw error, and the yaw goal leans against the sideways offset from the
+//! travel line. Joint PD throughout, through the env's ordinary action (gear 150).
+use anyhow::{bail, Result};
+use std::f64::consts::{FRAC_PI_4, PI};
+
+use super::command::{wrap_angle, Command};
+use super::gait::{GaitKind, GaitScheduler, LEGS};
+use crate::envs::Env;
+use crate::policy::{Policy, Telemetry};
+
+/// Ant's joint ranges: hips ±30°, ankles 30-70° in magnitude.
+const HIP_LIMIT: f64 = 0.52;
+/// Ant's actuator gear: ctrl = torque / 150.
+const GEAR: f64 = 150.0;
+
+#[derive(Debug, Clone)]
+pub struct AntRowParams {
+    /// Forward speed profile (along the travel direction) and yaw rate.
+    pub command: Command,
+    /// Rowing cycle (s): long enough that the command's peak speed needs a stroke of
+    /// `design_stroke` (rad), within these bounds. Shorter cycles cost energy (at 0.5 m/s
+    /// commanded, 0.8 s instead of 0.6 halves it), and below 0.6 s the swing PD cannot follow.
+    pub min_period: f64,
+    pub max_period: f64,
+    pub design_stroke: f64,
+    /// The share of the cycle the side feet push.
+    pub duty_factor: f64,
+    /// Ankle magnitude of a pushing side leg, of a side leg at the top of its swing, and of
+    /// the skids (rad).
+    pub stance_ankle: f64,
+    pub swing_ankle: f64,
+    pub skid_ankle: f64,
+    /// Joint PD of hips and side ankles, and the skids' ankle stiffness.
+    pub joint_kp: f64,
+    pub joint_kd: f64,
+    pub skid_kp: f64,
+    /// Stride actually made good per stroke, as a share of the hip arc's chord (measured: the
+    /// body stops on its skids while the side legs swing).
+    pub stroke_efficiency: f64,
+    /// Stroke amplitude added per cycle per m/s of the last cycle's speed error (rad s/m).
+    pub speed_gain: f64,
+    /// Relative difference of the two side strokes per rad of yaw error.
+    pub yaw_gain: f64,
+    /// Yaw goal change per m of sideways offset and per m/s of sideways speed, bounded.
+    pub lateral_gain: f64,
+    pub lateral_damping: f64,
+    /// Turning on the spot into the rowing pose: cycle, hip stroke, and the yaw error at which
+    /// rowing starts.
+    pub turn_period: f64,
+    pub turn_stroke: f64,
+    pub turn_tolerance: f64,
+    /// Yaw error below which the turning stroke shrinks in proportion (rad).
+    pub turn_slowdown: f64,
+}
+
+impl Default for AntRowParams {
+    fn default() -> Self {
+        AntRowParams {
+            command: Command::straight(0.5, 1.0),
+            min_period: 0.6,
+            max_period: 1.0,
+            design_stroke: 0.45,
+            duty_factor: 0.6,
+            stance_ankle: 0.98,
+            swing_ankle: 0.55,
+            skid_ankle: 0.9,
+            joint_kp: 80.0,
+            joint_kd: 4.0,
+            skid_kp: 30.0,
+            stroke_efficiency: 0.58,
+            speed_gain: 0.3,
+            yaw_gain: 4.0,
+            lateral_gain: 0.5,
+            lateral_damping: 0.5,
+            turn_period: 0.5,
+            turn_stroke: 0.5,
+            turn_tolerance: 0.05,
+            turn_slowdown: 0.3,
+        }
+    }
+}
+
+/// Hip and ankle of one leg: joint qpos/qvel addresses, actuators, ankle sign.
+struct Joints {
+    hip: (usize, usize, usize),
+    ankle: (usize, usize, usize),
+    ankle_sign: f64,
+}
+
+/// Ant's legs 1-4 in the scheduler's order (FL, BL, FR, BR), as in the trot controller: legs
+/// 1+3 and 2+4 are the trot's diagonal pairs.
+const ANT_LEGS: [usize; LEGS] = [1, 2, 4, 3];
+/// Scheduler slots of the side legs (Ant legs 2 and 4) and what they are: +1 for the leg on the
+/// left of the travel direction.
+const SIDE_SLOTS: [(usize, f64); 2] = [(1, 1.0), (2, -1.0)];
+
+/// Where an episode met the robot's limits: side strokes the hip range cut short, and motor
+/// commands at the actuator's limit.
+#[derive(Debug, Clone, Copy, Default)]
+struct RowStats {
+    side_strokes: u64,
+    strokes_at_hip_limit: u64,
+    motor_commands: u64,
+    motor_commands_clipped: u64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Mode {
+    Turning,
+    Rowing,
+}
+
+pub struct AntRowController {
+    pub params: AntRowParams,
+    joints: Option<Vec<Joints>>,
+    turn_gait: GaitScheduler,
+    row_gait: GaitScheduler,
+    /// The rowing cycle chosen for the command (s).
+    period: f64,
+    mode: Mode,
+    time: f64,
+    /// Direction of travel (world yaw) and where the episode started.
+    travel_heading: f64,
+    origin: [f64; 2],
+    /// Integral part of the stroke amplitude (rad).
+    stroke_integral: f64,
+    /// Travel-frame position and time at the start of the current rowing cycle.
+    cycle_start: Option<(f64, f64)>,
+    side_was_in_stance: bool,
+    /// Sign of the yaw error when the turn began (0 before).
+    turn_sense: f64,
+    /// How long the turn into the rowing pose took (s).
+    turn_time: f64,
+    stats: RowStats,
+    last_phase: [(bool, f64); LEGS],
+}
+
+impl AntRowController {
+    pub fn new(params: AntRowParams) -> Result<AntRowController> {
+        params.command.validate()?;
+        anyhow::ensure!(
+            params.min_period > 0.0 && params.max_period >= params.min_period && params.turn_period > 0.0,
+            "gait periods must be > 0 (and min_period <= max_period)"
+        );
+        let peak = params.command.speed.peak_speed();
+        let stride = 2.0 * reach() * params.stroke_efficiency * params.design_stroke.sin();
+        let period =
+            if peak > 0.0 { (stride / peak).clamp(params.min_period, params.max_period) } else { params.max_period };
+        let row_gait = GaitScheduler::new(GaitKind::Trot, period * params.duty_factor, params.duty_factor)?;
+        let turn_gait = GaitScheduler::new(GaitKind::Trot, 0.5 * params.turn_period, 0.5)?;
+        Ok(AntRowController {
+            params,
+            joints: None,
+            turn_gait,
+            row_gait,
+            period,
+            mode: Mode::Turning,
+            time: 0.0,
+            travel_heading: 0.0,
+            origin: [0.0; 2],
+            stroke_integral: 0.0,
+            cycle_start: None,
+            side_was_in_stance: false,
+            turn_sense: 0.0,
+            turn_time: 0.0,
+            stats: RowStats::default(),
+            last_phase: [(true, 0.0); LEGS],
+        })
+    }
+
+    fn joints(env: &dyn Env) -> Result<Vec<Joints>> {
+        let m = env.data().model();
+        let range = m.jnt_range();
+        ANT_LEGS
+            .iter()
+            .map(|&i| {
+                let hip = m.joint_id(&format!("hip_{i}"))?;
+                let ankle = m.joint_id(&format!("ankle_{i}"))?;
+                Ok(Joints {
+                    hip: (m.joint_qpos_adr(hip), m.joint_dof_adr(hip), m.actuator_id(&format!("hip_{i}"))?),
+                    ankle: (m.joint_qpos_adr(ankle), m.joint_dof_adr(ankle), m.actuator_id(&format!("ankle_{i}"))?),
+                    ankle_sign: if range[2 * ankle] > 0.0 { 1.0 } else { -1.0 },
+                })
+            })
+            .collect()
+    }
+
+    /// Stroke amplitude (rad, signed: negative rows backwards) that makes `speed` in one cycle.
+    fn feed_forward_stroke(&self, speed: f64) -> f64 {
+        let p = &self.params;
+        let chord = speed * self.period / (2.0 * reach() * p.stroke_efficiency);
+        chord.clamp(-1.0, 1.0).asin()
+    }
+
+    pub fn controls(&mut self, env: &dyn Env) -> Result<Vec<f64>> {
+        if env.spec().name != "ant" {
+            bail!("the Ant controller drives the ant environment only");
+        }
+        if self.joints.is_none() {
+            self.joints = Some(Self::joints(env)?);
+        }
+        let dt = env.spec().dt;
+        let d = env.data();
+        let (q, v) = (d.qpos(), d.qvel());
+        let yaw = base_yaw(q);
+        if self.time == 0.0 {
+            self.travel_heading = yaw;
+            self.origin = [q[0], q[1]];
+        }
+        let p = self.params.clone();
+        let (c, s) = (self.travel_heading.cos(), self.travel_heading.sin());
+        let (dx, dy) = (q[0] - self.origin[0], q[1] - self.origin[1]);
+        let (along, lateral) = (c * dx + s * dy, -s * dx + c * dy);
+        let lateral_speed = -s * v[0] + c * v[1];
+        // Lean the yaw goal against the sideways offset only once rowing (the turn moves the body).
+        let lean = match self.mode {
+            Mode::Rowing if p.command.yaw_rate == 0.0 => p.lateral_gain * lateral + p.lateral_damping * lateral_speed,
+            Mode::Rowing => p.lateral_damping * lateral_speed,
+            Mode::Turning => 0.0,
+        };
+        let body_goal = self.travel_heading - FRAC_PI_4 - lean.clamp(-0.2, 0.2);
+        let yaw_error = wrap_angle(yaw - body_goal);
+        // Row once the yaw is within tolerance of the goal or has passed it.
+        if self.mode == Mode::Turning && (yaw_error.abs() < p.turn_tolerance || yaw_error * self.turn_sense < 0.0) {
+            self.mode = Mode::Rowing;
+            self.row_gait.reset();
+            self.turn_time = self.time;
+        }
+
+        let joints = self.joints.as_ref().unwrap();
+        let mut targets = [(0.0, 0.0, p.joint_kp); LEGS];
+        match self.mode {
+            Mode::Turning => {
+                // Every stance foot sweeps the same way round the body: the body turns the other
+                // way, by less as the goal nears.
+                if self.turn_sense == 0.0 {
+                    self.turn_sense = yaw_error.signum();
+                }
+                let sense = (yaw_error / p.turn_slowdown).clamp(-1.0, 1.0);
+                let phases = self.turn_gait.legs();
+                self.last_phase = phases.map(|l| (l.in_stance, l.progress));
+                for (k, phase) in phases.iter().enumerate() {
+                    let (hip, ankle) = stroke(phase.in_stance, phase.progress, sense * p.turn_stroke, &p);
+                    targets[k] = (hip, ankle, p.joint_kp);
+                }
+                self.turn_gait.advance(dt);
+            }
+            Mode::Rowing => {
+                let phases = self.row_gait.legs();
+                let side = phases[SIDE_SLOTS[0].0];
+                if side.in_stance && !self.side_was_in_stance {
+                    if let Some((start_along, start_time)) = self.cycle_start {
+                        let cycle_speed = (along - start_along) / (self.time - start_time);
+                        let goal = p.command.speed.at(self.time);
+                        self.stroke_integral =
+                            (self.stroke_integral + p.speed_gain * (goal - cycle_speed)).clamp(-0.3, 0.3);
+                    }
+                    self.cycle_start = Some((along, self.time));
+                }
+                self.side_was_in_stance = side.in_stance;
+                let stroke_amplitude = self.feed_forward_stroke(p.command.speed.at(self.time)) + self.stroke_integral;
+                for k in 0..LEGS {
+                    targets[k] = (0.0, p.skid_ankle, p.skid_kp);
+                    self.last_phase[k] = (true, 0.0);
+                }
+                for (slot, left) in SIDE_SLOTS {
+                    // A bigger stroke on the left turns the body right (when rowing forwards).
+                    let wanted = stroke_amplitude + left * p.yaw_gain * yaw_error * stroke_amplitude.abs();
+                    self.stats.side_strokes += 1;
+                    self.stats.strokes_at_hip_limit += u64::from(wanted.abs() >= HIP_LIMIT);
+                    let amplitude = wanted.clamp(-HIP_LIMIT, HIP_LIMIT);
+                    // Positive hip angles move leg 2's foot backwards and leg 4's forwards.
+                    let (hip, ankle) = stroke(side.in_stance, side.progress, left * amplitude, &p);
+                    targets[slot] = (hip, ankle, p.joint_kp);
+                    self.last_phase[slot] = (side.in_stance, side.progress);
+                }
+                self.row_gait.advance(dt);
+            }
+        }
+
+        let mut ctrl = vec![0.0; env.data().model().nu()];
+        for (leg, &(hip, ankle, ankle_kp)) in joints.iter().zip(&targets) {
+            let pd = |(qa, va, _): (usize, usize, usize), target: f64, kp: f64| {
+                ((kp * (target - q[qa]) - p.joint_kd * v[va]) / GEAR).clamp(-1.0, 1.0)
+            };
+            ctrl[leg.hip.2] = pd(leg.hip, hip, p.joint_kp);
+            ctrl[leg.ankle.2] = pd(leg.ankle, leg.ankle_sign * ankle, ankle_kp);
+        }
+        self.stats.motor_commands += ctrl.len() as u64;
+        self.stats.motor_commands_clipped += ctrl.iter().filter(|u| u.abs() >= 1.0).count() as u64;
+        self.time += dt;
+        self.travel_heading = wrap_angle(self.travel_heading + p.command.yaw_rate * dt);
+        Ok(ctrl)
+    }
+}
+
+/// Hip and ankle-magnitude targets of a leg that pushes its foot from +amplitude to -amplitude
+/// in stance (hip angle) and brings it back lifted in swing.
+fn stroke(in_stance: bool, progress: f64, amplitude: f64, p: &AntRowParams) -> (f64, f64) {
+    if in_stance {
+        (amplitude * (2.0 * progress - 1.0), p.stance_ankle)
+    } else {
+        let lift = (PI * progress).sin();
+        (amplitude * (1.0 - 2.0 * progress), p.stance_ankle - lift * (p.stance_ankle - p.swing_ankle))
+    }
+}
+
+/// Horizontal reach of a leg from its hip axis at the default stance ankle (m): thigh 0.28,
+/// shin 0.57 at 56°.
+fn reach() -> f64 {
+    0.2 * std::f64::consts::SQRT_2 + 0.4 * std::f64::consts::SQRT_2 * 0.98f64.cos()
+}
+
+fn base_yaw(q: &[f64]) -> f64 {
+    let (w, x, y, z) = (q[3], q[4], q[5], q[6]);
+    (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z))
+}
+
+impl Policy for AntRowController {
+    fn name(&self) -> String {
+        let c = &self.params.command;
+        let mut name = format!("raibert-row@{}m/s", c.speed.final_speed());
+        if c.yaw_rate != 0.0 {
+            name += &format!(",{}rad/s", c.yaw_rate);
+        }
+        name
+    }
+    fn begin_episode(&mut self, _episode: usize) {
+        self.turn_gait.reset();
+        self.row_gait.reset();
+        self.mode = Mode::Turning;
+        self.time = 0.0;
+        self.stroke_integral = 0.0;
+        self.cycle_start = None;
+        self.side_was_in_stance = false;
+        self.turn_sense = 0.0;
+        self.turn_time = 0.0;
+        self.stats = RowStats::default();
+    }
+    fn act(&mut self, env: &dyn Env, _observation: &[f64]) -> Result<Vec<f64>> {
+        self.controls(env)
+    }
+    fn diagnostics(&self) -> Vec<(&'static str, f64)> {
+        let share = |n: u64, of: u64| if of > 0 { n as f64 / of as f64 } else { 0.0 };
+        let s = &self.stats;
+        vec![
+            ("turn_time", self.turn_time),
+            ("stroke_at_hip_limit", share(s.strokes_at_hip_limit, s.side_strokes)),
+            ("torque_clipped", share(s.motor_commands_clipped, s.motor_commands)),
+        ]
+    }
+    fn heading_offset(&self) -> f64 {
+        match self.mode {
+            Mode::Turning => 0.0,
+            Mode::Rowing => FRAC_PI_4,
+        }
+    }
+    fn telemetry(&self) -> Telemetry {
+        let mut t = super::gait::gait_telemetry(&self.last_phase, |_| [0.0; 3]);
+        t.points.clear();
+        t.scalars.push(("stroke_integral".into(), self.stroke_integral));
+        t
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::controller::command::SpeedProfile;
+
+    fn controller(profile: &str) -> AntRowController {
+        let command = Command { speed: SpeedProfile::parse(profile).unwrap(), yaw_rate: 0.0 };
+        AntRowController::new(AntRowParams { command, ..Default::default() }).unwrap()
+    }
+
+    /// The cycle is as long as the command's peak speed allows at the design stroke, within
+    /// bounds; the feed-forward stroke at that speed is then the design stroke.
+    #[test]
+    fn cycle_is_chosen_from_the_peak_speed() {
+        let p = AntRowParams::default();
+        let c = controller("0:0,1:0.5");
+        let expected = 2.0 * reach() * p.stroke_efficiency * p.design_stroke.sin() / 0.5;
+        assert!(expected > p.min_period && expected < p.max_period);
+        assert!((c.period - expected).abs() < 1e-12);
+        assert!((c.feed_forward_stroke(0.5) - p.design_stroke).abs() < 1e-12);
+        assert!((c.feed_forward_stroke(-0.5) + p.design_stroke).abs() < 1e-12);
+        // The peak of a reversing profile counts, not where it ends.
+        assert_eq!(controller("0:0,3:2.0,6:0.1").period, p.min_period);
+        assert_eq!(controller("0:0,3:0.05").period, p.max_period);
+        assert_eq!(controller("0:0").period, p.max_period);
+    }
+
+    #[test]
+    fn bad_periods_are_refused() {
+        for (min_period, max_period) in [(0.0, 1.0), (0.8, 0.6), (-1.0, 1.0)] {
+            assert!(AntRowController::new(AntRowParams { min_period, max_period, ..Default::default() }).is_err());
+        }
+    }
+}
