@@ -153,7 +153,7 @@ impl AntRowController {
             "gait periods must be > 0 (and min_period <= max_period)"
         );
         let peak = params.command.speed.peak_speed();
-        let stride = 2.0 * reach() * params.stroke_efficiency * params.design_stroke.sin();
+        let stride = 2.0 * reach(params.stance_ankle) * params.stroke_efficiency * params.design_stroke.sin();
         let period =
             if peak > 0.0 { (stride / peak).clamp(params.min_period, params.max_period) } else { params.max_period };
         let row_gait = GaitScheduler::new(GaitKind::Trot, period * params.duty_factor, params.duty_factor)?;
@@ -198,7 +198,7 @@ impl AntRowController {
     /// Stroke amplitude (rad, signed: negative rows backwards) that makes `speed` in one cycle.
     fn feed_forward_stroke(&self, speed: f64) -> f64 {
         let p = &self.params;
-        let chord = speed * self.period / (2.0 * reach() * p.stroke_efficiency);
+        let chord = speed * self.period / (2.0 * reach(p.stance_ankle) * p.stroke_efficiency);
         chord.clamp(-1.0, 1.0).asin()
     }
 
@@ -315,10 +315,10 @@ fn stroke(in_stance: bool, progress: f64, amplitude: f64, p: &AntRowParams) -> (
     }
 }
 
-/// Horizontal reach of a leg from its hip axis at the default stance ankle (m): thigh 0.28,
-/// shin 0.57 at 56°.
-fn reach() -> f64 {
-    0.2 * std::f64::consts::SQRT_2 + 0.4 * std::f64::consts::SQRT_2 * 0.98f64.cos()
+/// Horizontal reach of a leg from its hip axis with the ankle at `ankle` rad (m): thigh 0.28
+/// long and level, shin 0.57 long, bent down by the ankle angle.
+fn reach(ankle: f64) -> f64 {
+    0.2 * std::f64::consts::SQRT_2 + 0.4 * std::f64::consts::SQRT_2 * ankle.cos()
 }
 
 fn base_yaw(q: &[f64]) -> f64 {
@@ -389,7 +389,7 @@ mod tests {
     fn cycle_is_chosen_from_the_peak_speed() {
         let p = AntRowParams::default();
         let c = controller("0:0,1:0.5");
-        let expected = 2.0 * reach() * p.stroke_efficiency * p.design_stroke.sin() / 0.5;
+        let expected = 2.0 * reach(p.stance_ankle) * p.stroke_efficiency * p.design_stroke.sin() / 0.5;
         assert!(expected > p.min_period && expected < p.max_period);
         assert!((c.period - expected).abs() < 1e-12);
         assert!((c.feed_forward_stroke(0.5) - p.design_stroke).abs() < 1e-12);
