@@ -20,6 +20,11 @@ fn ten_seeds(env: &str, command: Command) -> Vec<GaitEpisode> {
     (0..10).flat_map(|seed| measure(e.as_mut(), c.as_mut(), 1, seed, &profile).unwrap()).collect()
 }
 
+/// A diagnostic's mean over the episodes.
+fn limit(eps: &[GaitEpisode], name: &str) -> f64 {
+    eps.iter().map(|e| e.diagnostics.iter().find(|(n, _)| *n == name).unwrap().1).sum::<f64>() / eps.len() as f64
+}
+
 /// Mean forward speed over the whole episode (the 1 s ramp from standing included) within 10%
 /// of the set-point, 1000 steps without a fall, on each of 10 seeds.
 fn assert_tracks(env: &str, speed: f64) {
@@ -60,9 +65,6 @@ fn minitaur_sustains_1_5_m_per_s() {
 /// reached: the limits the controller reports are the measurement the README quotes.
 #[test]
 fn minitaur_reports_where_it_meets_its_limits() {
-    let limit = |eps: &[GaitEpisode], name: &str| {
-        eps.iter().map(|e| e.diagnostics.iter().find(|(n, _)| *n == name).unwrap().1).sum::<f64>() / eps.len() as f64
-    };
     let slow = run("minitaur", 0.35, None);
     let fast = run("minitaur", 2.0, None);
     for name in ["stance_torque_clipped", "swing_torque_clipped", "on_friction_cone", "touchdown_miss_m"] {
@@ -134,9 +136,6 @@ fn ant_rowing_drifts_less_than_its_trot() {
 /// often as the command grows, while no motor command reaches the actuator limit.
 #[test]
 fn ant_reports_the_hip_range_as_its_limit() {
-    let limit = |eps: &[GaitEpisode], name: &str| {
-        eps.iter().map(|e| e.diagnostics.iter().find(|(n, _)| *n == name).unwrap().1).sum::<f64>() / eps.len() as f64
-    };
     let slow = run("ant", 0.35, None);
     let fast = run("ant", 1.0, None);
     assert!(limit(&fast, "stroke_at_hip_limit") > limit(&slow, "stroke_at_hip_limit") + 0.2);

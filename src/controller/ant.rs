@@ -248,12 +248,7 @@ impl AntController {
 
 impl Policy for AntController {
     fn name(&self) -> String {
-        let c = &self.params.command;
-        let mut name = format!("raibert-trot@{}m/s", c.speed.final_speed());
-        if c.yaw_rate != 0.0 {
-            name += &format!(",{}rad/s", c.yaw_rate);
-        }
-        name
+        self.params.command.controller_name("trot")
     }
     fn begin_episode(&mut self, _episode: usize) {
         self.gait.reset();

@@ -328,12 +328,7 @@ fn base_yaw(q: &[f64]) -> f64 {
 
 impl Policy for AntRowController {
     fn name(&self) -> String {
-        let c = &self.params.command;
-        let mut name = format!("raibert-row@{}m/s", c.speed.final_speed());
-        if c.yaw_rate != 0.0 {
-            name += &format!(",{}rad/s", c.yaw_rate);
-        }
-        name
+        self.params.command.controller_name("row")
     }
     fn begin_episode(&mut self, _episode: usize) {
         self.turn_gait.reset();

@@ -73,6 +73,15 @@ pub struct Command {
 }
 
 impl Command {
+    /// A controller's name for this command: `raibert-GAIT@Vm/s`, plus `,Wrad/s` when turning.
+    pub fn controller_name(&self, gait: &str) -> String {
+        let mut name = format!("raibert-{gait}@{}m/s", self.speed.final_speed());
+        if self.yaw_rate != 0.0 {
+            name += &format!(",{}rad/s", self.yaw_rate);
+        }
+        name
+    }
+
     /// Straight ahead at `speed`, reached over `ramp_time` seconds.
     pub fn straight(speed: f64, ramp_time: f64) -> Command {
         Command { speed: SpeedProfile::ramp(speed, ramp_time), yaw_rate: 0.0 }

@@ -353,12 +353,7 @@ impl MinitaurController {
 
 impl Policy for MinitaurController {
     fn name(&self) -> String {
-        let c = &self.params.command;
-        let mut name = format!("raibert-{:?}@{}m/s", self.params.gait, c.speed.final_speed()).to_lowercase();
-        if c.yaw_rate != 0.0 {
-            name += &format!(",{}rad/s", c.yaw_rate);
-        }
-        name
+        self.params.command.controller_name(&format!("{:?}", self.params.gait).to_lowercase())
     }
     fn begin_episode(&mut self, _episode: usize) {
         self.gait.reset();
