@@ -143,6 +143,23 @@ fn ant_reports_the_hip_range_as_its_limit() {
     assert!(fast.iter().all(|e| !e.fell), "{fast:?}");
 }
 
+#[test]
+fn ant_rows_at_0_7_m_per_s() {
+    assert_tracks("ant", 0.7);
+}
+
+/// Rowing backwards keeps to the line: leaning the yaw against the sideways offset steers the
+/// other way round when the body goes backwards.
+#[test]
+fn ant_rows_backwards_along_its_line() {
+    let eps = ten_seeds("ant", Command::straight(-0.35, RAMP_TIME));
+    for (seed, e) in eps.iter().enumerate() {
+        assert!(!e.fell && e.length == 1000, "seed {seed}: fell after {} steps", e.length);
+        assert!((e.mean_speed + 0.35).abs() <= 0.035, "seed {seed}: mean speed {:.3}", e.mean_speed);
+        assert!(e.sideways.abs() < 1.0, "seed {seed}: ended {:.2} m off its line", e.sideways);
+    }
+}
+
 /// Rowing backwards: PyBullet's profile, up to 0.35 m/s then reversing, followed without a fall.
 #[test]
 fn ant_follows_the_speed_profile_forwards_then_backwards() {
