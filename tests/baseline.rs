@@ -5,7 +5,6 @@ use locobench::controller::command::{Command, SpeedProfile};
 use locobench::controller::gait::GaitKind;
 use locobench::controller::measure::{measure, GaitEpisode};
 use locobench::envs::make;
-use locobench::policy::Policy;
 
 fn run(env: &str, speed: f64, gait: Option<GaitKind>) -> Vec<GaitEpisode> {
     let mut e = make(&baseline_env(env).unwrap()).unwrap();
@@ -79,35 +78,49 @@ fn minitaur_reports_where_it_meets_its_limits() {
     assert_eq!(limit(&slow, "stance_torque_clipped"), 0.0);
 }
 
+/// PyBullet's example profile, up to 0.35 m/s over 3 s then reversing to -0.35, on 10 seeds:
+/// no fall, and the mean speed within `tolerance` of `expected`, the profile's own mean over the
+/// episode.
+fn assert_follows_reversing_profile(env: &str, expected: f64, tolerance: f64) -> Vec<GaitEpisode> {
+    let profile = SpeedProfile::parse("0:0,3:0.35,6:-0.35").unwrap();
+    let eps = ten_seeds(env, Command { speed: profile, yaw_rate: 0.0 });
+    for (seed, e) in eps.iter().enumerate() {
+        assert!(!e.fell && e.length == 1000, "{env}, seed {seed}: fell after {} steps", e.length);
+        assert!((e.mean_speed - expected).abs() < tolerance, "{env}, seed {seed}: mean speed {:.3}", e.mean_speed);
+    }
+    eps
+}
+
 #[test]
 fn minitaur_follows_pybullets_speed_profile_forwards_then_backwards() {
-    let profile = SpeedProfile::parse("0:0,3:0.35,6:-0.35").unwrap();
-    let eps = ten_seeds("minitaur", Command { speed: profile, yaw_rate: 0.0 });
     // The profile's own mean over 10 s: (0.525 - 1.4) / 10 m/s.
-    let expected = -0.0875;
+    let eps = assert_follows_reversing_profile("minitaur", -0.0875, 0.03);
     for (seed, e) in eps.iter().enumerate() {
-        assert!(!e.fell && e.length == 1000, "seed {seed}: fell after {} steps", e.length);
-        assert!((e.mean_speed - expected).abs() < 0.03, "seed {seed}: mean speed {:.3}", e.mean_speed);
         assert!(e.speed_error < 0.08, "seed {seed}: mean |v - v_profile| {:.3}", e.speed_error);
     }
 }
 
-#[test]
-fn minitaur_turns_at_the_commanded_yaw_rate_both_ways() {
-    for yaw_rate in [0.2, -0.2, 0.3, -0.3] {
-        let eps = ten_seeds("minitaur", Command { speed: SpeedProfile::ramp(0.35, RAMP_TIME), yaw_rate });
+/// Turning at each of `yaw_rates` while walking at 0.35 m/s, on 10 seeds: no fall, the mean
+/// rate over the whole episode (start included) within 10% of the command, and the speed too.
+fn assert_turns(env: &str, yaw_rates: &[f64]) {
+    for &yaw_rate in yaw_rates {
+        let eps = ten_seeds(env, Command { speed: SpeedProfile::ramp(0.35, RAMP_TIME), yaw_rate });
         for (seed, e) in eps.iter().enumerate() {
-            assert!(!e.fell, "{yaw_rate} rad/s, seed {seed}: fell after {} steps", e.length);
-            // The mean rate over the whole episode, start included, within 10% of the command
-            // (the heading integral makes up the lag of the first seconds).
+            assert!(!e.fell, "{env}, {yaw_rate} rad/s, seed {seed}: fell after {} steps", e.length);
             assert!(
                 (e.yaw_rate - yaw_rate).abs() <= 0.1 * yaw_rate.abs(),
-                "{yaw_rate} rad/s, seed {seed}: turned at {:.3}",
+                "{env}, {yaw_rate} rad/s, seed {seed}: turned at {:.3}",
                 e.yaw_rate
             );
-            assert!((e.mean_speed - 0.35).abs() <= 0.1 * 0.35, "seed {seed}: {:.3} m/s", e.mean_speed);
+            assert!((e.mean_speed - 0.35).abs() <= 0.1 * 0.35, "{env}, seed {seed}: {:.3} m/s", e.mean_speed);
         }
     }
+}
+
+/// The heading integral makes up the lag of the first seconds.
+#[test]
+fn minitaur_turns_at_the_commanded_yaw_rate_both_ways() {
+    assert_turns("minitaur", &[0.2, -0.2, 0.3, -0.3]);
 }
 
 /// Ant rows (the default gait): within 10% of 0.35 and 0.5 m/s on each of 10 seeds, no fall.
@@ -164,29 +177,13 @@ fn ant_rows_backwards_along_its_line() {
 /// Rowing backwards: PyBullet's profile, up to 0.35 m/s then reversing, followed without a fall.
 #[test]
 fn ant_follows_the_speed_profile_forwards_then_backwards() {
-    let profile = SpeedProfile::parse("0:0,3:0.35,6:-0.35").unwrap();
-    let eps = ten_seeds("ant", Command { speed: profile, yaw_rate: 0.0 });
-    // The profile's own mean over Ant's 50 s episode: (0.525 - 0.35 * 44) / 50 m/s.
-    let expected = -0.2975;
-    for (seed, e) in eps.iter().enumerate() {
-        assert!(!e.fell && e.length == 1000, "seed {seed}: fell after {} steps", e.length);
-        assert!((e.mean_speed - expected).abs() < 0.1 * expected.abs(), "seed {seed}: mean speed {:.3}", e.mean_speed);
-    }
+    // The profile's own mean over Ant's 50 s episode: (0.525 - 0.35 * 44) / 50 m/s, within 10%.
+    assert_follows_reversing_profile("ant", -0.2975, 0.02975);
 }
 
 #[test]
 fn ant_turns_at_the_commanded_yaw_rate_both_ways() {
-    for yaw_rate in [0.2, -0.2] {
-        let eps = ten_seeds("ant", Command { speed: SpeedProfile::ramp(0.35, RAMP_TIME), yaw_rate });
-        for (seed, e) in eps.iter().enumerate() {
-            assert!(!e.fell, "{yaw_rate} rad/s, seed {seed}: fell after {} steps", e.length);
-            assert!(
-                (e.yaw_rate - yaw_rate).abs() <= 0.1 * yaw_rate.abs(),
-                "{yaw_rate} rad/s, seed {seed}: turned at {:.3}",
-                e.yaw_rate
-            );
-        }
-    }
+    assert_turns("ant", &[0.2, -0.2]);
 }
 
 #[test]
@@ -204,26 +201,37 @@ fn wrong_env_or_mode_is_a_clear_error() {
     assert!(err.to_string().contains("torque"), "{err}");
 }
 
+/// Rows Ant at `speed` from reset seed `seed` for `steps` steps, failing on a fall: the body's
+/// yaw at reset and its (x, y) after every step, the reset position first.
+fn ant_row_path(speed: f64, seed: u64, steps: usize) -> (f64, Vec<[f64; 2]>) {
+    let mut e = make(&baseline_env("ant").unwrap()).unwrap();
+    let mut c = baseline_controller_for("ant", Command::straight(speed, RAMP_TIME), None).unwrap();
+    let (mut obs, _) = e.reset(Some(seed)).unwrap();
+    c.begin_episode(0);
+    let q = e.data().qpos();
+    let reset_yaw = (2.0 * (q[3] * q[6] + q[4] * q[5])).atan2(1.0 - 2.0 * (q[5] * q[5] + q[6] * q[6]));
+    let mut path = vec![[q[0], q[1]]];
+    for t in 0..steps {
+        let action = c.act(e.as_ref(), &obs).unwrap();
+        let step = e.step(&action).unwrap();
+        assert!(!step.terminated, "seed {seed}: fell after {t} steps");
+        obs = step.observation;
+        path.push([e.data().qpos()[0], e.data().qpos()[1]]);
+    }
+    (reset_yaw, path)
+}
+
 /// Ant's reward counts progress along world x, and the reset noise turns the body by up to about
 /// ±11° (quaternion noise ±0.1): rowing goes along x all the same, not along the yaw the episode
 /// began with.
 #[test]
 fn ant_rows_along_world_x_whatever_its_reset_yaw() {
-    let mut e = make(&baseline_env("ant").unwrap()).unwrap();
-    let mut c = baseline_controller_for("ant", Command::straight(0.5, RAMP_TIME), None).unwrap();
-    let yaw = |q: &[f64]| (2.0 * (q[3] * q[6] + q[4] * q[5])).atan2(1.0 - 2.0 * (q[5] * q[5] + q[6] * q[6]));
     let mut largest_reset_yaw = 0.0f64;
     for seed in 0..6 {
-        let (mut obs, _) = e.reset(Some(seed)).unwrap();
-        c.begin_episode(seed as usize);
-        let start = e.data().qpos().to_vec();
-        largest_reset_yaw = largest_reset_yaw.max(yaw(&start).abs());
-        for _ in 0..400 {
-            let action = c.act(e.as_ref(), &obs).unwrap();
-            obs = e.step(&action).unwrap().observation;
-        }
-        let q = e.data().qpos();
-        let (dx, dy) = (q[0] - start[0], q[1] - start[1]);
+        let (reset_yaw, path) = ant_row_path(0.5, seed, 400);
+        largest_reset_yaw = largest_reset_yaw.max(reset_yaw.abs());
+        let (start, end) = (path[0], path[path.len() - 1]);
+        let (dx, dy) = (end[0] - start[0], end[1] - start[1]);
         assert!(dx > 7.0 && dy.abs() < 0.04 * dx, "seed {seed}: {dx:.2} m along x, {dy:+.2} m along y");
     }
     // The seeds include resets turned far enough that following the reset yaw would fail.
@@ -234,23 +242,10 @@ fn ant_rows_along_world_x_whatever_its_reset_yaw() {
 /// rowing pose and the ramp) at least 0.95 m/s along world x.
 #[test]
 fn ant_rows_at_1_0_m_per_s() {
-    let mut e = make(&baseline_env("ant").unwrap()).unwrap();
-    let mut c = baseline_controller_for("ant", Command::straight(1.0, RAMP_TIME), None).unwrap();
-    let dt = e.spec().dt;
+    let dt = make(&baseline_env("ant").unwrap()).unwrap().spec().dt;
     for seed in 0..10 {
-        let (mut obs, _) = e.reset(Some(seed)).unwrap();
-        c.begin_episode(seed as usize);
-        let mut x_at_10_s = 0.0;
-        for t in 0..1000 {
-            if t == 200 {
-                x_at_10_s = e.data().qpos()[0];
-            }
-            let action = c.act(e.as_ref(), &obs).unwrap();
-            let step = e.step(&action).unwrap();
-            assert!(!step.terminated, "seed {seed}: fell after {t} steps");
-            obs = step.observation;
-        }
-        let speed = (e.data().qpos()[0] - x_at_10_s) / (800.0 * dt);
+        let (_, path) = ant_row_path(1.0, seed, 1000);
+        let speed = (path[1000][0] - path[200][0]) / (800.0 * dt);
         assert!(speed >= 0.95, "seed {seed}: {speed:.3} m/s from 10 s on");
     }
 }
