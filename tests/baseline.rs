@@ -3,8 +3,9 @@
 use locobench::controller::baseline::{baseline_controller, baseline_controller_for, baseline_env, RAMP_TIME};
 use locobench::controller::command::{Command, SpeedProfile};
 use locobench::controller::gait::GaitKind;
-use locobench::controller::measure::{measure, GaitEpisode};
-use locobench::envs::make;
+use locobench::controller::measure::{base_pose, measure, GaitEpisode};
+use locobench::envs::{make, Env};
+use locobench::rollout::{run_episode, Observer, StepView};
 
 fn run(env: &str, speed: f64, gait: Option<GaitKind>) -> Vec<GaitEpisode> {
     let mut e = make(&baseline_env(env).unwrap()).unwrap();
@@ -201,24 +202,39 @@ fn wrong_env_or_mode_is_a_clear_error() {
     assert!(err.to_string().contains("torque"), "{err}");
 }
 
-/// Rows Ant at `speed` from reset seed `seed` for `steps` steps, failing on a fall: the body's
-/// yaw at reset and its (x, y) after every step, the reset position first.
-fn ant_row_path(speed: f64, seed: u64, steps: usize) -> (f64, Vec<[f64; 2]>) {
+/// Where the body went in one episode: its yaw at reset, its (x, y) at reset and after every
+/// step, and the control step.
+#[derive(Default)]
+struct Path {
+    reset_yaw: f64,
+    xy: Vec<[f64; 2]>,
+    dt: f64,
+}
+
+impl Observer for Path {
+    fn reset(&mut self, _episode: usize, env: &dyn Env) -> anyhow::Result<()> {
+        let (xy, yaw) = base_pose(env);
+        *self = Path { reset_yaw: yaw, xy: vec![xy], dt: env.spec().dt };
+        Ok(())
+    }
+    fn step(&mut self, v: &StepView) -> anyhow::Result<()> {
+        self.xy.push(base_pose(v.env).0);
+        Ok(())
+    }
+}
+
+/// Rows Ant at `speed` for one whole episode from each reset seed in `seeds`, failing on a fall.
+fn ant_row_paths(speed: f64, seeds: std::ops::Range<u64>) -> Vec<Path> {
     let mut e = make(&baseline_env("ant").unwrap()).unwrap();
     let mut c = baseline_controller_for("ant", Command::straight(speed, RAMP_TIME), None).unwrap();
-    let (mut obs, _) = e.reset(Some(seed)).unwrap();
-    c.begin_episode(0);
-    let q = e.data().qpos();
-    let reset_yaw = (2.0 * (q[3] * q[6] + q[4] * q[5])).atan2(1.0 - 2.0 * (q[5] * q[5] + q[6] * q[6]));
-    let mut path = vec![[q[0], q[1]]];
-    for t in 0..steps {
-        let action = c.act(e.as_ref(), &obs).unwrap();
-        let step = e.step(&action).unwrap();
-        assert!(!step.terminated, "seed {seed}: fell after {t} steps");
-        obs = step.observation;
-        path.push([e.data().qpos()[0], e.data().qpos()[1]]);
-    }
-    (reset_yaw, path)
+    seeds
+        .map(|seed| {
+            let mut path = Path::default();
+            let summary = run_episode(e.as_mut(), c.as_mut(), 0, Some(seed), &mut path).unwrap();
+            assert!(!summary.terminated && !summary.unstable, "seed {seed}: fell after {} steps", summary.length);
+            path
+        })
+        .collect()
 }
 
 /// Ant's reward counts progress along world x, and the reset noise turns the body by up to about
@@ -227,11 +243,10 @@ fn ant_row_path(speed: f64, seed: u64, steps: usize) -> (f64, Vec<[f64; 2]>) {
 #[test]
 fn ant_rows_along_world_x_whatever_its_reset_yaw() {
     let mut largest_reset_yaw = 0.0f64;
-    for seed in 0..6 {
-        let (reset_yaw, path) = ant_row_path(0.5, seed, 400);
-        largest_reset_yaw = largest_reset_yaw.max(reset_yaw.abs());
-        let (start, end) = (path[0], path[path.len() - 1]);
-        let (dx, dy) = (end[0] - start[0], end[1] - start[1]);
+    for (seed, path) in ant_row_paths(0.5, 0..6).iter().enumerate() {
+        largest_reset_yaw = largest_reset_yaw.max(path.reset_yaw.abs());
+        // After 400 steps (20 s).
+        let (dx, dy) = (path.xy[400][0] - path.xy[0][0], path.xy[400][1] - path.xy[0][1]);
         assert!(dx > 7.0 && dy.abs() < 0.04 * dx, "seed {seed}: {dx:.2} m along x, {dy:+.2} m along y");
     }
     // The seeds include resets turned far enough that following the reset yaw would fail.
@@ -242,10 +257,9 @@ fn ant_rows_along_world_x_whatever_its_reset_yaw() {
 /// rowing pose and the ramp) at least 0.95 m/s along world x.
 #[test]
 fn ant_rows_at_1_0_m_per_s() {
-    let dt = make(&baseline_env("ant").unwrap()).unwrap().spec().dt;
-    for seed in 0..10 {
-        let (_, path) = ant_row_path(1.0, seed, 1000);
-        let speed = (path[1000][0] - path[200][0]) / (800.0 * dt);
+    for (seed, path) in ant_row_paths(1.0, 0..10).iter().enumerate() {
+        assert_eq!(path.xy.len(), 1001, "seed {seed}: the episode ended early");
+        let speed = (path.xy[1000][0] - path.xy[200][0]) / (800.0 * path.dt);
         assert!(speed >= 0.95, "seed {seed}: {speed:.3} m/s from 10 s on");
     }
 }

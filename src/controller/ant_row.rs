@@ -243,18 +243,19 @@ impl AntRowController {
         let lateral_speed = -s * v[0] + c * v[1];
         // Lean the yaw goal against the sideways offset only once rowing (the turn moves the body),
         // the other way round when rowing backwards, where a yaw steers the body the other way.
-        let lean = sign(p.command.speed.at(self.time))
+        let lean = (sign(p.command.speed.at(self.time))
             * match self.mode {
                 Mode::Rowing if p.command.yaw_rate == 0.0 => {
                     p.lateral_gain * lateral + p.lateral_damping * lateral_speed
                 }
                 Mode::Rowing => p.lateral_damping * lateral_speed,
                 Mode::Turning => 0.0,
-            };
-        let body_goal = self.travel_heading - FRAC_PI_4 - lean.clamp(-0.2, 0.2);
+            })
+        .clamp(-0.2, 0.2);
+        let body_goal = self.travel_heading - FRAC_PI_4 - lean;
         let yaw_error = wrap_angle(yaw - body_goal);
         self.last_yaw_error = yaw_error;
-        self.last_lean = lean.clamp(-0.2, 0.2);
+        self.last_lean = lean;
         // Row once the yaw is within tolerance of the goal or has passed it.
         if self.mode == Mode::Turning && (yaw_error.abs() < p.turn_tolerance || yaw_error * self.turn_sense < 0.0) {
             self.mode = Mode::Rowing;

@@ -47,7 +47,7 @@ pub fn mean_cost_of_transport(episodes: &[GaitEpisode]) -> f64 {
 }
 
 /// Position (x, y) and yaw of the floating base (the model's first body).
-fn base_pose(env: &dyn Env) -> ([f64; 2], f64) {
+pub fn base_pose(env: &dyn Env) -> ([f64; 2], f64) {
     let d = env.data();
     let (p, r) = (&d.xpos()[3..6], &d.xmat()[9..18]);
     ([p[0], p[1]], r[3].atan2(r[0]))
