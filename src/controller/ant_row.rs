@@ -9,7 +9,8 @@
 //! pairs stroking the same way round), then rows. Speed: the stroke amplitude, a feed-forward
 //! term plus an integral of each cycle's speed error. Heading: the two side strokes differ in
 //! proportion to the yaw error, and the yaw goal leans against the sideways offset from the
-//! travel line. Joint PD throughout, through the env's ordinary action (gear 150).
+//! travel line. Joint PD throughout, through the env's ordinary action (gear 150). Two postures:
+//! a low, wide one up to 0.7 m/s that sways and costs less, and a tall one that reaches 1.0 m/s.
 use anyhow::{bail, Result};
 use std::f64::consts::{FRAC_PI_4, PI};
 
@@ -64,6 +65,12 @@ pub struct AntRowParams {
     /// Yaw goal change per m of sideways offset and per m/s of sideways speed, bounded.
     pub lateral_gain: f64,
     pub lateral_damping: f64,
+    /// Difference of the two side strokes per rad/s of yaw rate (relative, like `yaw_gain`):
+    /// damps the yaw swings that carry the body sideways after the turn into the pose.
+    pub yaw_damping: f64,
+    /// Hold the line through where rowing starts instead of through the episode's start, so the
+    /// sideways step the turn made is not steered back (steering back is itself sideways travel).
+    pub line_from_row_start: bool,
     /// Turning on the spot into the rowing pose: cycle, hip stroke, and the yaw error at which
     /// rowing starts.
     pub turn_period: f64,
@@ -73,10 +80,43 @@ pub struct AntRowParams {
     pub turn_slowdown: f64,
 }
 
-impl Default for AntRowParams {
-    fn default() -> Self {
+/// Commands whose peak speed is at most this (m/s) row in the steady posture, faster ones in
+/// the fast posture.
+pub const STEADY_SPEED_LIMIT: f64 = 0.7;
+
+impl AntRowParams {
+    /// The posture for a command: steady up to [`STEADY_SPEED_LIMIT`], fast above.
+    pub fn for_command(command: Command) -> AntRowParams {
+        let posture = if command.speed.peak_speed() <= STEADY_SPEED_LIMIT { Self::steady() } else { Self::fast() };
+        AntRowParams { command, ..posture }
+    }
+
+    /// Low and wide: the side legs push with their ankles at 0.83 rad instead of 0.98, so the
+    /// torso rides about 5 cm lower and the side feet 7 cm further out, a longer duty factor, and
+    /// the yaw damped. Sideways drift per 50 s episode, 30 reset seeds (200-229): 0.73 m at 0.35
+    /// m/s and 1.14 m at 0.5 (the fast posture: 2.1 and 3.3 m), for half the energy. It does not
+    /// reach 1.0 m/s (0.78), hence the fast posture. Found by a coordinate search over these
+    /// settings on reset seeds 0-7, checked on seeds 200-229 (README).
+    pub fn steady() -> AntRowParams {
         AntRowParams {
-            command: Command::straight(0.5, 1.0),
+            duty_factor: 0.63,
+            stance_ankle: 0.83,
+            swing_ankle: 0.49,
+            skid_ankle: 0.95,
+            joint_kd: 5.0,
+            yaw_gain: 3.5,
+            yaw_damping: 0.5,
+            lateral_damping: 0.4,
+            turn_period: 0.45,
+            line_from_row_start: true,
+            ..Self::fast()
+        }
+    }
+
+    /// Tall: reaches 1.0 m/s.
+    pub fn fast() -> AntRowParams {
+        AntRowParams {
+            command: Command::straight(1.0, 1.0),
             min_period: 0.6,
             max_period: 0.7,
             design_stroke: 0.45,
@@ -94,11 +134,19 @@ impl Default for AntRowParams {
             yaw_gain: 4.0,
             lateral_gain: 0.5,
             lateral_damping: 0.5,
+            yaw_damping: 0.0,
+            line_from_row_start: false,
             turn_period: 0.5,
             turn_stroke: 0.5,
             turn_tolerance: 0.05,
             turn_slowdown: 0.3,
         }
+    }
+}
+
+impl Default for AntRowParams {
+    fn default() -> Self {
+        Self::for_command(Command::straight(0.5, 1.0))
     }
 }
 
@@ -261,6 +309,9 @@ impl AntRowController {
             self.mode = Mode::Rowing;
             self.row_gait.reset();
             self.turn_time = self.time;
+            if p.line_from_row_start {
+                self.origin = [q[0], q[1]];
+            }
         }
 
         let joints = self.joints.as_ref().unwrap();
@@ -310,9 +361,12 @@ impl AntRowController {
                     targets[k] = (0.0, skid_ankle, p.skid_kp, p.joint_kd);
                     self.last_phase[k] = (true, 0.0);
                 }
+                // The free joint's angular velocity about the body's z axis stands for the yaw
+                // rate: the body stays within a few degrees of level.
+                let yaw_correction = p.yaw_gain * yaw_error + p.yaw_damping * (v[5] - p.command.yaw_rate);
                 for (slot, left) in SIDE_SLOTS {
                     // A bigger stroke on the left turns the body right (when rowing forwards).
-                    let wanted = stroke_amplitude + left * p.yaw_gain * yaw_error * stroke_amplitude.abs();
+                    let wanted = stroke_amplitude + left * yaw_correction * stroke_amplitude.abs();
                     self.stats.side_strokes += 1;
                     self.stats.strokes_at_hip_limit += u64::from(wanted.abs() >= HIP_LIMIT);
                     let amplitude = wanted.clamp(-HIP_LIMIT, HIP_LIMIT);

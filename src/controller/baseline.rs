@@ -52,7 +52,7 @@ pub fn baseline_controller_for(env: &str, command: Command, gait: Option<GaitKin
             })?)
         }
         "ant" => match gait.unwrap_or(GaitKind::Row) {
-            GaitKind::Row => Box::new(AntRowController::new(AntRowParams { command, ..Default::default() })?),
+            GaitKind::Row => Box::new(AntRowController::new(AntRowParams::for_command(command))?),
             GaitKind::Trot => Box::new(AntController::new(AntGaitParams { command, ..Default::default() })?),
             other => bail!("the Ant controller rows (default) or trots, it does not {other:?}"),
         },
