@@ -140,7 +140,7 @@ fn mean_drift(eps: &[GaitEpisode]) -> f64 {
     eps.iter().map(|e| e.drift).sum::<f64>() / eps.len() as f64
 }
 
-/// Rowing cuts the trot's sideways stepping to a fifteenth at 0.5 m/s (README: about 1 m against
+/// Rowing cuts the trot's sideways stepping to a twentieth at 0.5 m/s (README: 0.7 m against
 /// 15.6 m per episode).
 #[test]
 fn ant_rowing_drifts_less_than_its_trot() {
@@ -152,12 +152,13 @@ fn ant_rowing_drifts_less_than_its_trot() {
 }
 
 /// The steady posture (up to 0.7 m/s) keeps the sideways drift (PyBullet's term: every sideways
-/// step summed, sway included) below 1 m per 50 s episode at 0.35 m/s and under 1.5 m at 0.5 m/s,
-/// on average over reset seeds 0-9, where the tall fast posture drifts 2.1 and 3.3 m; and it
-/// costs less energy.
+/// step summed, sway included) below 1 m per 50 s episode at 0.5 m/s and below 0.6 m at 0.35 m/s,
+/// on average over reset seeds 0-9, where the tall fast posture drifts 3.3 and 2.1 m; and it
+/// costs less energy. (The settings were searched on reset seeds 0-29; the README's figures come
+/// from seeds 300-399.)
 #[test]
 fn ant_rows_steadily_with_little_drift() {
-    for (speed, most) in [(0.35, 1.0), (0.5, 1.5)] {
+    for (speed, most) in [(0.35, 0.6), (0.5, 1.0)] {
         let eps = ten_seeds("ant", Command::straight(speed, RAMP_TIME));
         assert!(mean_drift(&eps) < most, "{speed} m/s: drift {:.2} m", mean_drift(&eps));
     }
@@ -190,7 +191,7 @@ fn ant_rows_at_0_7_m_per_s() {
     assert_tracks("ant", 0.7);
 }
 
-/// Rowing backwards keeps to the line: leaning the yaw against the sideways offset steers the
+/// Rowing backwards keeps to the line: leaning the yaw against the sideways speed steers the
 /// other way round when the body goes backwards.
 #[test]
 fn ant_rows_backwards_along_its_line() {
@@ -211,7 +212,7 @@ fn ant_follows_the_speed_profile_forwards_then_backwards() {
 
 #[test]
 fn ant_turns_at_the_commanded_yaw_rate_both_ways() {
-    assert_turns("ant", &[0.2, -0.2]);
+    assert_turns("ant", &[0.2, -0.2, 0.3, -0.3]);
 }
 
 #[test]
