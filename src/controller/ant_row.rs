@@ -2,16 +2,17 @@
 //!
 //! Ant's hips turn about the vertical and its legs sit on the body's diagonals, so a trot moves
 //! the body at 45° to its heading, and pinned feet cannot carry it straight without pitching it
-//! (README, "What is not there yet"). Turned -45°, legs 2 and 4 point across the direction of
-//! travel: their hip strokes move the feet along the travel line at almost constant reach, so
-//! they row the body straight ahead, while legs 1 and 3, along the travel line, hold one pose
-//! and slide as skids. The controller first turns on the spot into that pose (both diagonal
+//! (README, "Why Ant cannot trot straight on pinned feet"). Turned -45°, legs 2 and 4 point
+//! across the direction of travel: their hip strokes move the feet along the travel line at
+//! almost constant reach, so they row the body straight ahead, while legs 1 and 3, along the
+//! travel line, hold one pose and slide as skids. The controller first turns on the spot into that pose (both diagonal
 //! pairs stroking the same way round), then rows. Before turning it lands: the reset drops the
-//! body from a tilt, and legs that step at touchdown tip it into a sideways slide. Speed: the stroke amplitude, a feed-forward
-//! term plus an integral of each cycle's speed error. Heading: the two side strokes differ in
-//! proportion to the yaw error, and the yaw goal leans against the sideways offset from the
-//! travel line. Joint PD throughout, through the env's ordinary action (gear 150). Two postures:
-//! a low, wide one up to 0.7 m/s that sways and costs less, and a tall one that reaches 1.0 m/s.
+//! body from a tilt, and legs that step at touchdown tip it into a sideways slide. Speed: the
+//! stroke amplitude, a feed-forward term plus an integral of each cycle's speed error. Heading:
+//! the two side strokes differ in proportion to the yaw error, and the yaw goal leans against
+//! the sideways speed (and, in the fast posture, the sideways offset from the travel line).
+//! Joint PD throughout, through the env's ordinary action (gear 150). Two postures: a low, wide
+//! one up to 0.7 m/s that sways and costs less, and a tall one that reaches 1.0 m/s.
 use anyhow::{bail, Result};
 use std::f64::consts::{FRAC_PI_4, PI};
 
@@ -110,9 +111,9 @@ impl AntRowParams {
     /// yaw damped by its rate and not leaned against the sideways offset, and no speed integral
     /// over the first two cycles. Sideways drift per 50 s episode, 100 reset seeds (300-399):
     /// 0.42 m at 0.35 m/s and 0.71 m at 0.5 (the fast posture: 2.1 and 3.2 m), for about half
-    /// the energy. It does not reach 1.0 m/s, hence
-    /// the fast posture. Found by coordinate searches over these settings on reset seeds 0-29,
-    /// checked on seeds 200-229 and 300-399 (README).
+    /// the energy. It does not reach 1.0 m/s, hence the fast posture. Found by coordinate
+    /// searches over these settings on reset seeds 0-29, checked on seeds 200-229 and 300-399
+    /// (README).
     pub fn steady() -> AntRowParams {
         AntRowParams {
             duty_factor: 0.63,
@@ -224,6 +225,7 @@ pub struct AntRowController {
     /// How long the turn into the rowing pose took (s).
     turn_time: f64,
     stats: RowStats,
+    /// Rowing cycles completed this episode.
     cycles_rowed: u32,
     last_phase: [(bool, f64); LEGS],
     /// The last tick's yaw error and lean of the yaw goal (rad), for telemetry.
