@@ -141,7 +141,7 @@ fn mean_drift(eps: &[GaitEpisode]) -> f64 {
 }
 
 /// Rowing cuts the trot's sideways stepping to a twentieth at 0.5 m/s (README: 0.7 m against
-/// 15.6 m per episode).
+/// 15.5 m per episode).
 #[test]
 fn ant_rowing_drifts_less_than_its_trot() {
     let row = run("ant", 0.5, None);

@@ -167,7 +167,9 @@ impl AntController {
         let (yaw, heading, body) = (frame.yaw, frame.heading, frame.body);
         let (local_vel, local_omega) = (frame.velocity, frame.angular_velocity);
         if self.time == 0.0 {
-            self.heading_goal = yaw;
+            // Walk along world x, where Ant's reward counts progress, whatever yaw the reset
+            // left the body at (as the rowing gait does).
+            self.heading_goal = 0.0;
         }
         let v_des = p.command.speed.at(self.time);
         let yaw_rate_des = p.command.yaw_rate;
