@@ -346,6 +346,7 @@ impl AntRowController {
         match self.mode {
             Mode::Landing => {
                 targets = [(0.0, p.land_ankle, p.land_kp, p.land_kd); LEGS];
+                self.last_phase = [(true, 0.0); LEGS];
             }
             Mode::Turning => {
                 // Every stance foot sweeps the same way round the body: the body turns the other
