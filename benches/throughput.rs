@@ -3,7 +3,9 @@
 //! training (one update per step, the real `locobench train` loop, after the warm-up).
 //!
 //! `cargo bench --bench throughput -- --roofline` instead prints the TD3 update's matmul GFLOP/s
-//! against one core's measured matmul peak.
+//! against one core's measured matmul peak, and `-- --matmul` the GFLOP/s of every kernel path
+//! (`numeric::kernel_path`) on the update's products. `LOCOBENCH_KERNELS` picks the path the
+//! other modes run on; each JSON line names it.
 //!
 //! `cargo bench --bench throughput -- --algo td3 [--updates 300] [--steps 1000] [--threads 1|2]`;
 //! used by `benches/sb3/compare.sh`, which alternates it with Stable-Baselines3 in one run.
@@ -133,14 +135,56 @@ fn matmul_peak_gflops() -> Result<f64> {
     Ok(reps as f64 * 2.0 * (n * n * n) as f64 / started.elapsed().as_secs_f64() / 1e9)
 }
 
+/// GFLOP/s of each kernel path this CPU supports on the products of a TD3 400-300 critic update
+/// at batch 256 (forward, weight gradient, input gradient of the 400 -> 300 layer, and the
+/// 23 -> 400 first layer), one thread.
+fn matmul_paths() -> Result<()> {
+    use locobench::numeric::matmul::{matmul, Strided};
+    use locobench::numeric::KernelPath;
+    let _runtime = locobench::runtime::Runtime::enter(1);
+    let shapes: [(&str, (usize, usize, usize), bool, bool); 4] = [
+        ("forward 256x300x400 (x W^T)", (BATCH, 300, 400), false, true),
+        ("weight grad 300x400x256 (g^T x)", (300, 400, BATCH), true, false),
+        ("input grad 256x400x300 (g W)", (BATCH, 400, 300), false, false),
+        ("forward 256x400x23 (x W^T)", (BATCH, 400, OBS + ACT), false, true),
+    ];
+    println!("| product | {} |", KernelPath::ALL.iter().filter(|p| p.is_supported()).map(|p| p.name()).collect::<Vec<_>>().join(" | "));
+    println!("|---|{}", "---|".repeat(KernelPath::ALL.iter().filter(|p| p.is_supported()).count()));
+    for (name, (m, n, k), a_transposed, b_transposed) in shapes {
+        let a_data: Vec<f32> = (0..m * k).map(|i| (i as f32 * 0.37).sin()).collect();
+        let b_data: Vec<f32> = (0..k * n).map(|i| (i as f32 * 0.11).cos()).collect();
+        let a = if a_transposed { Strided::transposed(&a_data, m) } else { Strided::rows(&a_data, k) };
+        let b = if b_transposed { Strided::transposed(&b_data, k) } else { Strided::rows(&b_data, n) };
+        let mut dst = vec![0f32; m * n];
+        let mut row = format!("| {name} |");
+        for path in KernelPath::ALL.into_iter().filter(|p| p.is_supported()) {
+            let reps = if path == KernelPath::Portable { 3 } else { 200 };
+            matmul(path, (m, n, k), &mut dst, n, false, a, b);
+            let started = Instant::now();
+            for _ in 0..reps {
+                matmul(path, (m, n, k), &mut dst, n, false, a, b);
+                std::hint::black_box(&mut dst);
+            }
+            let gflops = reps as f64 * 2.0 * (m * n * k) as f64 / started.elapsed().as_secs_f64() / 1e9;
+            row += &format!(" {gflops:.1} |");
+        }
+        println!("{row}");
+    }
+    Ok(())
+}
+
 fn main() -> Result<()> {
+    if std::env::args().any(|a| a == "--matmul") {
+        return matmul_paths();
+    }
     if std::env::args().any(|a| a == "--roofline") {
         let peak = matmul_peak_gflops()?;
         let flops = td3_update_flops() / 1e9;
         let ups = updates_per_second(Algo::Td3, arg("--updates").map(|v| v.parse()).transpose()?.unwrap_or(300))?;
         println!(
-            "{{\"matmul_peak_gflops\": {peak:.1}, \"td3_gflop_per_update\": {flops:.3}, \"threads\": {}, \"td3_updates_per_s\": {ups:.1}, \"td3_gflops\": {:.1}, \"fraction_of_one_core_peak\": {:.2}, \"fraction_of_peak_of_cores_used\": {:.2}}}",
+            "{{\"matmul_peak_gflops\": {peak:.1}, \"td3_gflop_per_update\": {flops:.3}, \"threads\": {}, \"kernels\": \"{}\", \"td3_updates_per_s\": {ups:.1}, \"td3_gflops\": {:.1}, \"fraction_of_one_core_peak\": {:.2}, \"fraction_of_peak_of_cores_used\": {:.2}}}",
             threads(),
+            locobench::numeric::kernel_path::active(),
             ups * flops,
             ups * flops / peak,
             ups * flops / (peak * threads() as f64)
@@ -155,9 +199,10 @@ fn main() -> Result<()> {
     let ups = updates_per_second(algo, updates)?;
     let sps = if smoke || steps == 0 { f64::NAN } else { training_steps_per_second(algo, steps)? };
     println!(
-        "{{\"library\": \"locobench\", \"algo\": \"{}\", \"threads\": {}, \"updates_per_s\": {ups:.2}, \"train_steps_per_s\": {}}}",
+        "{{\"library\": \"locobench\", \"algo\": \"{}\", \"threads\": {}, \"kernels\": \"{}\", \"updates_per_s\": {ups:.2}, \"train_steps_per_s\": {}}}",
         algo.name(),
         threads(),
+        locobench::numeric::kernel_path::active(),
         if sps.is_finite() { format!("{sps:.2}") } else { "null".into() }
     );
     Ok(())

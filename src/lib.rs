@@ -5,6 +5,7 @@ pub mod controller;
 pub mod envs;
 pub mod io;
 pub mod mujoco;
+pub mod numeric;
 pub mod policy;
 pub mod record;
 pub mod report;

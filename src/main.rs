@@ -11,6 +11,10 @@ fn main() {
     // computes under the same settings as training.
     locobench::runtime::configure_process();
     let _runtime = locobench::runtime::Runtime::enter(1);
+    if let Err(e) = locobench::numeric::kernel_path::process_path() {
+        eprintln!("error: {e}");
+        std::process::exit(1);
+    }
     if let Err(e) = cli::run() {
         eprintln!("error: {e:#}");
         std::process::exit(1);

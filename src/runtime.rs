@@ -5,13 +5,14 @@
 //! | setting | scope | why |
 //! |---|---|---|
 //! | `RAYON_NUM_THREADS`, `CANDLE_NUM_THREADS` = 1 unless set | process, before candle starts ([`configure_process`]) | candle's pools busy-wait; one thread is fastest at these sizes (REFERENCE §6) |
-//! | glibc keeps freed memory (`agents::allocator`) | process | each update would page-fault its buffers again (~8% of a TD3 update) |
-//! | flush-to-zero and denormals-are-zero (`agents::denormals`) | calling thread | subnormal Adam moments take x86's slow path; results depend on the bit, so it must be on wherever the networks run |
-//! | one helper thread (`agents::second_core`), when `threads >= 2` | calling thread | splits large layers over two cores, same bits |
+//! | glibc keeps freed memory (`numeric::allocator`) | process | each update would page-fault its buffers again (~8% of a TD3 update) |
+//! | flush-to-zero and denormals-are-zero (`numeric::denormals`) | calling thread | subnormal Adam moments take x86's slow path; results depend on the bit, so it must be on wherever the networks run |
+//! | one helper thread (`numeric::second_core`), when `threads >= 2` | calling thread | splits large layers over two cores, same bits |
+//! | the matrix-multiply kernel path (`numeric::kernel_path`, `LOCOBENCH_KERNELS`) | process, or one thread when forced | the exact paths give the same bits on every AVX2+FMA CPU; `library` does not |
 //!
 //! `train::train`, `train::resume`, `train::evaluate::evaluate` and `rollout::run_episode` enter
 //! it themselves; a library caller running an agent some other way enters it around its work.
-use crate::agents::second_core::HelperGuard;
+use crate::numeric::second_core::HelperGuard;
 
 /// Process-wide settings; the CLI calls this first thing. Environment variables are only read
 /// when candle starts its pools, and setting them is only sound while no other thread runs.

@@ -10,7 +10,7 @@ use super::config::{Algo, TrainConfig};
 use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, Mlp, Output};
 use super::noise::{Noise, NoiseKind};
-use super::optim::Adam;
+use crate::numeric::optim::Adam;
 use super::{layer_sizes, Agent, Losses};
 
 pub struct DeterministicAgent {

@@ -3,34 +3,30 @@
 //! Agents work in the normalised action space [-1, 1]^n; the trainer maps actions to the
 //! environment's bounds. All randomness (initialisation, exploration, target smoothing, SAC's
 //! sampling) comes from RNGs the caller seeds, never from a library's global RNG.
-mod allocator;
 pub mod buffer;
 pub mod config;
 mod critics;
-mod denormals;
-mod dense;
 mod dpg;
-mod kernels;
 pub mod nets;
 pub mod noise;
 pub mod normalize;
-pub mod optim;
 pub mod registry;
 mod sac;
-pub mod second_core;
 
 use candle_core::{Result, Var};
 use rand_chacha::ChaCha8Rng;
 
-pub use allocator::keep_freed_memory;
+pub use crate::numeric::allocator::keep_freed_memory;
 pub use buffer::{Batch, ReplayBuffer};
 pub use config::{Algo, DpgConfig, OtherAlgorithmKeys, SacConfig, SacVersion, TanhCorrection, TrainConfig, WeightInit};
-pub use denormals::{float_mode, flush_denormals_to_zero, set_float_mode};
+pub use crate::numeric::denormals::{float_mode, flush_denormals_to_zero, set_float_mode};
+/// The optimiser and the helper thread live in [`crate::numeric`]; these paths stay for callers.
+pub use crate::numeric::{optim, second_core};
 pub use dpg::DeterministicAgent;
 pub use normalize::NormalizedAgent;
 pub use sac::SacAgent;
 
-use optim::Adam;
+use crate::numeric::optim::Adam;
 
 /// Losses and temperature of one gradient update (None where the update did not touch them).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]

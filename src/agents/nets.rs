@@ -6,8 +6,8 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::config::WeightInit;
-use super::dense::dense;
-use super::kernels::{Activation, Polyak};
+use crate::numeric::dense::dense;
+use crate::numeric::inplace::{Activation, Polyak};
 
 /// What follows the last layer.
 #[derive(Debug, Clone, Copy, PartialEq)]

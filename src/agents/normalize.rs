@@ -14,7 +14,7 @@
 use candle_core::{DType, Device, Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 
-use super::optim::Adam;
+use crate::numeric::optim::Adam;
 use super::{Agent, Algo, Batch, Losses, ReplayBuffer};
 
 /// VecNormalize's defaults (Stable-Baselines3 `vec_normalize.py`).

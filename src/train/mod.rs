@@ -7,6 +7,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod evaluate;
 pub mod metrics;
+pub mod provenance;
 mod recording;
 pub mod run_config;
 pub mod run_dir;
@@ -71,7 +72,7 @@ pub struct RunControl {
     /// rollout takes about 3 MB.
     pub record_every: u64,
     /// 2: the training thread gets a helper thread, and the large dense layers of every update
-    /// run in two halves on both cores (`agents::second_core`); results are the same bit for
+    /// run in two halves on both cores (`numeric::second_core`); results are the same bit for
     /// bit. 0 or 1: the training thread alone (parallel runs, e.g. a sweep's jobs).
     pub threads: usize,
 }
@@ -126,6 +127,7 @@ pub fn train(
     std::fs::create_dir_all(run_dir)?;
     let _lock = run_lock::RunLock::acquire(run_dir)?;
     write_bytes_atomic(&run_dir.join("config.toml"), run.to_toml()?.as_bytes())?;
+    provenance::append(run_dir, provenance::Stretch::here(0, control.threads, run.git_commit.as_deref()))?;
     trainer.run(control)
 }
 
@@ -177,6 +179,7 @@ pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
     if metrics_path.exists() {
         trainer.metrics = metrics::read(&metrics_path)?.into_iter().filter(|r| r.step <= state.step).collect();
     }
+    provenance::append(run_dir, provenance::Stretch::here(state.step, control.threads, git_commit().as_deref()))?;
     trainer.run(control)
 }
 

@@ -1,13 +1,13 @@
 //! Adam whose state (moments and step count) can be saved and restored, so that a resumed run
 //! continues with exactly the optimiser it stopped with. candle-nn's `AdamW` keeps its moments
 //! private; this one computes the same update (tested against it) in one pass per parameter,
-//! in place (`kernels::AdamStep`).
+//! in place (`inplace::AdamStep`).
 use std::cell::RefCell;
 
 use candle_core::backprop::GradStore;
 use candle_core::{Device, Result, Tensor, Var};
 
-use super::kernels::AdamStep;
+use super::inplace::AdamStep;
 
 pub struct Adam {
     pub lr: f64,

@@ -4,8 +4,8 @@
 //! one for the ReLU, and candle's backward pass allocates a zero gradient and adds into it for
 //! every input of every node, including a strided add for the transposed weight. perf showed that
 //! bookkeeping at about a fifth of a TD3 update once the matmuls were fast; as one node the
-//! forward pass is a single gemm call that accumulates onto the bias, and the backward pass is
-//! two gemm calls, a mask and a row sum.
+//! forward pass is a single matrix product ([`super::matmul`]) that accumulates onto the bias, and
+//! the backward pass is two products, a mask and a row sum.
 //!
 //! Large layers are cut in two independent halves (stacked networks by member, one network by
 //! rows of the batch for outputs and input gradients, by output units for weight gradients),
@@ -13,7 +13,9 @@
 //! thread exists, so results are the same with one thread or two.
 use candle_core::{bail, CpuStorage, CustomOp3, Layout, Result, Shape, Storage, Tensor};
 
-use super::kernels::{contiguous, Activation};
+use super::inplace::{contiguous, Activation};
+use super::kernel_path::{self, KernelPath};
+use super::matmul::{matmul, Strided};
 use super::second_core;
 
 /// Layers with fewer multiply-adds (k * n * in * out) than this run as one piece (a single
@@ -21,7 +23,12 @@ use super::second_core;
 /// threads measured the same within noise for thresholds from 1 << 17 to 1 << 22.
 const SPLIT_MACS: usize = 1 << 20;
 
-struct Dense(Activation);
+/// The layer's activation, and the kernel path its forward pass ran on (the backward pass uses
+/// the same one, whichever thread runs it).
+struct Dense {
+    act: Activation,
+    path: KernelPath,
+}
 
 /// Sizes of `x [n, in] | [k, n, in]`, `w [out, in] | [k, out, in]` and `b` (k * out values).
 struct Dims {
@@ -65,56 +72,14 @@ fn dims(x: &[usize], w: &[usize], b_len: usize) -> Result<Dims> {
     Ok(Dims { k, n, inp, out, shared_x })
 }
 
-/// `dst (m x n, row stride dst_rs) (+)= lhs (m x k) * rhs (k x n)`, every operand given by its
-/// row and column strides. One core.
-///
-/// SAFETY (caller): each slice holds every element its strides and sizes address.
-#[allow(clippy::too_many_arguments)]
-unsafe fn gemm_into(
-    (m, n, k): (usize, usize, usize),
-    dst: &mut [f32],
-    dst_rs: usize,
-    accumulate: bool,
-    lhs: &[f32],
-    (lhs_rs, lhs_cs): (usize, usize),
-    rhs: &[f32],
-    (rhs_rs, rhs_cs): (usize, usize),
-) {
-    debug_assert!(m == 0 || dst.len() >= (m - 1) * dst_rs + n);
-    debug_assert!(m == 0 || k == 0 || lhs.len() > (m - 1) * lhs_rs + (k - 1) * lhs_cs);
-    debug_assert!(k == 0 || n == 0 || rhs.len() > (k - 1) * rhs_rs + (n - 1) * rhs_cs);
-    gemm::gemm(
-        m,
-        n,
-        k,
-        dst.as_mut_ptr(),
-        1,
-        dst_rs as isize,
-        accumulate,
-        lhs.as_ptr(),
-        lhs_cs as isize,
-        lhs_rs as isize,
-        rhs.as_ptr(),
-        rhs_cs as isize,
-        rhs_rs as isize,
-        1.0,
-        1.0,
-        false,
-        false,
-        false,
-        gemm::Parallelism::None,
-    );
-}
-
 /// `y = act(x W^T + b)` for a block of rows: x `[rows, in]`, w `[out, in]`, y `[rows, out]`.
-fn forward_block(x: &[f32], w: &[f32], b: &[f32], y: &mut [f32], inp: usize, out: usize, act: Activation) {
+#[allow(clippy::too_many_arguments)]
+fn forward_block(path: KernelPath, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32], inp: usize, out: usize, act: Activation) {
     let rows = y.len() / out;
     for row in y.chunks_exact_mut(out) {
         row.copy_from_slice(b);
     }
-    // SAFETY: y is rows x out, x rows x in, and W^T (in x out) is read from the out x in weight
-    // with row stride 1 and column stride in.
-    unsafe { gemm_into((rows, out, inp), y, out, true, &x[..rows * inp], (inp, 1), w, (1, inp)) };
+    matmul(path, (rows, out, inp), y, out, true, Strided::rows(&x[..rows * inp], inp), Strided::transposed(w, inp));
     if act == Activation::Relu {
         y.iter_mut().for_each(|v| *v = v.max(0.0));
     }
@@ -122,11 +87,12 @@ fn forward_block(x: &[f32], w: &[f32], b: &[f32], y: &mut [f32], inp: usize, out
 
 /// Weight and bias gradients of `units` output units: `gw [units, in] = gp^T x`, `gb = sum of gp's
 /// rows`, where `gp` starts at the first of those units, `rows` rows of stride `out`.
-fn weight_grads(gp: &[f32], out: usize, x: &[f32], gw: &mut [f32], gb: &mut [f32], rows: usize, inp: usize) {
+#[allow(clippy::too_many_arguments)]
+fn weight_grads(path: KernelPath, gp: &[f32], out: usize, x: &[f32], gw: &mut [f32], gb: &mut [f32], rows: usize, inp: usize) {
     let units = gb.len();
-    // SAFETY: gw is units x in; gp^T (units x rows) is read with row stride 1 and column stride
-    // out; x is rows x in.
-    unsafe { gemm_into((units, inp, rows), gw, inp, false, gp, (1, out), x, (inp, 1)) };
+    // gp^T (units x rows) is gp read with row stride 1 and column stride out.
+    let gp_t = Strided { data: gp, row_stride: 1, col_stride: out };
+    matmul(path, (units, inp, rows), gw, inp, false, gp_t, Strided::rows(x, inp));
     gb.fill(0.0);
     for r in 0..rows {
         gb.iter_mut().zip(&gp[r * out..r * out + units]).for_each(|(a, g)| *a += g);
@@ -134,10 +100,9 @@ fn weight_grads(gp: &[f32], out: usize, x: &[f32], gw: &mut [f32], gb: &mut [f32
 }
 
 /// Input gradient of a block of rows: `gx [rows, in] = gp [rows, out] W [out, in]`.
-fn input_grad(gp: &[f32], w: &[f32], gx: &mut [f32], inp: usize, out: usize) {
+fn input_grad(path: KernelPath, gp: &[f32], w: &[f32], gx: &mut [f32], inp: usize, out: usize) {
     let rows = gx.len() / inp;
-    // SAFETY: gx is rows x in, gp rows x out, w out x in, all row-major.
-    unsafe { gemm_into((rows, inp, out), gx, inp, false, gp, (out, 1), w, (inp, 1)) };
+    matmul(path, (rows, inp, out), gx, inp, false, Strided::rows(gp, out), Strided::rows(w, inp));
 }
 
 fn f32_slice<'a>(storage: &'a Storage, layout: &Layout) -> Result<&'a [f32]> {
@@ -163,14 +128,14 @@ impl CustomOp3 for Dense {
     ) -> Result<(CpuStorage, Shape)> {
         let (x, w, b) = (contiguous(s1, l1, "dense")?, contiguous(s2, l2, "dense")?, contiguous(s3, l3, "dense")?);
         let d = dims(l1.dims(), l2.dims(), b.len())?;
-        let act = self.0;
+        let (act, path) = (self.act, self.path);
         let mut y = vec![0f32; d.k * d.n * d.out];
         // members g0, g0 + 1, ... into consecutive `[n, out]` blocks of y
         let members = |g0: usize, y: &mut [f32]| {
             for (i, y) in y.chunks_exact_mut(d.n * d.out).enumerate() {
                 let g = g0 + i;
                 let w = &w[g * d.out * d.inp..(g + 1) * d.out * d.inp];
-                forward_block(&x[d.x_range(g)], w, &b[g * d.out..(g + 1) * d.out], y, d.inp, d.out, act)
+                forward_block(path, &x[d.x_range(g)], w, &b[g * d.out..(g + 1) * d.out], y, d.inp, d.out, act)
             }
         };
         if !d.split() {
@@ -179,8 +144,8 @@ impl CustomOp3 for Dense {
             let half = d.n / 2;
             let (top, bottom) = y.split_at_mut(half * d.out);
             second_core::join(
-                || forward_block(&x[..half * d.inp], w, b, top, d.inp, d.out, act),
-                || forward_block(&x[half * d.inp..], w, b, bottom, d.inp, d.out, act),
+                || forward_block(path, &x[..half * d.inp], w, b, top, d.inp, d.out, act),
+                || forward_block(path, &x[half * d.inp..], w, b, bottom, d.inp, d.out, act),
             );
         } else {
             let first = d.k / 2;
@@ -211,7 +176,8 @@ impl CustomOp3 for Dense {
         let (xv, wv, yv) = (f32_slice(&xs, xl)?, f32_slice(&ws, wl)?, f32_slice(&ys, yl)?);
         let gv = f32_slice(&gs, gl)?;
         // gradient before the activation (a select, not a branch, so that it vectorises)
-        let gp: Vec<f32> = match self.0 {
+        let path = self.path;
+        let gp: Vec<f32> = match self.act {
             Activation::Identity => gv.to_vec(),
             Activation::Relu => gv.iter().zip(yv).map(|(g, y)| if *y > 0.0 { *g } else { 0.0 }).collect(),
         };
@@ -226,9 +192,10 @@ impl CustomOp3 for Dense {
             for (i, (gw, gb)) in gw.chunks_exact_mut(out * inp).zip(gb.chunks_exact_mut(out)).enumerate() {
                 let g = g0 + i;
                 let gp = &gp[g * n * out..(g + 1) * n * out];
-                weight_grads(gp, out, &xv[d.x_range(g)], gw, gb, n, inp);
+                weight_grads(path, gp, out, &xv[d.x_range(g)], gw, gb, n, inp);
                 if need_grad_x {
                     input_grad(
+                        path,
                         gp,
                         &wv[g * out * inp..(g + 1) * out * inp],
                         &mut gx[i * gx_len..(i + 1) * gx_len],
@@ -247,9 +214,9 @@ impl CustomOp3 for Dense {
             let (gb_a, gb_z) = gb.split_at_mut(units);
             let (gx_a, gx_z) = gx.split_at_mut(if need_grad_x { rows * inp } else { 0 });
             let half = |gp_units: &[f32], gw: &mut [f32], gb: &mut [f32], gp_rows: &[f32], gx: &mut [f32]| {
-                weight_grads(gp_units, out, xv, gw, gb, n, inp);
+                weight_grads(path, gp_units, out, xv, gw, gb, n, inp);
                 if need_grad_x {
-                    input_grad(gp_rows, wv, gx, inp, out);
+                    input_grad(path, gp_rows, wv, gx, inp, out);
                 }
             };
             second_core::join(
@@ -280,7 +247,7 @@ impl CustomOp3 for Dense {
 /// `act(x W^T + b)`: x `[n, in]` with w `[out, in]`, b `[out]` (one network), or w `[k, out, in]`,
 /// b `[k, 1, out]` with x `[k, n, in]` or a shared `[n, in]` (k stacked networks, output `[k, n, out]`).
 pub fn dense(x: &Tensor, w: &Tensor, b: &Tensor, act: Activation) -> Result<Tensor> {
-    x.contiguous()?.apply_op3(&w.contiguous()?, &b.contiguous()?, Dense(act))
+    x.contiguous()?.apply_op3(&w.contiguous()?, &b.contiguous()?, Dense { act, path: kernel_path::active() })
 }
 
 #[cfg(test)]
@@ -373,6 +340,20 @@ mod tests {
         let zeros = |shape: &[usize]| Tensor::zeros(shape, candle_core::DType::F32, &Device::Cpu).unwrap();
         assert!(dense(&zeros(&[5, 3]), &zeros(&[4, 2]), &zeros(&[4]), Activation::Relu).is_err());
         assert!(dense(&zeros(&[5, 3]), &zeros(&[4, 3]), &zeros(&[3]), Activation::Relu).is_err());
+    }
+
+    /// Every exact kernel path gives the same output and gradients, bit for bit.
+    #[test]
+    fn every_exact_kernel_path_gives_the_same_layer() {
+        let on = |path: KernelPath| {
+            let _forced = kernel_path::force_on_this_thread(path).unwrap();
+            let act = [Activation::Identity, Activation::Relu];
+            CASES.iter().flat_map(|c| act.map(|a| run(*c, a))).collect::<Vec<_>>()
+        };
+        let portable = on(KernelPath::Portable);
+        for path in KernelPath::ALL.into_iter().filter(|p| p.is_exact() && p.is_supported()) {
+            assert_eq!(on(path), portable, "{path}");
+        }
     }
 
     /// The halves of a split layer give the same bits whichever thread runs them.

@@ -1,0 +1,463 @@
+//! `C (+)= A B` in one fixed order of operations, whatever the vector width.
+//!
+//! Every output element starts from its old value (or zero) and takes one fused multiply-add per
+//! term, `c = fma(a[i][p], b[p][j], c)` for `p = 0, 1, ..., k-1`, in that order. The vector paths
+//! compute 16 (AVX-512) or 8 (AVX2) neighbouring elements of a row at once, each lane doing
+//! exactly that sequence, and the portable path one element at a time with `f32::mul_add`; an
+//! IEEE fused multiply-add rounds once, so all three give the same bits on every CPU. Nothing is
+//! summed across lanes, and partial sums are never added to each other.
+//!
+//! The loops are those of Goto and van de Geijn ("Anatomy of High-Performance Matrix
+//! Multiplication", ACM TOMS 34(3), 2008): `k` is cut into chunks of [`K_CHUNK`] terms, a chunk of
+//! A is packed into row tiles and a chunk of B into column panels so that the innermost loop
+//! reads two contiguous streams from cache, and a register tile of 6 rows by two vectors takes
+//! one chunk at a time. Cutting `k` keeps the order exact because a tile carries its partial
+//! result into the next chunk through C (a stored f32 is the value itself), rather than summing
+//! chunks computed from zero as BLAS libraries do. The `gemm` crate remains available as
+//! [`KernelPath::Library`] and is the reference the tests compare with.
+use std::cell::RefCell;
+
+use super::kernel_path::KernelPath;
+
+/// A matrix read through strides: element (i, j) is `data[i * row_stride + j * col_stride]`.
+#[derive(Clone, Copy)]
+pub struct Strided<'a> {
+    pub data: &'a [f32],
+    pub row_stride: usize,
+    pub col_stride: usize,
+}
+
+impl<'a> Strided<'a> {
+    /// A row-major matrix with `cols` columns.
+    pub fn rows(data: &'a [f32], cols: usize) -> Strided<'a> {
+        Strided { data, row_stride: cols, col_stride: 1 }
+    }
+
+    /// The transpose of a row-major matrix with `cols` columns.
+    pub fn transposed(data: &'a [f32], cols: usize) -> Strided<'a> {
+        Strided { data, row_stride: 1, col_stride: cols }
+    }
+
+    fn holds(&self, rows: usize, cols: usize) -> bool {
+        rows == 0 || cols == 0 || self.data.len() > (rows - 1) * self.row_stride + (cols - 1) * self.col_stride
+    }
+}
+
+/// `dst [m x n] (+)= a [m x k] * b [k x n]` on `path`; `dst` is row-major with row stride
+/// `dst_stride`; with `accumulate` false its old values are ignored.
+///
+/// # Panics
+/// When a slice is too short for the sizes and strides, or `path` is not supported here.
+#[allow(clippy::too_many_arguments)]
+pub fn matmul(
+    path: KernelPath,
+    (m, n, k): (usize, usize, usize),
+    dst: &mut [f32],
+    dst_stride: usize,
+    accumulate: bool,
+    a: Strided,
+    b: Strided,
+) {
+    assert!(m == 0 || n == 0 || dst.len() >= (m - 1) * dst_stride + n, "matmul: destination too short");
+    assert!(a.holds(m, k) && b.holds(k, n), "matmul: operand too short for {m}x{k} * {k}x{n}");
+    if m == 0 || n == 0 {
+        return;
+    }
+    if path == KernelPath::Library {
+        // SAFETY: the asserts above bound every element the strides address.
+        unsafe { library(m, n, k, dst, dst_stride, accumulate, a, b) };
+        return;
+    }
+    assert!(path.is_supported(), "matmul: the {path} kernels need CPU features this machine lacks");
+    let (tile, Geometry { tile_rows, panel }): (TileKernel, Geometry) = match path {
+        #[cfg(target_arch = "x86_64")]
+        KernelPath::Avx512 => (avx512::tile, avx512::GEOMETRY),
+        #[cfg(target_arch = "x86_64")]
+        KernelPath::Avx2 => (avx2::tile, avx2::GEOMETRY),
+        _ => (portable_tile, PORTABLE),
+    };
+    if k == 0 {
+        if !accumulate {
+            dst.chunks_mut(dst_stride).take(m).for_each(|row| row[..n].fill(0.0));
+        }
+        return;
+    }
+    SCRATCH.with(|scratch| {
+        let (a_pack, b_pack) = &mut *scratch.borrow_mut();
+        for p0 in (0..k).step_by(K_CHUNK) {
+            let kc = K_CHUNK.min(k - p0);
+            pack_a(a, m, p0, kc, tile_rows, a_pack);
+            for j0 in (0..n).step_by(panel) {
+                let cols = panel.min(n - j0);
+                pack_b(b, p0, kc, j0, cols, panel, b_pack);
+                for (t, i0) in (0..m).step_by(tile_rows).enumerate() {
+                    let rows = tile_rows.min(m - i0);
+                    let c = &mut dst[i0 * dst_stride + j0..];
+                    assert!(c.len() >= (rows - 1) * dst_stride + cols);
+                    let a_tile = &a_pack[t * tile_rows * kc..(t + 1) * tile_rows * kc];
+                    // SAFETY: the CPU has the path's features (asserted above); the packed tiles
+                    // hold kc terms of tile_rows rows and `panel` columns, and c holds `rows` rows
+                    // of `cols` elements at `dst_stride` (asserted).
+                    unsafe {
+                        tile(rows, cols, kc, a_tile.as_ptr(), b_pack.as_ptr(), c.as_mut_ptr(), dst_stride, accumulate || p0 > 0)
+                    };
+                }
+            }
+        }
+    });
+}
+
+/// Terms per chunk of k: a 48-column panel of B is then 24 KB, half a 48 KB L1 data cache (128
+/// measured faster than 192 and 256 on the TD3 products, `cargo bench --bench throughput -- --matmul`).
+const K_CHUNK: usize = 128;
+
+/// A path's register tile: rows of A (a packed row tile) by `panel` columns (a packed column
+/// panel of B, whole vectors).
+#[derive(Clone, Copy)]
+struct Geometry {
+    tile_rows: usize,
+    panel: usize,
+}
+
+const PORTABLE: Geometry = Geometry { tile_rows: 6, panel: 16 };
+
+thread_local! {
+    /// Packed chunks of A (row tiles) and B (one column panel), reused between calls.
+    static SCRATCH: RefCell<(Vec<f32>, Vec<f32>)> = const { RefCell::new((Vec::new(), Vec::new())) };
+}
+
+/// Terms p0..p0+kc of every row of A, as consecutive tiles of `tile_rows` rows stored term by
+/// term (`tile[p * tile_rows + r]`); rows past m are zero.
+fn pack_a(a: Strided, m: usize, p0: usize, kc: usize, tile_rows: usize, out: &mut Vec<f32>) {
+    let tiles = m.div_ceil(tile_rows);
+    out.clear();
+    out.resize(tiles * tile_rows * kc, 0.0);
+    for (t, tile) in out.chunks_exact_mut(tile_rows * kc).enumerate() {
+        let (first, rows) = (t * tile_rows, tile_rows.min(m - t * tile_rows));
+        if a.row_stride == 1 {
+            // A^T stored row-major (a weight gradient's g^T): each term's rows are contiguous.
+            for (p, dst) in tile.chunks_exact_mut(tile_rows).enumerate() {
+                let start = (p0 + p) * a.col_stride + first;
+                dst[..rows].copy_from_slice(&a.data[start..start + rows]);
+            }
+        } else {
+            for r in 0..rows {
+                let row = (first + r) * a.row_stride + p0 * a.col_stride;
+                let terms = (0..kc).map(|p| a.data[row + p * a.col_stride]);
+                tile.chunks_exact_mut(tile_rows).zip(terms).for_each(|(dst, v)| dst[r] = v);
+            }
+        }
+    }
+}
+
+/// Terms p0..p0+kc of columns j0..j0+cols of B, row by row, `panel` wide (zeros past cols).
+fn pack_b(b: Strided, p0: usize, kc: usize, j0: usize, cols: usize, panel: usize, out: &mut Vec<f32>) {
+    out.clear();
+    out.resize(kc * panel, 0.0);
+    if b.col_stride == 1 {
+        for (p, row) in out.chunks_exact_mut(panel).enumerate() {
+            let start = (p0 + p) * b.row_stride + j0;
+            row[..cols].copy_from_slice(&b.data[start..start + cols]);
+        }
+    } else {
+        for j in 0..cols {
+            let column = (j0 + j) * b.col_stride + p0 * b.row_stride;
+            let terms = (0..kc).map(|p| b.data[column + p * b.row_stride]);
+            out.chunks_exact_mut(panel).zip(terms).for_each(|(row, v)| row[j] = v);
+        }
+    }
+}
+
+/// `rows x cols` of C (row stride `c_stride`), starting from C's values when `load_c` and from
+/// zero otherwise, plus `kc` terms of a packed A tile times a packed B panel.
+type TileKernel = unsafe fn(usize, usize, usize, *const f32, *const f32, *mut f32, usize, bool);
+
+/// One element at a time, in the order every path follows.
+///
+/// SAFETY (caller): as for [`TileKernel`]: the packed operands hold kc terms, C its tile.
+#[allow(clippy::too_many_arguments)]
+unsafe fn portable_tile(rows: usize, cols: usize, kc: usize, a: *const f32, b: *const f32, c: *mut f32, c_stride: usize, load_c: bool) {
+    let Geometry { tile_rows, panel } = PORTABLE;
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        for r in 0..rows {
+            for j in 0..cols {
+                let out = c.add(r * c_stride + j);
+                let mut acc = if load_c { *out } else { 0.0 };
+                for p in 0..kc {
+                    acc = (*a.add(p * tile_rows + r)).mul_add(*b.add(p * panel + j), acc);
+                }
+                *out = acc;
+            }
+        }
+    }
+}
+
+/// One vector kernel family: `$width` lanes of type `$vec`, C's partial last vector read and
+/// written with masks (lanes outside the mask are not accessed).
+#[cfg(target_arch = "x86_64")]
+macro_rules! vector_kernels {
+    ($module:ident, $feature:literal, $width:expr, $tile_rows:expr, $vectors:expr, $vec:ty, $mask:ty, $mask_for:expr, $zero:expr,
+     $load:expr, $store:expr, $masked_load:expr, $masked_store:expr, $splat:expr, $fma:expr) => {
+        mod $module {
+            use std::arch::x86_64::*;
+
+            use super::Geometry;
+
+            const W: usize = $width;
+            const TILE_ROWS: usize = $tile_rows;
+            const PANEL: usize = $vectors * W;
+            pub(super) const GEOMETRY: Geometry = Geometry { tile_rows: TILE_ROWS, panel: PANEL };
+
+            /// [`super::TileKernel`] for this family.
+            ///
+            /// # Safety
+            /// The CPU has the features; the operands hold what [`super::TileKernel`] says.
+            #[target_feature(enable = $feature)]
+            #[allow(clippy::too_many_arguments)]
+            pub(super) unsafe fn tile(rows: usize, cols: usize, kc: usize, a: *const f32, b: *const f32, c: *mut f32, c_stride: usize, load_c: bool) {
+                let vectors = cols.div_ceil(W);
+                let last = cols - (vectors - 1) * W;
+                let mask = ($mask_for)(last);
+                let full = last == W;
+                // SAFETY: forwarded from the caller.
+                unsafe {
+                    match rows {
+                        8 => by_vectors::<8>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
+                        7 => by_vectors::<7>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
+                        6 => by_vectors::<6>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
+                        5 => by_vectors::<5>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
+                        4 => by_vectors::<4>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
+                        3 => by_vectors::<3>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
+                        2 => by_vectors::<2>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
+                        _ => by_vectors::<1>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
+                    }
+                }
+            }
+
+            #[target_feature(enable = $feature)]
+            #[allow(clippy::too_many_arguments)]
+            unsafe fn by_vectors<const R: usize>(vectors: usize, full: bool, kc: usize, a: *const f32, b: *const f32, c: *mut f32, c_stride: usize, load_c: bool, mask: $mask) {
+                // SAFETY: forwarded from `tile`.
+                unsafe {
+                    match (vectors, full) {
+                        (3, true) => rows_tile::<R, 3, true>(kc, a, b, c, c_stride, load_c, mask),
+                        (3, false) => rows_tile::<R, 3, false>(kc, a, b, c, c_stride, load_c, mask),
+                        (2, true) => rows_tile::<R, 2, true>(kc, a, b, c, c_stride, load_c, mask),
+                        (2, false) => rows_tile::<R, 2, false>(kc, a, b, c, c_stride, load_c, mask),
+                        (_, true) => rows_tile::<R, 1, true>(kc, a, b, c, c_stride, load_c, mask),
+                        (_, false) => rows_tile::<R, 1, false>(kc, a, b, c, c_stride, load_c, mask),
+                    }
+                }
+            }
+
+            /// `R` rows by `V` vectors; C's last vector is masked unless `FULL`.
+            #[target_feature(enable = $feature)]
+            #[inline]
+            #[allow(clippy::too_many_arguments)]
+            unsafe fn rows_tile<const R: usize, const V: usize, const FULL: bool>(kc: usize, a: *const f32, b: *const f32, c: *mut f32, c_stride: usize, load_c: bool, mask: $mask) {
+                // SAFETY (whole body): a and b are packed (TILE_ROWS and PANEL floats per term,
+                // kc terms); C is read and written in rows < R and lanes inside the mask.
+                unsafe {
+                    let mut acc: [[$vec; V]; R] = [[$zero; V]; R];
+                    if load_c {
+                        for (r, acc_r) in acc.iter_mut().enumerate() {
+                            let row = c.add(r * c_stride);
+                            for (v, acc_rv) in acc_r.iter_mut().enumerate() {
+                                *acc_rv = if FULL || v + 1 < V { ($load)(row.add(v * W)) } else { ($masked_load)(row.add(v * W), mask) };
+                            }
+                        }
+                    }
+                    let (mut a, mut b) = (a, b);
+                    for _ in 0..kc {
+                        let mut b_vec: [$vec; V] = [$zero; V];
+                        for (v, bv) in b_vec.iter_mut().enumerate() {
+                            *bv = ($load)(b.add(v * W));
+                        }
+                        for (r, acc_r) in acc.iter_mut().enumerate() {
+                            let a_r = ($splat)(*a.add(r));
+                            for (acc_rv, bv) in acc_r.iter_mut().zip(&b_vec) {
+                                *acc_rv = ($fma)(a_r, *bv, *acc_rv);
+                            }
+                        }
+                        a = a.add(TILE_ROWS);
+                        b = b.add(PANEL);
+                    }
+                    for (r, acc_r) in acc.iter().enumerate() {
+                        let row = c.add(r * c_stride);
+                        for (v, acc_rv) in acc_r.iter().enumerate() {
+                            if FULL || v + 1 < V {
+                                ($store)(row.add(v * W), *acc_rv);
+                            } else {
+                                ($masked_store)(row.add(v * W), mask, *acc_rv);
+                            }
+                        }
+                    }
+                }
+            }
+        }
+    };
+}
+
+#[cfg(target_arch = "x86_64")]
+vector_kernels!(
+    avx512,
+    "avx512f,fma",
+    16,
+    8,
+    3,
+    __m512,
+    __mmask16,
+    |lanes: usize| if lanes >= 16 { 0xffffu16 } else { ((1u32 << lanes) - 1) as u16 },
+    _mm512_setzero_ps(),
+    |p: *const f32| _mm512_loadu_ps(p),
+    |p: *mut f32, v: __m512| _mm512_storeu_ps(p, v),
+    |p: *const f32, m: __mmask16| _mm512_maskz_loadu_ps(m, p),
+    |p: *mut f32, m: __mmask16, v: __m512| _mm512_mask_storeu_ps(p, m, v),
+    |x: f32| _mm512_set1_ps(x),
+    |a: __m512, b: __m512, c: __m512| _mm512_fmadd_ps(a, b, c)
+);
+
+#[cfg(target_arch = "x86_64")]
+vector_kernels!(
+    avx2,
+    "avx2,fma",
+    8,
+    6,
+    2,
+    __m256,
+    __m256i,
+    |lanes: usize| _mm256_cmpgt_epi32(_mm256_set1_epi32(lanes as i32), _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7)),
+    _mm256_setzero_ps(),
+    |p: *const f32| _mm256_loadu_ps(p),
+    |p: *mut f32, v: __m256| _mm256_storeu_ps(p, v),
+    |p: *const f32, m: __m256i| _mm256_maskload_ps(p, m),
+    |p: *mut f32, m: __m256i, v: __m256| _mm256_maskstore_ps(p, m, v),
+    |x: f32| _mm256_set1_ps(x),
+    |a: __m256, b: __m256, c: __m256| _mm256_fmadd_ps(a, b, c)
+);
+
+/// The `gemm` crate, as candle calls it, on one thread.
+///
+/// SAFETY (caller): each slice holds every element its strides and sizes address.
+#[allow(clippy::too_many_arguments)]
+unsafe fn library(m: usize, n: usize, k: usize, dst: &mut [f32], dst_stride: usize, accumulate: bool, a: Strided, b: Strided) {
+    // SAFETY: forwarded from the caller.
+    unsafe {
+        gemm::gemm(
+            m,
+            n,
+            k,
+            dst.as_mut_ptr(),
+            1,
+            dst_stride as isize,
+            accumulate,
+            a.data.as_ptr(),
+            a.col_stride as isize,
+            a.row_stride as isize,
+            b.data.as_ptr(),
+            b.col_stride as isize,
+            b.row_stride as isize,
+            1.0,
+            1.0,
+            false,
+            false,
+            false,
+            gemm::Parallelism::None,
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn values(n: usize, seed: f32) -> Vec<f32> {
+        (0..n).map(|i| ((i as f32 * 0.37 + seed).sin() * 3.0).tan().clamp(-50.0, 50.0)).collect()
+    }
+
+    /// Every shape class the kernels branch on: full and partial tiles in rows and vector
+    /// columns, a single row (acting), k = 0 and 1, and the network sizes.
+    const SHAPES: [(usize, usize, usize); 12] = [
+        (1, 1, 1),
+        (1, 300, 400),
+        (5, 3, 7),
+        (6, 16, 9),
+        (7, 17, 3),
+        (13, 33, 20),
+        (12, 8, 1),
+        (4, 5, 0),
+        (64, 40, 23),
+        (256, 300, 400),
+        (300, 23, 256),
+        (257, 31, 6),
+    ];
+
+    /// The same product with every stride pattern the dense layer uses.
+    fn product(path: KernelPath, (m, n, k): (usize, usize, usize), layout: usize, accumulate: bool) -> Vec<f32> {
+        let a_data = values(m * k, 0.3);
+        let b_data = values(k * n, 1.1);
+        let (a, b) = match layout {
+            0 => (Strided::rows(&a_data, k), Strided::rows(&b_data, n)),
+            1 => (Strided::transposed(&a_data, m), Strided::rows(&b_data, n)),
+            _ => (Strided::rows(&a_data, k), Strided::transposed(&b_data, k)),
+        };
+        let stride = n + 3;
+        let mut dst = values(m * stride, 2.7);
+        matmul(path, (m, n, k), &mut dst, stride, accumulate, a, b);
+        dst
+    }
+
+    /// The reference: f64 sums, which every f32 order must approach.
+    #[test]
+    fn every_exact_path_gives_the_same_bits_and_matches_the_library() {
+        let paths: Vec<KernelPath> = KernelPath::ALL.into_iter().filter(|p| p.is_supported()).collect();
+        assert!(paths.contains(&KernelPath::Portable) && paths.contains(&KernelPath::Library));
+        for shape in SHAPES {
+            for layout in 0..3 {
+                for accumulate in [false, true] {
+                    let portable = product(KernelPath::Portable, shape, layout, accumulate);
+                    for path in paths.iter().filter(|p| p.is_exact()) {
+                        let ours = product(*path, shape, layout, accumulate);
+                        let same = ours.iter().zip(&portable).all(|(a, b)| a.to_bits() == b.to_bits());
+                        assert!(same, "{path} differs from portable at {shape:?} layout {layout} accumulate {accumulate}");
+                    }
+                    let library = product(KernelPath::Library, shape, layout, accumulate);
+                    let scale = shape.2 as f32 * 2500.0 * f32::EPSILON * 4.0 + 1e-6;
+                    for (i, (a, l)) in portable.iter().zip(&library).enumerate() {
+                        assert!((a - l).abs() <= scale * (1.0 + l.abs()), "{shape:?} layout {layout} element {i}: {a} vs gemm {l}");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn the_order_is_one_fused_multiply_add_per_term_from_the_old_value() {
+        let exact_paths = || KernelPath::ALL.into_iter().filter(|p| p.is_exact() && p.is_supported());
+        // (1 + e)(1 - e) - 1 = -e^2 survives a fused multiply-add and is 0 after a rounded product.
+        let e = f32::EPSILON;
+        for path in exact_paths() {
+            let mut dst = [-1.0f32];
+            matmul(path, (1, 1, 1), &mut dst, 1, true, Strided::rows(&[1.0 + e], 1), Strided::rows(&[1.0 - e], 1));
+            assert_eq!(dst[0], -e * e, "{path}");
+        }
+        // Terms in order from the old value: (0 + 1e8) + 1 rounds back to 1e8, so the sum is 0;
+        // any other grouping gives 1.
+        let b = [1e8f32, 1.0, -1e8];
+        for path in exact_paths() {
+            let mut dst = [0.0f32; 17];
+            let ones = [1.0f32; 3];
+            let wide: Vec<f32> = b.iter().flat_map(|v| [*v; 17]).collect();
+            matmul(path, (1, 17, 3), &mut dst, 17, false, Strided::rows(&ones, 3), Strided::rows(&wide, 17));
+            assert!(dst.iter().all(|v| *v == 0.0), "{path}: {dst:?}");
+        }
+    }
+
+    #[test]
+    #[should_panic(expected = "operand too short")]
+    fn short_operands_are_refused() {
+        let mut dst = [0f32; 4];
+        matmul(KernelPath::Portable, (2, 2, 3), &mut dst, 2, false, Strided::rows(&[0.0; 5], 3), Strided::rows(&[0.0; 6], 2));
+    }
+}

@@ -1,0 +1,18 @@
+//! The numeric engine under the agents: the dense layer, the matrix-multiply kernels it runs on,
+//! the in-place optimiser and target-network steps, and the settings every network computation
+//! runs under (flush-to-zero, the helper thread, the allocator).
+//!
+//! Results are the same bits on every x86-64 CPU with AVX2 and FMA, with or without AVX-512, for
+//! a fixed seed and thread count: the matrix products follow one order of operations on every
+//! [`kernel_path::KernelPath`] (see [`matmul`]), and everything else here is plain Rust compiled
+//! for the baseline x86-64 target, which does not change with the CPU.
+pub(crate) mod allocator;
+pub mod dense;
+pub(crate) mod denormals;
+pub mod inplace;
+pub mod kernel_path;
+pub mod matmul;
+pub mod optim;
+pub mod second_core;
+
+pub use kernel_path::KernelPath;
