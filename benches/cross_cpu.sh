@@ -1,64 +1,40 @@
 #!/usr/bin/env bash
-# Same binary, other CPUs: runs one release build natively and under qemu-user as an AVX2-only
-# CPU (Haswell: AVX2 and FMA, no AVX-512) and a CPU without AVX or FMA (Nehalem), and prints a
-# digest of what each computed:
-#   physics     a 1000-step Ant rollout of random actions (MuJoCo alone)
-#   controller  two Minitaur episodes of the Raibert/QP controller at 1.0 m/s
-#   policy      three evaluation episodes of the shipped TD3 Minitaur policy
-#   training    a 3000-step TD3 run on InvertedPendulum (weights, optimiser, metrics)
-# once with the default kernels (auto: the widest exact path) and once with the gemm crate's
-# (LOCOBENCH_KERNELS=library). Same digest in a column = same bits.
+# Same binary, other CPUs: runs the digest bench (benches/digest.rs: an Ant episode of random
+# actions, a Minitaur episode of the controller, two episodes of the shipped TD3 policy and a
+# 3000-step TD3 run, each hashed bit for bit) natively and under qemu-user as an AVX2-only CPU
+# (Haswell: AVX2 and FMA, no AVX-512) and as a CPU without AVX or FMA (Nehalem), once with the
+# default kernels and once with the gemm crate's (LOCOBENCH_KERNELS=library). Prints a markdown
+# table: the same digest along a row means the same bits on those CPUs.
 #
-#   bash benches/cross_cpu.sh [OUT_DIR]     (installs qemu-user if missing; ~10 min on 2 cores)
+#   bash benches/cross_cpu.sh            (installs qemu-user if missing; ~15 min on 2 cores)
 set -euo pipefail
 cd "$(dirname "$0")/.."
-out=${1:-target/cross_cpu}
-mkdir -p "$out"
 if ! command -v qemu-x86_64 >/dev/null; then
   SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
   $SUDO apt-get install -y -q qemu-user >/dev/null
 fi
-cargo build --release --locked -q
-bin=$PWD/target/release/locobench
-
-digest() { sha256sum "$@" | cut -c1-12; }
-
-run_case() { # cpu kernels case
-  local cpu=$1 kernels=$2 case=$3 dir="$out/$1-$2-$3"
-  local runner=()
-  [ "$cpu" != native ] && runner=(qemu-x86_64 -cpu "$cpu")
-  rm -rf "$dir"; mkdir -p "$dir"
-  export LOCOBENCH_KERNELS=$kernels
-  case $case in
-    physics)
-      "${runner[@]}" "$bin" rollout --env ant --policy random --seed 3 --out "$dir/rollout.csv" >/dev/null
-      digest "$dir/rollout.csv" ;;
-    controller)
-      "${runner[@]}" "$bin" baseline --env minitaur --speed 1.0 --episodes 2 --seed 0 >"$dir/out.txt"
-      digest "$dir/out.txt" ;;
-    policy)
-      "${runner[@]}" "$bin" eval --checkpoint models/policies/minitaur-td3 --episodes 3 --seed 6000 \
-        | sed 's/^[^ ]* //' >"$dir/out.txt"
-      digest "$dir/out.txt" ;;
-    training)
-      "${runner[@]}" "$bin" train --env inverted-pendulum --algo td3 --seed 1 --steps 3000 --quiet \
-        --set warmup_steps=500,learning_starts=500,eval_every=1000,eval_episodes=2,hidden=[64,64],batch_size=64 \
-        --out "$dir/run" >/dev/null
-      local ckpt; ckpt=$(ls -d "$dir"/run/checkpoints/step_* | sort -V | tail -1)
-      cut -d, -f1-9 "$dir/run/metrics.csv" >"$dir/metrics-no-timing.csv"
-      cat "$ckpt/model.safetensors" "$ckpt/optim.safetensors" "$dir/metrics-no-timing.csv" | digest ;;
-  esac
-}
-
+bin=$(cargo bench --locked --bench digest --no-run --message-format=json 2>/dev/null \
+  | sed -n 's/.*"executable":"\([^"]*digest[^"]*\)".*/\1/p' | tail -1)
+[ -x "$bin" ] || { echo "cross_cpu: could not build the digest bench" >&2; exit 1; }
+out=$(mktemp -d)
+trap 'rm -rf "$out"' EXIT
 cpus=(native Haswell Nehalem)
-echo "host: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | xargs); commit $(git rev-parse --short HEAD)"
-printf '| case | kernels | %s | %s | %s |\n|---|---|---|---|---|\n' "${cpus[@]}"
-for case in physics controller policy training; do
-  for kernels in auto library; do
-    [ "$case" = physics ] && [ "$kernels" = library ] && continue
-    [ "$case" = controller ] && [ "$kernels" = library ] && continue
-    row="| $case | $kernels |"
-    for cpu in "${cpus[@]}"; do row="$row $(run_case "$cpu" "$kernels" "$case" 2>&1 | tail -1) |"; done
-    echo "$row"
+for kernels in auto library; do
+  for cpu in "${cpus[@]}"; do
+    runner=()
+    [ "$cpu" != native ] && runner=(qemu-x86_64 -cpu "$cpu")
+    LOCOBENCH_KERNELS=$kernels "${runner[@]}" "$bin" --bench >"$out/$kernels-$cpu" &
+  done
+  wait
+done
+echo "host: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | xargs); commit $(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src benches Cargo.toml || echo ' (modified)')"
+echo
+printf '| case | LOCOBENCH_KERNELS |'; printf ' %s |' "${cpus[@]}"; echo
+printf '|---|---|'; printf -- '---|%.0s' "${cpus[@]}"; echo
+for kernels in auto library; do
+  for case in kernels physics controller policy training; do
+    printf '| %s | %s |' "$case" "$kernels"
+    for cpu in "${cpus[@]}"; do printf ' %s |' "$(awk -v c="$case" '$1 == c {print $2}' "$out/$kernels-$cpu")"; done
+    echo
   done
 done
