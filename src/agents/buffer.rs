@@ -172,53 +172,104 @@ impl ReplayBuffer {
         }
     }
 
-    /// Everything needed to restore the buffer exactly, as named flat arrays.
-    pub fn export(&self) -> BufferSnapshot {
+    /// The stored part of the buffer, borrowed: what a checkpoint writes, without copying it.
+    pub fn columns(&self) -> BufferColumns<'_> {
         let n = self.len;
         let mut side_index: Vec<u32> = self.side_next.keys().map(|&k| k as u32).collect();
         side_index.sort_unstable();
         let side_values = side_index.iter().flat_map(|k| self.side_next[&(*k as usize)].iter().copied()).collect();
-        BufferSnapshot {
+        BufferColumns {
             capacity: self.capacity,
             obs_dim: self.obs_dim,
             act_dim: self.act_dim,
             write: self.write,
             len: n,
-            obs: self.obs[..n * self.obs_dim].to_vec(),
-            actions: self.actions[..n * self.act_dim].to_vec(),
-            rewards: self.rewards[..n].to_vec(),
-            flags: self.flags[..n].to_vec(),
+            obs: &self.obs[..n * self.obs_dim],
+            actions: &self.actions[..n * self.act_dim],
+            rewards: &self.rewards[..n],
+            flags: &self.flags[..n],
             side_index,
             side_values,
-            newest_next: self.newest_next.clone(),
+            newest_next: &self.newest_next,
         }
     }
 
+    /// Everything needed to restore the buffer exactly, as named flat arrays (a copy).
+    pub fn export(&self) -> BufferSnapshot {
+        let c = self.columns();
+        BufferSnapshot {
+            capacity: c.capacity,
+            obs_dim: c.obs_dim,
+            act_dim: c.act_dim,
+            write: c.write,
+            len: c.len,
+            obs: c.obs.to_vec(),
+            actions: c.actions.to_vec(),
+            rewards: c.rewards.to_vec(),
+            flags: c.flags.to_vec(),
+            side_index: c.side_index,
+            side_values: c.side_values,
+            newest_next: c.newest_next.to_vec(),
+        }
+    }
+
+    /// The buffer a snapshot describes. Takes the snapshot's arrays over (a full buffer's are
+    /// not copied), growing them to the capacity.
     pub fn import(s: BufferSnapshot) -> anyhow::Result<ReplayBuffer> {
-        let ok = s.len <= s.capacity
+        let ok = s.capacity > 0
+            && s.len <= s.capacity
             && s.write < s.capacity
             && s.obs.len() == s.len * s.obs_dim
             && s.actions.len() == s.len * s.act_dim
             && s.rewards.len() == s.len
             && s.flags.len() == s.len
             && s.side_values.len() == s.side_index.len() * s.obs_dim
-            && s.newest_next.len() == s.obs_dim;
+            && s.newest_next.len() == s.obs_dim
+            && s.side_index.iter().all(|&i| (i as usize) < s.capacity);
         if !ok {
             anyhow::bail!("replay buffer snapshot is inconsistent (corrupt checkpoint?)");
         }
-        let mut b = ReplayBuffer::new(s.capacity, s.obs_dim, s.act_dim);
-        b.obs[..s.obs.len()].copy_from_slice(&s.obs);
-        b.actions[..s.actions.len()].copy_from_slice(&s.actions);
-        b.rewards[..s.len].copy_from_slice(&s.rewards);
-        b.flags[..s.len].copy_from_slice(&s.flags);
-        for (k, idx) in s.side_index.iter().enumerate() {
-            b.side_next.insert(*idx as usize, s.side_values[k * s.obs_dim..(k + 1) * s.obs_dim].to_vec());
+        fn grown<T: Clone + Default>(mut v: Vec<T>, len: usize) -> Vec<T> {
+            v.resize(len, T::default());
+            v
         }
-        b.newest_next = s.newest_next;
-        b.write = s.write;
-        b.len = s.len;
-        Ok(b)
+        let side_next = s
+            .side_index
+            .iter()
+            .enumerate()
+            .map(|(k, idx)| (*idx as usize, s.side_values[k * s.obs_dim..(k + 1) * s.obs_dim].to_vec()))
+            .collect();
+        Ok(ReplayBuffer {
+            capacity: s.capacity,
+            obs_dim: s.obs_dim,
+            act_dim: s.act_dim,
+            obs: grown(s.obs, s.capacity * s.obs_dim),
+            actions: grown(s.actions, s.capacity * s.act_dim),
+            rewards: grown(s.rewards, s.capacity),
+            flags: grown(s.flags, s.capacity),
+            side_next,
+            newest_next: s.newest_next,
+            write: s.write,
+            len: s.len,
+        })
     }
+}
+
+/// A replay buffer's stored part, borrowed from it ([`ReplayBuffer::columns`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct BufferColumns<'a> {
+    pub capacity: usize,
+    pub obs_dim: usize,
+    pub act_dim: usize,
+    pub write: usize,
+    pub len: usize,
+    pub obs: &'a [f32],
+    pub actions: &'a [f32],
+    pub rewards: &'a [f32],
+    pub flags: &'a [u8],
+    pub side_index: Vec<u32>,
+    pub side_values: Vec<f32>,
+    pub newest_next: &'a [f32],
 }
 
 /// A replay buffer's contents as flat arrays (a full buffer's slots are `0..len`).

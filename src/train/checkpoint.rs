@@ -9,7 +9,7 @@ use anyhow::{bail, Context, Result};
 use candle_core::{DType, Device, Tensor};
 use serde::{Deserialize, Serialize};
 
-use crate::agents::buffer::{BufferSnapshot, ReplayBuffer};
+use crate::agents::buffer::ReplayBuffer;
 use crate::agents::Agent;
 use crate::io::write_bytes_atomic;
 
@@ -97,7 +97,7 @@ pub fn save(run_dir: &Path, agent: &mut dyn Agent, buffer: &ReplayBuffer, state:
         optimizer_steps.insert(name.to_string(), steps);
     }
     candle_core::safetensors::save(&optim, tmp.path().join("optim.safetensors"))?;
-    candle_core::safetensors::save(&buffer_tensors(&buffer.export())?, tmp.path().join("buffer.safetensors"))?;
+    super::buffer_file::write(buffer, &tmp.path().join("buffer.safetensors"))?;
 
     let state = TrainState {
         optimizer_steps,
@@ -179,44 +179,7 @@ pub fn load_all(checkpoint: &Path, agent: &mut dyn Agent) -> Result<(TrainState,
     for (name, value) in &state.counters {
         agent.set_counter(name, *value);
     }
-    let buffer = ReplayBuffer::import(buffer_snapshot(&read_tensors(&checkpoint.join("buffer.safetensors"))?)?)?;
+    let buffer = super::buffer_file::read(&checkpoint.join("buffer.safetensors"))?;
     Ok((state, buffer))
 }
 
-fn buffer_tensors(s: &BufferSnapshot) -> Result<HashMap<String, Tensor>> {
-    let dev = Device::Cpu;
-    let meta = [s.capacity, s.obs_dim, s.act_dim, s.write, s.len].map(|v| v as i64);
-    let f = |v: &[f32]| Tensor::from_slice(v, v.len(), &dev);
-    let mut t = HashMap::new();
-    t.insert("meta".into(), Tensor::from_slice(&meta, 5, &dev)?);
-    t.insert("obs".into(), f(&s.obs)?);
-    t.insert("actions".into(), f(&s.actions)?);
-    t.insert("rewards".into(), f(&s.rewards)?);
-    t.insert("flags".into(), Tensor::from_slice(&s.flags, s.flags.len(), &dev)?);
-    let side: Vec<i64> = s.side_index.iter().map(|&i| i as i64).collect();
-    t.insert("side_index".into(), Tensor::from_slice(&side, side.len(), &dev)?);
-    t.insert("side_values".into(), f(&s.side_values)?);
-    t.insert("newest_next".into(), f(&s.newest_next)?);
-    Ok(t)
-}
-
-fn buffer_snapshot(t: &HashMap<String, Tensor>) -> Result<BufferSnapshot> {
-    let get = |k: &str| t.get(k).with_context(|| format!("buffer checkpoint lacks '{k}'"));
-    let f32s = |k: &str| -> Result<Vec<f32>> { Ok(get(k)?.to_vec1::<f32>()?) };
-    let meta = get("meta")?.to_vec1::<i64>()?;
-    anyhow::ensure!(meta.len() == 5 && meta.iter().all(|&v| v >= 0), "buffer checkpoint metadata is corrupt");
-    Ok(BufferSnapshot {
-        capacity: meta[0] as usize,
-        obs_dim: meta[1] as usize,
-        act_dim: meta[2] as usize,
-        write: meta[3] as usize,
-        len: meta[4] as usize,
-        obs: f32s("obs")?,
-        actions: f32s("actions")?,
-        rewards: f32s("rewards")?,
-        flags: get("flags")?.to_vec1::<u8>()?,
-        side_index: get("side_index")?.to_vec1::<i64>()?.into_iter().map(|i| i as u32).collect(),
-        side_values: f32s("side_values")?,
-        newest_next: f32s("newest_next")?,
-    })
-}

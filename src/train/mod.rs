@@ -3,6 +3,7 @@
 //!
 //! Run directory: `config.toml` (every hyperparameter, env options, seed, crate version, git
 //! commit), `metrics.csv`, `checkpoints/`. Everything is written atomically.
+mod buffer_file;
 pub mod checkpoint;
 pub mod config;
 pub mod evaluate;
