@@ -16,6 +16,7 @@ fi
 bin=$(cargo bench --locked --bench digest --no-run --message-format=json 2>/dev/null \
   | sed -n 's/.*"executable":"\([^"]*digest[^"]*\)".*/\1/p' | tail -1)
 [ -x "$bin" ] || { echo "cross_cpu: could not build the digest bench" >&2; exit 1; }
+commit="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src benches Cargo.toml || echo ' (modified)')"
 out=$(mktemp -d)
 trap 'rm -rf "$out"' EXIT
 cpus=(native Haswell Nehalem)
@@ -27,7 +28,7 @@ for kernels in auto library; do
   done
   wait
 done
-echo "host: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | xargs); commit $(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src benches Cargo.toml || echo ' (modified)')"
+echo "host: $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2- | xargs); built at commit $commit"
 echo
 printf '| case | LOCOBENCH_KERNELS |'; printf ' %s |' "${cpus[@]}"; echo
 printf '|---|---|'; printf -- '---|%.0s' "${cpus[@]}"; echo

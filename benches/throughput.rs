@@ -142,7 +142,9 @@ fn matmul_paths() -> Result<()> {
     use locobench::numeric::matmul::{matmul, Strided};
     use locobench::numeric::KernelPath;
     let _runtime = locobench::runtime::Runtime::enter(1);
-    let shapes: [(&str, (usize, usize, usize), bool, bool); 4] = [
+    // (name, (m, n, k), A read transposed, B read transposed)
+    type Product = (&'static str, (usize, usize, usize), bool, bool);
+    let shapes: [Product; 4] = [
         ("forward 256x300x400 (x W^T)", (BATCH, 300, 400), false, true),
         ("weight grad 300x400x256 (g^T x)", (300, 400, BATCH), true, false),
         ("input grad 256x400x300 (g W)", (BATCH, 400, 300), false, false),

@@ -10,8 +10,8 @@
 //! The loops are those of Goto and van de Geijn ("Anatomy of High-Performance Matrix
 //! Multiplication", ACM TOMS 34(3), 2008): `k` is cut into chunks of [`K_CHUNK`] terms, a chunk of
 //! A is packed into row tiles and a chunk of B into column panels so that the innermost loop
-//! reads two contiguous streams from cache, and a register tile of 6 rows by two vectors takes
-//! one chunk at a time. Cutting `k` keeps the order exact because a tile carries its partial
+//! reads two contiguous streams from cache, and a register tile (8 rows by three vectors with
+//! AVX-512, 6 rows by two with AVX2) takes one chunk at a time. Cutting `k` keeps the order exact because a tile carries its partial
 //! result into the next chunk through C (a stored f32 is the value itself), rather than summing
 //! chunks computed from zero as BLAS libraries do. The `gemm` crate remains available as
 //! [`KernelPath::Library`] and is the reference the tests compare with.
@@ -107,8 +107,9 @@ pub fn matmul(
     });
 }
 
-/// Terms per chunk of k: a 48-column panel of B is then 24 KB, half a 48 KB L1 data cache (128
-/// measured faster than 192 and 256 on the TD3 products, `cargo bench --bench throughput -- --matmul`).
+/// Terms per chunk of k: AVX-512's 48-column panel of B is then 24 KB, half a 48 KB L1 data cache
+/// (128 measured faster than 192 and 256 on the TD3 products, `cargo bench --bench throughput --
+/// --matmul`).
 const K_CHUNK: usize = 128;
 
 /// A path's register tile: rows of A (a packed row tile) by `panel` columns (a packed column
