@@ -142,10 +142,16 @@ fn pack_a(a: Strided, m: usize, p0: usize, kc: usize, tile_rows: usize, out: &mu
                 dst[..rows].copy_from_slice(&a.data[start..start + rows]);
             }
         } else {
-            for r in 0..rows {
-                let row = (first + r) * a.row_stride + p0 * a.col_stride;
-                let terms = (0..kc).map(|p| a.data[row + p * a.col_stride]);
-                tile.chunks_exact_mut(tile_rows).zip(terms).for_each(|(dst, v)| dst[r] = v);
+            // Each packed term gathers one element of `rows` rows, which stay in L1 across
+            // consecutive terms; the writes are sequential.
+            let last = (first + rows - 1) * a.row_stride + (p0 + kc - 1) * a.col_stride;
+            assert!(last < a.data.len());
+            for (p, dst) in tile.chunks_exact_mut(tile_rows).enumerate() {
+                let base = first * a.row_stride + (p0 + p) * a.col_stride;
+                for (r, d) in dst[..rows].iter_mut().enumerate() {
+                    // SAFETY: base + r * row_stride <= last < len (asserted above).
+                    *d = unsafe { *a.data.get_unchecked(base + r * a.row_stride) };
+                }
             }
         }
     }
@@ -161,10 +167,16 @@ fn pack_b(b: Strided, p0: usize, kc: usize, j0: usize, cols: usize, panel: usize
             row[..cols].copy_from_slice(&b.data[start..start + cols]);
         }
     } else {
-        for j in 0..cols {
-            let column = (j0 + j) * b.col_stride + p0 * b.row_stride;
-            let terms = (0..kc).map(|p| b.data[column + p * b.row_stride]);
-            out.chunks_exact_mut(panel).zip(terms).for_each(|(row, v)| row[j] = v);
+        // A transposed weight: each packed row gathers one term of `cols` weight rows, which stay
+        // in L1 across consecutive terms; the writes are sequential.
+        let last = (j0 + cols - 1) * b.col_stride + (p0 + kc - 1) * b.row_stride;
+        assert!(last < b.data.len());
+        for (p, row) in out.chunks_exact_mut(panel).enumerate() {
+            let base = (p0 + p) * b.row_stride + j0 * b.col_stride;
+            for (j, dst) in row[..cols].iter_mut().enumerate() {
+                // SAFETY: base + j * col_stride <= last < len (asserted above).
+                *dst = unsafe { *b.data.get_unchecked(base + j * b.col_stride) };
+            }
         }
     }
 }
