@@ -189,7 +189,7 @@ fn same_seed_same_run() {
 }
 
 /// `--threads 2` splits the large layers across two cores; the run must not change by a bit.
-/// 256-unit layers at batch 64 are large enough to be split (see agents::dense).
+/// 256-unit layers at batch 64 are large enough to be split (see numeric::dense).
 #[test]
 fn a_second_core_gives_the_same_run_bit_for_bit() {
     let dir = tempfile::tempdir().unwrap();

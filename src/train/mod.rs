@@ -2,7 +2,8 @@
 //! and checkpoints.
 //!
 //! Run directory: `config.toml` (every hyperparameter, env options, seed, crate version, git
-//! commit), `metrics.csv`, `checkpoints/`. Everything is written atomically.
+//! commit), `metrics.csv`, `provenance.csv` (the machine of every stretch), `checkpoints/`.
+//! Everything is written atomically.
 mod buffer_file;
 pub mod checkpoint;
 pub mod config;
