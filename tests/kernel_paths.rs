@@ -139,6 +139,17 @@ fn the_switch_reaches_the_command_line_and_bad_values_are_refused() {
     let recorded = |run: &Path| train::provenance::read(run).unwrap()[0].kernel_path.clone();
     assert_eq!((recorded(&a), recorded(&b)), ("portable".to_string(), KernelPath::best_exact().name().to_string()));
 
+    // Extending the portable run on the gemm crate's kernels says it will not be exact.
+    let out = std::process::Command::new(env!("CARGO_BIN_EXE_locobench"))
+        .env("LOCOBENCH_KERNELS", "library")
+        .args(["train", "--resume", a.to_str().unwrap(), "--steps", "900", "--quiet"])
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(out.status.success() && text.contains("note: resuming will not match") && text.contains("portable kernels, this one on library"), "{text}");
+    let stretches = train::provenance::read(&a).unwrap();
+    assert_eq!(stretches.iter().map(|s| s.kernel_path.as_str()).collect::<Vec<_>>(), ["portable", "library"]);
+
     let bad = train("avx1024", &dir.path().join("bad"));
     let err = String::from_utf8_lossy(&bad.stderr);
     assert!(!bad.status.success() && err.contains("LOCOBENCH_KERNELS") && err.contains("avx1024"), "{err}");

@@ -28,6 +28,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             }
         }
         println!("resuming {}", dir.display());
+        note_resume_caveat(dir, &control)?;
         train::resume(dir, &control)?
     } else {
         let env = args.env.as_deref().expect("clap requires --env");
@@ -54,6 +55,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         if args.resume_if_exists && out.join("config.toml").exists() {
             same_run_or_error(&out, &env_cfg, &cfg, args.seed.seed)?;
             println!("{} holds this run already: resuming it", out.display());
+            note_resume_caveat(&out, &control)?;
             let summary = train::resume(&out, &control)?;
             return report(&args, &summary);
         }
@@ -124,6 +126,21 @@ fn report(args: &TrainArgs, summary: &train::RunSummary) -> Result<()> {
     println!("run directory: {}", summary.run_dir.display());
     if let Some(r) = &args.record {
         println!("recording: {} (open with `rerun {}`)", r.display(), r.display());
+    }
+    Ok(())
+}
+
+/// Says when resuming here will not continue the run bit for bit (another kernel path, commit or
+/// MuJoCo; docs/reproducibility.md), unless the run has nothing left to train.
+fn note_resume_caveat(dir: &std::path::Path, control: &RunControl) -> Result<()> {
+    let finished = match (train::read_run_config(dir), train::checkpoint::latest(dir)) {
+        (Ok(run), Ok(ckpt)) => train::checkpoint::load_state(&ckpt).is_ok_and(|s| s.step >= run.train.total_steps),
+        _ => false,
+    };
+    if !finished {
+        if let Some(note) = train::provenance::resume_caveat_for(dir, control.threads)? {
+            println!("note: {note}");
+        }
     }
     Ok(())
 }

@@ -99,6 +99,43 @@ pub fn append(run_dir: &Path, stretch: Stretch) -> Result<()> {
     write_bytes_atomic(&run_dir.join(FILE), &writer.into_inner()?)
 }
 
+/// Why resuming a run whose last stretch is `last` here (`here`) will not continue it bit for bit,
+/// if it will not. `last` is None for a run directory written before this file existed.
+pub fn resume_caveat(last: Option<&Stretch>, here: &Stretch) -> Option<String> {
+    let Some(last) = last else {
+        return Some(
+            "this run predates provenance.csv: it ran on the gemm crate's kernels, so continuing it on the exact ones \
+             (the default) will not match an uninterrupted run bit for bit; LOCOBENCH_KERNELS=library on the kind of \
+             CPU that wrote it would"
+                .into(),
+        );
+    };
+    let exact = |s: &Stretch| s.kernel_path != "library";
+    let why = if exact(last) != exact(here) {
+        format!("its last stretch ran on the {} kernels, this one on {}", last.kernel_path, here.kernel_path)
+    } else if !exact(here) && (last.cpu_model != here.cpu_model || last.simd != here.simd) {
+        format!(
+            "the gemm crate's kernels depend on the CPU, and its last stretch ran on {} ({}), this one on {} ({})",
+            last.cpu_model, last.simd, here.cpu_model, here.simd
+        )
+    } else if (last.simd == "baseline") != (here.simd == "baseline") {
+        format!("one of the CPUs lacks FMA ({} then {}), and glibc rounds differently without it", last.simd, here.simd)
+    } else if last.git_commit != here.git_commit {
+        format!("its last stretch ran at commit {}, this one at {}", last.git_commit, here.git_commit)
+    } else if last.mujoco_version != here.mujoco_version {
+        format!("its last stretch ran on MuJoCo {}, this one on {}", last.mujoco_version, here.mujoco_version)
+    } else {
+        return None;
+    };
+    Some(format!("resuming will not match an uninterrupted run bit for bit: {why}"))
+}
+
+/// [`resume_caveat`] for `run_dir` resumed by this process with `threads`.
+pub fn resume_caveat_for(run_dir: &Path, threads: usize) -> Result<Option<String>> {
+    let rows = read(run_dir)?;
+    Ok(resume_caveat(rows.last(), &Stretch::here(0, threads, super::git_commit().as_deref())))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -120,5 +157,48 @@ mod tests {
         std::fs::write(dir.path().join(FILE), "from_step,git_commit\nnot-a-number,x\n").unwrap();
         let err = format!("{:#}", read(dir.path()).unwrap_err());
         assert!(err.contains(FILE) && err.contains("row 1"), "{err}");
+    }
+
+    #[test]
+    fn resuming_names_what_breaks_exactness_and_nothing_else() {
+        let base = Stretch {
+            from_step: 0,
+            git_commit: "abc".into(),
+            crate_version: "0.1.0".into(),
+            cpu_model: "Intel Xeon".into(),
+            simd: "avx512".into(),
+            kernel_path: "avx512".into(),
+            threads: 2,
+            mujoco_version: 222,
+        };
+        let with = |f: &dyn Fn(&mut Stretch)| {
+            let mut s = base.clone();
+            f(&mut s);
+            s
+        };
+        // Another CPU with AVX2, another exact path, another thread count: exact.
+        let amd = with(&|s| {
+            s.cpu_model = "AMD EPYC".into();
+            s.simd = "avx2".into();
+            s.kernel_path = "avx2".into();
+            s.threads = 1;
+        });
+        assert_eq!(resume_caveat(Some(&base), &amd), None);
+        let lib = with(&|s| s.kernel_path = "library".into());
+        assert!(resume_caveat(Some(&base), &lib).unwrap().contains("avx512 kernels, this one on library"));
+        let lib_amd = with(&|s| {
+            s.kernel_path = "library".into();
+            s.cpu_model = "AMD EPYC".into();
+        });
+        assert!(resume_caveat(Some(&lib), &lib_amd).unwrap().contains("depend on the CPU"));
+        assert_eq!(resume_caveat(Some(&lib), &lib), None);
+        let old_cpu = with(&|s| {
+            s.simd = "baseline".into();
+            s.kernel_path = "portable".into();
+        });
+        assert!(resume_caveat(Some(&base), &old_cpu).unwrap().contains("FMA"));
+        assert!(resume_caveat(Some(&base), &with(&|s| s.git_commit = "def".into())).unwrap().contains("commit abc, this one at def"));
+        assert!(resume_caveat(Some(&base), &with(&|s| s.mujoco_version = 300)).unwrap().contains("MuJoCo 300"));
+        assert!(resume_caveat(None, &base).unwrap().contains("predates"));
     }
 }
