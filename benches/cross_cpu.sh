@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Same binary, other CPUs: runs the digest bench (benches/digest.rs: an Ant episode of random
 # actions, a Minitaur episode of the controller, two episodes of the shipped TD3 policy and a
-# 3000-step TD3 run, each hashed bit for bit) natively and under qemu-user as an AVX2-only CPU
+# 3000-step TD3 run and one of SAC, each hashed bit for bit) natively and under qemu-user as an AVX2-only CPU
 # (Haswell: AVX2 and FMA, no AVX-512) and as a CPU without AVX or FMA (Nehalem), once with the
 # default kernels and once with the gemm crate's (LOCOBENCH_KERNELS=library). Prints a markdown
 # table: the same digest along a row means the same bits on those CPUs.
@@ -33,7 +33,7 @@ echo
 printf '| case | LOCOBENCH_KERNELS |'; printf ' %s |' "${cpus[@]}"; echo
 printf '|---|---|'; printf -- '---|%.0s' "${cpus[@]}"; echo
 for kernels in auto library; do
-  for case in kernels physics controller policy training; do
+  for case in kernels physics controller policy training training-sac; do
     printf '| %s | %s |' "$case" "$kernels"
     for cpu in "${cpus[@]}"; do printf ' %s |' "$(awk -v c="$case" '$1 == c {print $2}' "$out/$kernels-$cpu")"; done
     echo

@@ -4,7 +4,8 @@
 //! - `physics`: an Ant episode of random actions (MuJoCo and the env's Rust code alone);
 //! - `controller`: a Minitaur episode of the Raibert/QP controller at 1.0 m/s;
 //! - `policy`: two episodes of the shipped TD3 Minitaur policy (the networks acting);
-//! - `training`: a short TD3 run on InvertedPendulum (weights, optimiser state, metrics).
+//! - `training`: a short TD3 run on InvertedPendulum (weights, optimiser state, metrics);
+//! - `training-sac`: the same with SAC (its `exp`, `log` and sampling on top of TD3's `tanh`).
 //!
 //! Every f64 and f32 is hashed by its bits, so equal digests mean equal bits. The kernel path is
 //! whatever `LOCOBENCH_KERNELS` selects, printed first.
@@ -36,12 +37,12 @@ fn episodes(cfg: &EnvConfig, policy: &mut dyn Policy, count: usize, seed: u64) -
     Ok(h.finish())
 }
 
-fn training(steps: u64) -> Result<u64> {
+fn training(algo: Algo, steps: u64) -> Result<u64> {
     let dir = tempfile::tempdir()?;
     let set = format!(
         "total_steps={steps},warmup_steps=500,learning_starts=500,eval_every=1000,eval_episodes=2,hidden=[64,64],batch_size=64"
     );
-    let cfg = build_config("inverted-pendulum", Algo::Td3, &split_pairs(&set)?)?;
+    let cfg = build_config("inverted-pendulum", algo, &split_pairs(&set)?)?;
     let run = dir.path().join("run");
     let s = train::train(EnvConfig::new("inverted-pendulum"), cfg, 1, &run, None, false, &RunControl::default())?;
     let mut h = DefaultHasher::new();
@@ -75,6 +76,8 @@ fn main() -> Result<()> {
     let mut policy = AgentPolicy { agent: agent.as_ref(), label: "td3".into() };
     println!("policy {:016x}", episodes(&run.env, &mut policy, 2, 6000)?);
 
-    println!("training {:016x}", training(if smoke { 1000 } else { 3000 })?);
+    let steps = if smoke { 1000 } else { 3000 };
+    println!("training {:016x}", training(Algo::Td3, steps)?);
+    println!("training-sac {:016x}", training(Algo::Sac, steps)?);
     Ok(())
 }
