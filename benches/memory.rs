@@ -83,7 +83,12 @@ fn peak_per_run(smoke: bool) -> Result<()> {
             let nums: Vec<u64> = text.split_whitespace().filter_map(|v| v.parse().ok()).collect();
             anyhow::ensure!(nums.len() == 2, "{env} {}: unexpected output {text:?}", algo.name());
             let hidden = build_config(env, *algo, &[])?.hidden;
-            println!("| {env} | {} | {hidden:?} | {:.2} GiB | {:.2} GiB |", algo.name(), gib(nums[1] as f64), gib(nums[0] as f64));
+            println!(
+                "| {env} | {} | {hidden:?} | {:.2} GiB | {:.2} GiB |",
+                algo.name(),
+                gib(nums[1] as f64),
+                gib(nums[0] as f64)
+            );
         }
     }
     Ok(())

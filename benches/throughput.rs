@@ -150,7 +150,10 @@ fn matmul_paths() -> Result<()> {
         ("input grad 256x400x300 (g W)", (BATCH, 400, 300), false, false),
         ("forward 256x400x23 (x W^T)", (BATCH, 400, OBS + ACT), false, true),
     ];
-    println!("| product | {} |", KernelPath::ALL.iter().filter(|p| p.is_supported()).map(|p| p.name()).collect::<Vec<_>>().join(" | "));
+    println!(
+        "| product | {} |",
+        KernelPath::ALL.iter().filter(|p| p.is_supported()).map(|p| p.name()).collect::<Vec<_>>().join(" | ")
+    );
     println!("|---|{}", "---|".repeat(KernelPath::ALL.iter().filter(|p| p.is_supported()).count()));
     for (name, (m, n, k), a_transposed, b_transposed) in shapes {
         let a_data: Vec<f32> = (0..m * k).map(|i| (i as f32 * 0.37).sin()).collect();

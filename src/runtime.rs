@@ -4,7 +4,7 @@
 //!
 //! | setting | scope | why |
 //! |---|---|---|
-//! | `RAYON_NUM_THREADS`, `CANDLE_NUM_THREADS` = 1 unless set | process, before candle starts ([`configure_process`]) | candle's pools busy-wait; one thread is fastest at these sizes (REFERENCE §6) |
+//! | `RAYON_NUM_THREADS`, `CANDLE_NUM_THREADS` = 1 unless set | process, before candle starts ([`configure_process`]) | candle's pools busy-wait; one thread is fastest at these sizes (`cargo bench --bench throughput`) |
 //! | glibc keeps freed memory (`numeric::allocator`) | process | each update would page-fault its buffers again (~8% of a TD3 update) |
 //! | flush-to-zero and denormals-are-zero (`numeric::denormals`) | calling thread | subnormal Adam moments take x86's slow path; results depend on the bit, so it must be on wherever the networks run |
 //! | one helper thread (`numeric::second_core`), when `threads >= 2` | calling thread | splits large layers over two cores, same bits |

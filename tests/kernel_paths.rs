@@ -36,10 +36,11 @@ fn fingerprint(run: &Path, checkpoint: &Path) -> Vec<Vec<u8>> {
         .collect();
     let metrics = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
     let header: Vec<&str> = metrics.lines().next().unwrap().split(',').collect();
-    let timing: Vec<usize> = ["steps_per_s", "wall_time"].iter().map(|c| header.iter().position(|h| h == c).unwrap()).collect();
-    let rows = metrics
-        .lines()
-        .map(|l| l.split(',').enumerate().filter(|(i, _)| !timing.contains(i)).map(|(_, v)| v).collect::<Vec<_>>().join(","));
+    let timing: Vec<usize> =
+        ["steps_per_s", "wall_time"].iter().map(|c| header.iter().position(|h| h == c).unwrap()).collect();
+    let rows = metrics.lines().map(|l| {
+        l.split(',').enumerate().filter(|(i, _)| !timing.contains(i)).map(|(_, v)| v).collect::<Vec<_>>().join(",")
+    });
     out.push(rows.collect::<Vec<_>>().join("\n").into_bytes());
     out
 }
@@ -71,7 +72,12 @@ fn every_exact_kernel_path_trains_the_same_run_bit_for_bit() {
             assert!(fp == &runs[0].1, "{algo:?}: {path} trains a different run than {}", runs[0].0);
         }
         // The library's kernels are not exact, but they compute the same function.
-        let library = train_on(KernelPath::Library, algo, &dir.path().join(format!("{}-lib", algo.name())), &RunControl::default());
+        let library = train_on(
+            KernelPath::Library,
+            algo,
+            &dir.path().join(format!("{}-lib", algo.name())),
+            &RunControl::default(),
+        );
         assert_eq!(library.outcome, Outcome::Finished);
     }
 }
@@ -134,7 +140,8 @@ fn the_switch_reaches_the_command_line_and_bad_values_are_refused() {
         let out = train(value, run);
         assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     }
-    let weights = |run: &Path| std::fs::read(train::checkpoint::latest(run).unwrap().join("model.safetensors")).unwrap();
+    let weights =
+        |run: &Path| std::fs::read(train::checkpoint::latest(run).unwrap().join("model.safetensors")).unwrap();
     assert_eq!(weights(&a), weights(&b), "portable and auto ({}) differ", KernelPath::best_exact());
     let recorded = |run: &Path| train::provenance::read(run).unwrap()[0].kernel_path.clone();
     assert_eq!((recorded(&a), recorded(&b)), ("portable".to_string(), KernelPath::best_exact().name().to_string()));
@@ -146,7 +153,12 @@ fn the_switch_reaches_the_command_line_and_bad_values_are_refused() {
         .output()
         .unwrap();
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(out.status.success() && text.contains("note: resuming will not match") && text.contains("portable kernels, this one on library"), "{text}");
+    assert!(
+        out.status.success()
+            && text.contains("note: resuming will not match")
+            && text.contains("portable kernels, this one on library"),
+        "{text}"
+    );
     let stretches = train::provenance::read(&a).unwrap();
     assert_eq!(stretches.iter().map(|s| s.kernel_path.as_str()).collect::<Vec<_>>(), ["portable", "library"]);
 

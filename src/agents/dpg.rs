@@ -10,8 +10,8 @@ use super::config::{Algo, TrainConfig};
 use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, Mlp, Output};
 use super::noise::{Noise, NoiseKind};
-use crate::numeric::optim::Adam;
 use super::{layer_sizes, Agent, Losses};
+use crate::numeric::optim::Adam;
 
 pub struct DeterministicAgent {
     algo: Algo,

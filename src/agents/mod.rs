@@ -17,11 +17,11 @@ use candle_core::{Result, Var};
 use rand_chacha::ChaCha8Rng;
 
 pub use crate::numeric::allocator::keep_freed_memory;
-pub use buffer::{Batch, ReplayBuffer};
-pub use config::{Algo, DpgConfig, OtherAlgorithmKeys, SacConfig, SacVersion, TanhCorrection, TrainConfig, WeightInit};
 pub use crate::numeric::denormals::{float_mode, flush_denormals_to_zero, set_float_mode};
 /// The optimiser and the helper thread live in [`crate::numeric`]; these paths stay for callers.
 pub use crate::numeric::{optim, second_core};
+pub use buffer::{Batch, ReplayBuffer};
+pub use config::{Algo, DpgConfig, OtherAlgorithmKeys, SacConfig, SacVersion, TanhCorrection, TrainConfig, WeightInit};
 pub use dpg::DeterministicAgent;
 pub use normalize::NormalizedAgent;
 pub use sac::SacAgent;

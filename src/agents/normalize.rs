@@ -14,8 +14,8 @@
 use candle_core::{DType, Device, Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 
-use crate::numeric::optim::Adam;
 use super::{Agent, Algo, Batch, Losses, ReplayBuffer};
+use crate::numeric::optim::Adam;
 
 /// VecNormalize's defaults (Stable-Baselines3 `vec_normalize.py`).
 pub const CLIP: f32 = 10.0;

@@ -9,8 +9,8 @@ use super::buffer::Batch;
 use super::config::{Algo, SacVersion, TanhCorrection, TrainConfig, WeightInit};
 use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
-use crate::numeric::optim::Adam;
 use super::{layer_sizes, Agent, Losses};
+use crate::numeric::optim::Adam;
 
 const LOG_STD_MIN: f64 = -20.0;
 const LOG_STD_MAX: f64 = 2.0;

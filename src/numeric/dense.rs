@@ -74,7 +74,16 @@ fn dims(x: &[usize], w: &[usize], b_len: usize) -> Result<Dims> {
 
 /// `y = act(x W^T + b)` for a block of rows: x `[rows, in]`, w `[out, in]`, y `[rows, out]`.
 #[allow(clippy::too_many_arguments)]
-fn forward_block(path: KernelPath, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32], inp: usize, out: usize, act: Activation) {
+fn forward_block(
+    path: KernelPath,
+    x: &[f32],
+    w: &[f32],
+    b: &[f32],
+    y: &mut [f32],
+    inp: usize,
+    out: usize,
+    act: Activation,
+) {
     let rows = y.len() / out;
     for row in y.chunks_exact_mut(out) {
         row.copy_from_slice(b);
@@ -88,7 +97,16 @@ fn forward_block(path: KernelPath, x: &[f32], w: &[f32], b: &[f32], y: &mut [f32
 /// Weight and bias gradients of `units` output units: `gw [units, in] = gp^T x`, `gb = sum of gp's
 /// rows`, where `gp` starts at the first of those units, `rows` rows of stride `out`.
 #[allow(clippy::too_many_arguments)]
-fn weight_grads(path: KernelPath, gp: &[f32], out: usize, x: &[f32], gw: &mut [f32], gb: &mut [f32], rows: usize, inp: usize) {
+fn weight_grads(
+    path: KernelPath,
+    gp: &[f32],
+    out: usize,
+    x: &[f32],
+    gw: &mut [f32],
+    gb: &mut [f32],
+    rows: usize,
+    inp: usize,
+) {
     let units = gb.len();
     // gp^T (units x rows) is gp read with row stride 1 and column stride out.
     let gp_t = Strided { data: gp, row_stride: 1, col_stride: out };

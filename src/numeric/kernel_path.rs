@@ -151,7 +151,10 @@ mod tests {
             assert_eq!(KernelPath::parse(p.name()).unwrap(), p);
         }
         assert_eq!(KernelPath::parse("auto").unwrap(), KernelPath::best_exact());
-        assert_eq!(KernelPath::parse(" AVX2 ").map(|p| p.name()).ok(), KernelPath::Avx2.is_supported().then_some("avx2"));
+        assert_eq!(
+            KernelPath::parse(" AVX2 ").map(|p| p.name()).ok(),
+            KernelPath::Avx2.is_supported().then_some("avx2")
+        );
         let err = KernelPath::parse("sse9").unwrap_err().to_string();
         assert!(err.contains("LOCOBENCH_KERNELS") && err.contains("sse9") && err.contains("avx2"), "{err}");
         assert!(KernelPath::best_exact().is_exact() && !KernelPath::Library.is_exact());

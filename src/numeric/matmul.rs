@@ -99,7 +99,16 @@ pub fn matmul(
                     // hold kc terms of tile_rows rows and `panel` columns, and c holds `rows` rows
                     // of `cols` elements at `dst_stride` (asserted).
                     unsafe {
-                        tile(rows, cols, kc, a_tile.as_ptr(), b_pack.as_ptr(), c.as_mut_ptr(), dst_stride, accumulate || p0 > 0)
+                        tile(
+                            rows,
+                            cols,
+                            kc,
+                            a_tile.as_ptr(),
+                            b_pack.as_ptr(),
+                            c.as_mut_ptr(),
+                            dst_stride,
+                            accumulate || p0 > 0,
+                        )
                     };
                 }
             }
@@ -189,7 +198,16 @@ type TileKernel = unsafe fn(usize, usize, usize, *const f32, *const f32, *mut f3
 ///
 /// SAFETY (caller): as for [`TileKernel`]: the packed operands hold kc terms, C its tile.
 #[allow(clippy::too_many_arguments)]
-unsafe fn portable_tile(rows: usize, cols: usize, kc: usize, a: *const f32, b: *const f32, c: *mut f32, c_stride: usize, load_c: bool) {
+unsafe fn portable_tile(
+    rows: usize,
+    cols: usize,
+    kc: usize,
+    a: *const f32,
+    b: *const f32,
+    c: *mut f32,
+    c_stride: usize,
+    load_c: bool,
+) {
     let Geometry { tile_rows, panel } = PORTABLE;
     // SAFETY: forwarded from the caller.
     unsafe {
@@ -228,7 +246,16 @@ macro_rules! vector_kernels {
             /// The CPU has the features; the operands hold what [`super::TileKernel`] says.
             #[target_feature(enable = $feature)]
             #[allow(clippy::too_many_arguments)]
-            pub(super) unsafe fn tile(rows: usize, cols: usize, kc: usize, a: *const f32, b: *const f32, c: *mut f32, c_stride: usize, load_c: bool) {
+            pub(super) unsafe fn tile(
+                rows: usize,
+                cols: usize,
+                kc: usize,
+                a: *const f32,
+                b: *const f32,
+                c: *mut f32,
+                c_stride: usize,
+                load_c: bool,
+            ) {
                 let vectors = cols.div_ceil(W);
                 let last = cols - (vectors - 1) * W;
                 let mask = ($mask_for)(last);
@@ -250,7 +277,17 @@ macro_rules! vector_kernels {
 
             #[target_feature(enable = $feature)]
             #[allow(clippy::too_many_arguments)]
-            unsafe fn by_vectors<const R: usize>(vectors: usize, full: bool, kc: usize, a: *const f32, b: *const f32, c: *mut f32, c_stride: usize, load_c: bool, mask: $mask) {
+            unsafe fn by_vectors<const R: usize>(
+                vectors: usize,
+                full: bool,
+                kc: usize,
+                a: *const f32,
+                b: *const f32,
+                c: *mut f32,
+                c_stride: usize,
+                load_c: bool,
+                mask: $mask,
+            ) {
                 // SAFETY: forwarded from `tile`.
                 unsafe {
                     match (vectors, full) {
@@ -268,7 +305,15 @@ macro_rules! vector_kernels {
             #[target_feature(enable = $feature)]
             #[inline]
             #[allow(clippy::too_many_arguments)]
-            unsafe fn rows_tile<const R: usize, const V: usize, const FULL: bool>(kc: usize, a: *const f32, b: *const f32, c: *mut f32, c_stride: usize, load_c: bool, mask: $mask) {
+            unsafe fn rows_tile<const R: usize, const V: usize, const FULL: bool>(
+                kc: usize,
+                a: *const f32,
+                b: *const f32,
+                c: *mut f32,
+                c_stride: usize,
+                load_c: bool,
+                mask: $mask,
+            ) {
                 // SAFETY (whole body): a and b are packed (TILE_ROWS and PANEL floats per term,
                 // kc terms); C is read and written in rows < R and lanes inside the mask.
                 unsafe {
@@ -277,7 +322,11 @@ macro_rules! vector_kernels {
                         for (r, acc_r) in acc.iter_mut().enumerate() {
                             let row = c.add(r * c_stride);
                             for (v, acc_rv) in acc_r.iter_mut().enumerate() {
-                                *acc_rv = if FULL || v + 1 < V { ($load)(row.add(v * W)) } else { ($masked_load)(row.add(v * W), mask) };
+                                *acc_rv = if FULL || v + 1 < V {
+                                    ($load)(row.add(v * W))
+                                } else {
+                                    ($masked_load)(row.add(v * W), mask)
+                                };
                             }
                         }
                     }
@@ -354,7 +403,16 @@ vector_kernels!(
 ///
 /// SAFETY (caller): each slice holds every element its strides and sizes address.
 #[allow(clippy::too_many_arguments)]
-unsafe fn library(m: usize, n: usize, k: usize, dst: &mut [f32], dst_stride: usize, accumulate: bool, a: Strided, b: Strided) {
+unsafe fn library(
+    m: usize,
+    n: usize,
+    k: usize,
+    dst: &mut [f32],
+    dst_stride: usize,
+    accumulate: bool,
+    a: Strided,
+    b: Strided,
+) {
     // SAFETY: forwarded from the caller.
     unsafe {
         gemm::gemm(
@@ -433,12 +491,18 @@ mod tests {
                     for path in paths.iter().filter(|p| p.is_exact()) {
                         let ours = product(*path, shape, layout, accumulate);
                         let same = ours.iter().zip(&portable).all(|(a, b)| a.to_bits() == b.to_bits());
-                        assert!(same, "{path} differs from portable at {shape:?} layout {layout} accumulate {accumulate}");
+                        assert!(
+                            same,
+                            "{path} differs from portable at {shape:?} layout {layout} accumulate {accumulate}"
+                        );
                     }
                     let library = product(KernelPath::Library, shape, layout, accumulate);
                     let scale = shape.2 as f32 * 2500.0 * f32::EPSILON * 4.0 + 1e-6;
                     for (i, (a, l)) in portable.iter().zip(&library).enumerate() {
-                        assert!((a - l).abs() <= scale * (1.0 + l.abs()), "{shape:?} layout {layout} element {i}: {a} vs gemm {l}");
+                        assert!(
+                            (a - l).abs() <= scale * (1.0 + l.abs()),
+                            "{shape:?} layout {layout} element {i}: {a} vs gemm {l}"
+                        );
                     }
                 }
             }
@@ -471,6 +535,14 @@ mod tests {
     #[should_panic(expected = "operand too short")]
     fn short_operands_are_refused() {
         let mut dst = [0f32; 4];
-        matmul(KernelPath::Portable, (2, 2, 3), &mut dst, 2, false, Strided::rows(&[0.0; 5], 3), Strided::rows(&[0.0; 6], 2));
+        matmul(
+            KernelPath::Portable,
+            (2, 2, 3),
+            &mut dst,
+            2,
+            false,
+            Strided::rows(&[0.0; 5], 3),
+            Strided::rows(&[0.0; 6], 2),
+        );
     }
 }

@@ -87,12 +87,14 @@ pub fn read(path: &Path) -> Result<ReplayBuffer> {
     let map = unsafe { memmap2::Mmap::map(&file) }.with_context(corrupt)?;
     let tensors = SafeTensors::deserialize(&map).with_context(corrupt)?;
     let get = |name: &str, dtype: Dtype| -> Result<Vec<u8>> {
-        let t = tensors.tensor(name).with_context(|| format!("{}: buffer checkpoint lacks '{name}'", path.display()))?;
+        let t =
+            tensors.tensor(name).with_context(|| format!("{}: buffer checkpoint lacks '{name}'", path.display()))?;
         anyhow::ensure!(t.dtype() == dtype, "{}: '{name}' is {:?}, not {dtype:?}", path.display(), t.dtype());
         Ok(t.data().to_vec())
     };
     let f32s = |name: &str| -> Result<Vec<f32>> {
-        let bytes = tensors.tensor(name).with_context(|| format!("{}: buffer checkpoint lacks '{name}'", path.display()))?;
+        let bytes =
+            tensors.tensor(name).with_context(|| format!("{}: buffer checkpoint lacks '{name}'", path.display()))?;
         anyhow::ensure!(bytes.dtype() == Dtype::F32, "{}: '{name}' is {:?}, not F32", path.display(), bytes.dtype());
         Ok(bytes.data().chunks_exact(4).map(|b| f32::from_le_bytes([b[0], b[1], b[2], b[3]])).collect())
     };

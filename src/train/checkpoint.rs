@@ -182,4 +182,3 @@ pub fn load_all(checkpoint: &Path, agent: &mut dyn Agent) -> Result<(TrainState,
     let buffer = super::buffer_file::read(&checkpoint.join("buffer.safetensors"))?;
     Ok((state, buffer))
 }
-

@@ -197,8 +197,12 @@ mod tests {
             s.kernel_path = "portable".into();
         });
         assert!(resume_caveat(Some(&base), &old_cpu).unwrap().contains("FMA"));
-        assert!(resume_caveat(Some(&base), &with(&|s| s.git_commit = "def".into())).unwrap().contains("commit abc, this one at def"));
-        assert!(resume_caveat(Some(&base), &with(&|s| s.mujoco_version = 300)).unwrap().contains("MuJoCo 222, this one on 300"));
+        assert!(resume_caveat(Some(&base), &with(&|s| s.git_commit = "def".into()))
+            .unwrap()
+            .contains("commit abc, this one at def"));
+        assert!(resume_caveat(Some(&base), &with(&|s| s.mujoco_version = 300))
+            .unwrap()
+            .contains("MuJoCo 222, this one on 300"));
         assert!(resume_caveat(None, &base).unwrap().contains("predates"));
     }
 }
