@@ -1,7 +1,8 @@
 //! `cargo bench --bench returns [-- TIER]`: TD3, SAC and DDPG trained over seeds with their
-//! published settings, one table per environment: our evaluation at the published curves' step
-//! marks with the published mean ± std beside it, the final evaluation, the random policy and
-//! (Minitaur, Ant) the Raibert/QP baseline.
+//! published settings, then `locobench report` over the runs (`<out>/report/`): held-out
+//! evaluation at each budget beside the published curves, the random policy and (Minitaur, Ant)
+//! the controller across its speeds. LOCOBENCH_RETURNS_EPISODES and
+//! LOCOBENCH_RETURNS_PUSH_EPISODES set the report's episodes.
 //!
 //! Tiers (`LOCOBENCH_RETURNS_TIER=quick|standard|full`, or the tier's name as an argument):
 //!   quick     (default, about an hour on 2 cores) InvertedPendulum solved, HalfCheetah at 100k,
@@ -20,24 +21,13 @@
 //! LOCOBENCH_RETURNS_SBATCH, further sbatch options separated by spaces, e.g.
 //! "--partition=cpu --time=12:00:00"), returns at once and tabulates whatever has finished; run
 //! it again later to submit what is missing and tabulate more.
-use std::fmt::Write as _;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 
-use anyhow::{bail, Context, Result};
-use locobench::controller::baseline::{baseline_controller, baseline_env, RAMP_TIME};
-use locobench::controller::command::SpeedProfile;
-use locobench::controller::measure::measure;
-use locobench::envs::{make, EnvConfig};
-use locobench::io::write_bytes_atomic;
-use locobench::policy::RandomPolicy;
-use locobench::report::anchors::{bundled_anchors, bundled_curves, published_curve};
-use locobench::report::curves::mean_std;
-use locobench::report::runs::{find_runs, Run};
-use locobench::report::{fmt_return, group_runs, summarise};
-use locobench::rollout::{run_episodes, StepView};
+use anyhow::{bail, Result};
+use locobench::evaluation::{Protocol, DEFAULT_EPISODES};
+use locobench::report::{write_report, ReportOptions, HELD_OUT_CSV};
 use locobench::sweep::slurm::{submit, SlurmOptions, Submitted};
 use locobench::sweep::{jobs, run_jobs, write_plan, SweepSpec};
-use locobench::train::run_progress;
 
 /// One environment's share of a tier.
 struct Block {
@@ -165,151 +155,19 @@ fn main() -> Result<()> {
             }
         }
     }
-    let tables = tabulate(&blocks, &out, &tier_name)?;
-    write_bytes_atomic(&out.join("returns.md"), tables.markdown.as_bytes())?;
-    write_bytes_atomic(&out.join("returns.csv"), tables.csv.as_bytes())?;
-    print!("\n{}", tables.markdown);
-    println!(
-        "\nwrote {} and {}; runs under {} (`locobench report --runs {}`)",
-        out.join("returns.md").display(),
-        out.join("returns.csv").display(),
-        out.display(),
-        out.display()
-    );
+    // The tables are the report's: the same protocol, statistics and rendering as
+    // `locobench report --runs <out>`.
+    let opts = ReportOptions {
+        protocol: Protocol {
+            episodes: var("LOCOBENCH_RETURNS_EPISODES").unwrap_or(if smoke { 2 } else { DEFAULT_EPISODES }),
+            seed: 0,
+        },
+        push_episodes: var("LOCOBENCH_RETURNS_PUSH_EPISODES").unwrap_or(if smoke { 0 } else { 20 }),
+        ..ReportOptions::default()
+    };
+    let dirs: Vec<PathBuf> = blocks.iter().map(|b| out.join(b.env)).filter(|d| d.exists()).collect();
+    let report = write_report(&dirs, &out.join("report"), &opts)?;
+    print!("\n{}", std::fs::read_to_string(&report.readme)?);
+    println!("\nwrote {} ({} beside it); runs under {}", report.readme.display(), HELD_OUT_CSV, out.display());
     Ok(())
-}
-
-struct Tables {
-    markdown: String,
-    csv: String,
-}
-
-/// Step marks for the columns: the published curves' marks within the budget, or quarters of
-/// the budget when it is below the first mark.
-fn marks(steps: u64) -> Vec<u64> {
-    let mut published: Vec<u64> = bundled_curves().into_iter().flat_map(|c| c.steps).filter(|&m| m <= steps).collect();
-    published.sort_unstable();
-    published.dedup();
-    if published.is_empty() {
-        vec![steps / 4, steps / 2, steps]
-    } else {
-        published
-    }
-}
-
-fn k(steps: u64) -> String {
-    if steps % 1000 == 0 {
-        format!("{}k", steps / 1000)
-    } else {
-        steps.to_string()
-    }
-}
-
-/// Mean return of the uniform random policy over 10 episodes (seed 0).
-fn random_return(env: &str) -> Result<(f64, f64)> {
-    let mut e = make(&EnvConfig::new(env))?;
-    let mut policy = RandomPolicy::new(0);
-    let eps = run_episodes(e.as_mut(), &mut policy, 10, 0, &mut |_: &StepView| Ok(()))?;
-    Ok(mean_std(&eps.iter().map(|x| x.episode_return).collect::<Vec<_>>()))
-}
-
-fn tabulate(blocks: &[Block], out: &Path, tier_name: &str) -> Result<Tables> {
-    let anchors = bundled_anchors();
-    let fmt = |v: Option<f64>| v.map_or("–".to_string(), fmt_return);
-    let mut md = format!(
-        "# Returns bench, tier `{tier_name}`\n\nPublished hyperparameters (src/agents/config.rs, src/train/presets.toml). \
-         Evaluation: mean return of the deterministic policy over 10 episodes (InvertedPendulum: 5) every 5k steps \
-         (1k); each cell is the mean over seeds of that evaluation, with the published learning curve's mean ± std \
-         over seeds at the same step in brackets (baselines/published_curves.toml). Only finished runs are \
-         tabulated.\n\n"
-    );
-    let mut csv = String::from("env,policy,seeds,steps,mark,mean,std,published_mean,published_std\n");
-    let mut total_wall = 0.0;
-    for block in blocks {
-        let runs: Vec<Run> = find_runs(&[out.join(block.env)])
-            .unwrap_or_default()
-            .into_iter()
-            .filter(|r| run_progress(&r.dir).is_ok_and(|p| p.finished()))
-            .collect();
-        let marks = marks(block.steps);
-        let _ = write!(md, "## {}\n\n| policy | seeds |", block.env);
-        for m in &marks {
-            let _ = write!(md, " @{} |", k(*m));
-        }
-        let _ = writeln!(md, " final | wall min (mean) | steps/s | published at the end |");
-        let _ = writeln!(md, "|---|---|{}---|---|---|---|", "---|".repeat(marks.len()));
-        for (group, rs) in group_runs(&runs) {
-            let s = summarise(&group, &rs);
-            total_wall += rs.iter().map(|r| r.wall_time()).sum::<f64>();
-            let curve = published_curve(block.env, &group.algo);
-            let _ = write!(md, "| {} | {} |", group.algo, s.seeds);
-            for &m in &marks {
-                let ours = (s.steps >= m).then(|| s.curve.at(m)).flatten();
-                let theirs = curve.as_ref().and_then(|c| c.at(m));
-                let published = theirs.map_or(String::new(), |(pm, ps)| format!(" ({pm:.0} ± {ps:.0})"));
-                let sd = ours.and_then(|_| s.curve.steps.iter().rposition(|&t| t <= m).map(|i| s.curve.std[i]));
-                let _ = write!(md, " {}{} |", fmt(ours), published);
-                let _ = writeln!(
-                    csv,
-                    "{},{},{},{},{m},{},{},{},{}",
-                    block.env,
-                    group.algo,
-                    s.seeds,
-                    block.steps,
-                    ours.unwrap_or(f64::NAN),
-                    sd.unwrap_or(f64::NAN),
-                    theirs.map_or(f64::NAN, |t| t.0),
-                    theirs.map_or(f64::NAN, |t| t.1),
-                );
-            }
-            let end: Vec<String> = anchors
-                .iter()
-                .filter(|a| a.env == block.env && a.algo == group.algo && a.steps >= 1_000_000)
-                .map(|a| {
-                    let sd = a.std.map_or(String::new(), |s| format!(" ± {s}"));
-                    let source = a.source.split([',', '(']).next().unwrap_or("").trim();
-                    format!("{}{sd} @{} ({source})", a.value, k(a.steps))
-                })
-                .collect();
-            let rate = if s.wall_time > 0.0 { s.steps as f64 / s.wall_time } else { f64::NAN };
-            let _ = writeln!(
-                md,
-                " {} ± {} | {:.1} | {:.0} | {} |",
-                fmt(Some(s.final_mean)),
-                fmt(Some(s.final_std)),
-                s.wall_time / 60.0,
-                rate,
-                if end.is_empty() { "–".into() } else { end.join("; ") }
-            );
-        }
-        // Reference rows: no learning, and the controller.
-        let mut reference = |label: &str, (m, sd): (f64, f64), note: &str| {
-            let empty = "| – ".repeat(marks.len());
-            let _ = writeln!(
-                md,
-                "| {label} | 10 episodes {empty}| {} ± {} | – | – | {note} |",
-                fmt_return(m),
-                fmt_return(sd)
-            );
-            let _ = writeln!(csv, "{},{label},10 episodes,0,0,{m},{sd},,", block.env);
-        };
-        reference("random policy", random_return(block.env)?, "–");
-        if block.env == "minitaur" || block.env == "ant" {
-            let speed = if block.env == "minitaur" { 0.35 } else { 0.5 };
-            let mut e = make(&baseline_env(block.env)?)?;
-            let mut c = baseline_controller(block.env, speed, None)?;
-            let eps = measure(e.as_mut(), c.as_mut(), 10, 0, &SpeedProfile::ramp(speed, RAMP_TIME))?;
-            let falls = eps.iter().filter(|x| x.fell).count();
-            let v = mean_std(&eps.iter().map(|x| x.mean_speed).collect::<Vec<_>>()).0;
-            reference(
-                &format!("raibert @{speed} m/s"),
-                mean_std(&eps.iter().map(|x| x.episode_return).collect::<Vec<_>>()),
-                &format!("mean speed {v:.2} m/s, falls {falls}/10"),
-            );
-        }
-        md.push('\n');
-    }
-    let _ = writeln!(md, "The tabulated runs' wall times add up to {:.0} min.", total_wall / 60.0);
-    let _ = std::fs::create_dir_all(out).context("creating the output directory");
-    Ok(Tables { markdown: md, csv })
 }

@@ -3,6 +3,7 @@ pub mod agents;
 pub mod args;
 pub mod controller;
 pub mod envs;
+pub mod evaluation;
 pub mod io;
 pub mod mujoco;
 pub mod numeric;

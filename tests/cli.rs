@@ -166,7 +166,15 @@ fn train_eval_resume_and_fine_tune_from_the_command_line() {
 
     let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "3"]);
     assert!(ok, "{err}");
-    assert!(out.contains("over 3 episodes") && out.contains("healthy"), "{out}");
+    assert!(out.contains("3 held-out episodes") && out.contains("healthy") && out.contains("IQM"), "{out}");
+    // The run's own evaluation episodes, as during training, on request.
+    let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "3", "--training-seeds"]);
+    assert!(ok && out.contains("the run's evaluation episodes") && out.contains("over 3 episodes"), "{out}\n{err}");
+    // The actor saved at the run's budget; a budget it never passed is a clear error.
+    let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "3", "--budget", "600"]);
+    assert!(ok && out.contains("3 held-out episodes"), "{out}\n{err}");
+    let (ok, _, err) = locobench(&["eval", "--checkpoint", r, "--budget", "500"]);
+    assert!(!ok && err.contains("no policy at step 500"), "{err}");
 
     // Same directory again: refused without --force.
     let (ok, _, err) =
@@ -325,7 +333,7 @@ fn env_options_file_option_and_reward_work_alike_everywhere() {
     }
     // eval, baseline and rollout read the same file; a reward term an env lacks is an error.
     let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "1", "--env-config", f]);
-    assert!(ok && out.contains("mean length 30.0"), "{out}\n{err}");
+    assert!(ok && out.contains("length  30.0"), "{out}\n{err}");
     let (ok, out, err) =
         locobench(&["baseline", "--env", "minitaur", "--episodes", "1", "--env-config", f, "--reward", "drift=1"]);
     let row = out.lines().nth(1).unwrap_or_default();

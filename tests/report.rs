@@ -4,7 +4,7 @@ mod common;
 use common::locobench;
 
 #[test]
-fn sweep_then_report_with_baseline_comparison_under_three_rewards() {
+fn sweep_then_report_evaluates_every_run_at_its_budget_beside_the_controller() {
     let dir = tempfile::tempdir().unwrap();
     let sweep = dir.path().join("sweep");
     let s = sweep.to_str().unwrap();
@@ -49,27 +49,117 @@ fn sweep_then_report_with_baseline_comparison_under_three_rewards() {
     assert_eq!(std::fs::read(&metrics).unwrap(), before);
 
     let report = dir.path().join("report");
-    let (ok, out, err) = locobench(&["report", "--runs", s, "--out", report.to_str().unwrap(), "--episodes", "1"]);
+    let (ok, out, err) = locobench(&[
+        "report",
+        "--runs",
+        s,
+        "--out",
+        report.to_str().unwrap(),
+        "--episodes",
+        "2",
+        "--push-episodes",
+        "1",
+    ]);
     assert!(ok, "{out}\n{err}");
     let html = std::fs::read_to_string(report.join("index.html")).unwrap();
     let md = std::fs::read_to_string(report.join("README.md")).unwrap();
     assert!(html.starts_with("<!DOCTYPE html>") && html.contains("<svg"), "inline charts");
     assert!(!html.contains("<script"), "no scripts, no network");
-    for needle in ["Baseline vs RL", "no penalty", "full penalty", "trained reward (drift=0.5)", "baseline (raibert"] {
+    for needle in [
+        "## Protocol",
+        "2 held-out episodes per seed",
+        "Held-out evaluation at fixed budgets",
+        "Controller across commanded speeds",
+        "Learned policies against the controller",
+        "Pushes",
+        "sac-drift0.5",
+        "| sac-drift0.5 | 2 | sac, drift=0.5, batch_size=32,",
+        "2 row(s) trained under other env options",
+    ] {
         assert!(md.contains(needle), "{needle} missing:\n{md}");
     }
-    // Four groups (2 algorithms x 2 drift weights), each with 2 seeds.
-    assert_eq!(md.matches("| 2 | 240 |").count(), 4, "{md}");
-    let svgs: Vec<_> = std::fs::read_dir(&report)
+    // Four groups (2 algorithms x 2 drift weights), each evaluated at its one budget (240 steps)
+    // from both seeds' policies, 2 episodes each; no budget row borrows from another.
+    assert_eq!(md.matches("| 240 | 2 of 2 | 2 |").count(), 4, "{md}");
+    assert!(!md.contains("| 100k |"), "no run reached 100k: no such row");
+    let svgs: Vec<String> = std::fs::read_dir(&report)
         .unwrap()
         .filter_map(|e| e.ok())
-        .filter(|e| e.path().extension().is_some_and(|x| x == "svg"))
+        .map(|e| e.file_name().into_string().unwrap())
+        .filter(|n| n.ends_with(".svg"))
         .collect();
-    assert_eq!(svgs.len(), 1 + 4, "one evaluation chart and one training chart per group");
-    for e in svgs {
-        let svg = std::fs::read_to_string(e.path()).unwrap();
-        assert!(svg.contains("<svg") && (svg.contains("seed 1") || svg.contains("n=2")), "{}", e.path().display());
+    assert_eq!(svgs.len(), 1 + 3 + 4, "evaluation, three speed charts, one training chart per group: {svgs:?}");
+    assert!(svgs.iter().all(|n| n.len() <= 40), "short file names: {svgs:?}");
+    for n in svgs.iter().filter(|n| n.ends_with("_training.svg")) {
+        assert!(html.contains(&format!("<a href=\"{n}\">")), "{n} linked, not embedded");
     }
+
+    // The same report, number for number, on one thread.
+    let again = dir.path().join("report-1");
+    let (ok, out, err) = locobench(&[
+        "report",
+        "--runs",
+        s,
+        "--out",
+        again.to_str().unwrap(),
+        "--episodes",
+        "2",
+        "--push-episodes",
+        "1",
+        "--threads",
+        "1",
+    ]);
+    assert!(ok, "{out}\n{err}");
+    for file in ["README.md", "held_out.csv", "controller.csv"] {
+        assert_eq!(
+            std::fs::read_to_string(report.join(file)).unwrap(),
+            std::fs::read_to_string(again.join(file)).unwrap(),
+            "{file}"
+        );
+    }
+}
+
+/// A run whose policy file is damaged is a line in the report, not a panic or a silent gap.
+#[test]
+fn report_lists_a_run_whose_policy_is_unreadable() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let (ok, _, err) = locobench(&[
+        "train",
+        "--env",
+        "minitaur",
+        "--algo",
+        "td3",
+        "--steps",
+        "200",
+        "--set",
+        "hidden=[8,8],batch_size=16,warmup_steps=50,learning_starts=50,eval_every=100,eval_episodes=1",
+        "--option",
+        "max_episode_steps=30",
+        "--out",
+        run.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(ok, "{err}");
+    let policy = run.join("policies/step-200.safetensors");
+    assert!(policy.is_file());
+    std::fs::write(&policy, b"not a safetensors file").unwrap();
+    let out_dir = dir.path().join("report");
+    let (ok, out, err) = locobench(&[
+        "report",
+        "--runs",
+        run.to_str().unwrap(),
+        "--out",
+        out_dir.to_str().unwrap(),
+        "--episodes",
+        "1",
+        "--push-episodes",
+        "0",
+    ]);
+    assert!(ok, "{out}\n{err}");
+    let md = std::fs::read_to_string(out_dir.join("README.md")).unwrap();
+    assert!(md.contains("policy unreadable"), "{md}");
+    assert!(md.contains("| 200 | 0 |"), "{md}");
 }
 
 #[test]

@@ -2,18 +2,31 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use locobench::envs::make;
-use locobench::train::{evaluate::evaluate, load_policy};
+use locobench::evaluation::stats::{self, wilson};
+use locobench::evaluation::Protocol;
+use locobench::policy::AgentPolicy;
+use locobench::report::format::interval;
+use locobench::report::heldout::estimate;
+use locobench::train::{evaluate::evaluate, load_budget_policy, load_policy};
 
 #[derive(clap::Args, Debug)]
 pub struct EvalArgs {
-    /// A checkpoint directory, or a run directory (its newest checkpoint).
+    /// A run directory (its newest checkpoint), a checkpoint directory, or an exported policy.
     #[arg(long)]
     pub checkpoint: PathBuf,
-    #[arg(long, default_value_t = 10)]
-    pub episodes: usize,
-    /// Seed for the evaluation episodes (default: the run's seed, as during training).
+    /// Evaluate the actor the run saved at this step budget (`policies/step-N.safetensors`).
     #[arg(long)]
-    pub seed: Option<u64>,
+    pub budget: Option<u64>,
+    /// Held-out episodes (the report's protocol).
+    #[arg(long, default_value_t = locobench::evaluation::DEFAULT_EPISODES)]
+    pub episodes: usize,
+    /// Protocol seed: picks the held-out reset seeds, the same ones `locobench report` uses.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
+    /// Play the run's own in-training evaluation episodes instead of held-out ones (what
+    /// metrics.csv's eval rows were measured on).
+    #[arg(long)]
+    pub training_seeds: bool,
     /// Options over the run's own environment, e.g. `--reward drift=1,shake=1,energy=0.005` to
     /// evaluate under other reward weights.
     #[command(flatten)]
@@ -21,26 +34,50 @@ pub struct EvalArgs {
 }
 
 pub fn run(args: EvalArgs) -> Result<()> {
-    let (run, agent) = load_policy(&args.checkpoint)?;
+    anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
+    let (run, agent) = match args.budget {
+        Some(b) => load_budget_policy(&args.checkpoint, b)?,
+        None => load_policy(&args.checkpoint)?,
+    };
     let env_cfg = args.env_options.apply(run.env.clone())?;
     let mut env = make(&env_cfg)?;
-    let e = evaluate(agent.as_ref(), env.as_mut(), args.episodes, args.seed.unwrap_or(run.seed))?;
-    println!(
-        "{} {} on {}: return {:.2} ± {:.2} over {} episodes (mean length {:.1})",
-        args.checkpoint.display(),
-        run.train.algo.name(),
-        run.env.name,
-        e.mean(),
-        e.std(),
-        e.returns.len(),
-        e.lengths.iter().sum::<usize>() as f64 / e.lengths.len() as f64
-    );
-    for (term, v) in &e.term_means {
-        println!("  {term:<14} {v:>12.3}");
+    let what = format!("{} {} on {}", args.checkpoint.display(), run.train.algo.name(), run.env.name);
+    if args.training_seeds {
+        let e = evaluate(agent.as_ref(), env.as_mut(), args.episodes, run.seed)?;
+        println!(
+            "{what}, the run's evaluation episodes: return {:.3} ± {:.3} (population std) over {} episodes (mean length {:.1})",
+            e.mean(),
+            e.std(),
+            e.returns.len(),
+            e.lengths.iter().sum::<usize>() as f64 / e.lengths.len() as f64
+        );
+        for (term, v) in &e.term_means {
+            println!("  {term:<14} {v:>12.3}");
+        }
+        println!("  {:<14} {:>12.3}  (share of action components at |a| >= 0.99)", "saturated", e.saturation);
+        return Ok(());
     }
-    println!("  {:<14} {:>12.3}  (share of action components at |a| >= 0.99)", "saturated", e.saturation);
-    if e.unstable_episodes > 0 {
-        println!("  {} episode(s) ended by a physics blow-up", e.unstable_episodes);
+    let protocol = Protocol { episodes: args.episodes, seed: args.seed };
+    protocol.check_disjoint(run.seed, run.train.total_steps, run.train.eval_episodes)?;
+    let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.train.algo.name().into() };
+    let eps = protocol.run(env.as_mut(), &mut policy, None, None)?;
+    let returns: Vec<f64> = eps.iter().map(|e| e.episode_return).collect();
+    let fmt = |v: f64| format!("{v:.3}");
+    let falls = eps.iter().filter(|e| e.fell).count();
+    let w = wilson(falls, eps.len());
+    println!("{what}: {} held-out episodes (protocol seed {})", eps.len(), args.seed);
+    println!(
+        "  return  mean {} (95% CI over episodes)",
+        interval(estimate(&[returns.clone()], stats::mean, 2021).interval, fmt)
+    );
+    println!("  return  IQM  {}", interval(estimate(&[returns.clone()], stats::iqm, 2022).interval, fmt));
+    println!("  return  sample std {:.3}", stats::sample_std(&returns));
+    println!("  falls   {falls}/{} ({:.2}-{:.2})", eps.len(), w.low, w.high);
+    println!("  length  {:.1}", stats::mean(&eps.iter().map(|e| e.length as f64).collect::<Vec<_>>()));
+    println!("  speed   {:.3} m/s", stats::mean(&eps.iter().map(|e| e.mean_speed).collect::<Vec<_>>()));
+    for (i, (term, _)) in eps[0].reward_terms.iter().enumerate() {
+        let m = stats::mean(&eps.iter().map(|e| e.reward_terms[i].1).collect::<Vec<_>>());
+        println!("  {term:<14} {m:>12.3}");
     }
     Ok(())
 }

@@ -1,6 +1,9 @@
 use std::path::PathBuf;
+use std::time::Instant;
 
 use anyhow::Result;
+use locobench::evaluation::Protocol;
+use locobench::report::format::{budget, interval};
 use locobench::report::{fmt_return, write_report, ReportOptions};
 
 #[derive(clap::Args, Debug)]
@@ -10,38 +13,45 @@ pub struct ReportArgs {
     pub runs: Vec<PathBuf>,
     #[arg(long, default_value = "report")]
     pub out: PathBuf,
-    /// Episodes per policy, seed and reward in the baseline-vs-RL comparison (0 skips it).
-    #[arg(long, default_value_t = 5)]
+    /// Held-out episodes per policy and seed.
+    #[arg(long, default_value_t = locobench::evaluation::DEFAULT_EPISODES)]
     pub episodes: usize,
+    /// Episodes per push level (0: no push table).
+    #[arg(long, default_value_t = 20)]
+    pub push_episodes: usize,
+    /// Evaluations at once (default: every core); the report is the same for any number.
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Protocol seed: picks the held-out reset seeds.
     #[command(flatten)]
     pub seed: super::SeedArg,
-    /// Baseline speed set-point on Minitaur (m/s).
-    #[arg(long, default_value_t = 0.35)]
-    pub minitaur_speed: f64,
-    /// Baseline speed set-point on Ant (m/s).
-    #[arg(long, default_value_t = 0.5)]
-    pub ant_speed: f64,
 }
 
 pub fn run(args: ReportArgs) -> Result<()> {
-    let mut opts = ReportOptions { compare_episodes: args.episodes, seed: args.seed.seed, ..Default::default() };
-    opts.baseline_speed.insert("minitaur".into(), args.minitaur_speed);
-    opts.baseline_speed.insert("ant".into(), args.ant_speed);
+    anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
+    let started = Instant::now();
+    let opts = ReportOptions {
+        protocol: Protocol { episodes: args.episodes, seed: args.seed.seed },
+        push_episodes: args.push_episodes,
+        threads: args.threads.unwrap_or_else(locobench::evaluation::parallel::default_threads),
+    };
     let report = write_report(&args.runs, &args.out, &opts)?;
-    for g in &report.groups {
-        println!(
-            "{:<18} {:<28} seeds {:>2}  final eval {:>9} ± {:<7} AUC {:>9}",
-            g.group.env,
-            g.group.label(),
-            g.seeds,
-            fmt_return(g.final_mean),
-            fmt_return(g.final_std),
-            fmt_return(g.auc)
-        );
+    for (env, rows) in &report.rows {
+        for r in rows.iter().filter(|r| r.seeds() > 0) {
+            println!(
+                "{env:<14} {:<40} {:>5}  seeds {:>2}  held-out return {}",
+                r.group.label(),
+                budget(r.budget),
+                r.seeds(),
+                interval(r.mean_return(locobench::report::BOOTSTRAP_SEED).interval, fmt_return)
+            );
+        }
     }
-    for (env, rows) in &report.comparisons {
-        println!("{env}: baseline vs RL over {} rows (see the report)", rows.len());
-    }
-    println!("wrote {} and {}", report.index.display(), report.readme.display());
+    println!(
+        "wrote {} and {} in {:.0} s",
+        report.index.display(),
+        report.readme.display(),
+        started.elapsed().as_secs_f64()
+    );
     Ok(())
 }

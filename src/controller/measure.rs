@@ -34,6 +34,8 @@ pub struct GaitEpisode {
     pub qp_failures: f64,
     /// The rest of the policy's end-of-episode diagnostics (a controller's limits).
     pub diagnostics: Vec<(&'static str, f64)>,
+    /// Each reward term summed over the episode.
+    pub reward_terms: Vec<(&'static str, f64)>,
 }
 
 /// Mean cost of transport over the episodes that moved forward (infinite if none did).
@@ -54,7 +56,7 @@ pub fn base_pose(env: &dyn Env) -> ([f64; 2], f64) {
 }
 
 struct GaitObserver<'a> {
-    profile: &'a SpeedProfile,
+    profile: Option<&'a SpeedProfile>,
     dt: f64,
     episode: GaitEpisode,
     pose: ([f64; 2], f64),
@@ -79,7 +81,8 @@ impl Observer for GaitObserver<'_> {
         self.forward_distance += along;
         e.sideways += across;
         self.turned += wrap_angle(yaw - yaw0);
-        e.speed_error += (along / self.dt - self.profile.at(v.t as f64 * self.dt)).abs();
+        // Without a set-point (a trained agent) there is no speed error: it stays NaN.
+        e.speed_error += self.profile.map_or(f64::NAN, |p| (along / self.dt - p.at(v.t as f64 * self.dt)).abs());
         let info = &v.step.info;
         e.energy += info.metric("mechanical_energy").unwrap_or(0.0);
         e.drift += info.metric("dy").map(f64::abs).unwrap_or(0.0);
@@ -89,8 +92,9 @@ impl Observer for GaitObserver<'_> {
     }
 }
 
-/// Runs `episodes` episodes (the first reset seeded with `seed`) and measures each against the
-/// speed profile (time from each episode's start).
+/// Runs `episodes` episodes (the first reset seeded with `seed`, later ones continuing the
+/// environment's random stream) and measures each against the speed profile (time from each
+/// episode's start).
 pub fn measure(
     env: &mut dyn Env,
     policy: &mut dyn Policy,
@@ -98,38 +102,52 @@ pub fn measure(
     seed: u64,
     profile: &SpeedProfile,
 ) -> Result<Vec<GaitEpisode>> {
+    (0..episodes)
+        .map(|episode| {
+            let reset_seed = if episode == 0 { Some(seed) } else { None };
+            measure_episode(env, policy, episode, reset_seed, Some(profile))
+        })
+        .collect()
+}
+
+/// Runs and measures one episode, reset with `reset_seed` (None continues the environment's
+/// random stream); `profile` is the set-point speed errors are measured against, if the policy
+/// has one.
+pub fn measure_episode(
+    env: &mut dyn Env,
+    policy: &mut dyn Policy,
+    episode: usize,
+    reset_seed: Option<u64>,
+    profile: Option<&SpeedProfile>,
+) -> Result<GaitEpisode> {
     let dt = env.spec().dt;
     let mass: f64 = env.data().model().body_mass().iter().sum();
     let gravity = -env.data().model().gravity()[2];
-    let mut out = Vec::with_capacity(episodes);
-    for episode in 0..episodes {
-        let mut obs = GaitObserver {
-            profile,
-            dt,
-            episode: GaitEpisode::default(),
-            pose: ([0.0; 2], 0.0),
-            forward_distance: 0.0,
-            turned: 0.0,
-        };
-        let reset_seed = if episode == 0 { Some(seed) } else { None };
-        let summary = run_episode(env, policy, episode, reset_seed, &mut obs)?;
-        let mut e = obs.episode;
-        e.episode_return = summary.episode_return;
-        e.length = summary.length;
-        e.fell = summary.terminated || summary.unstable;
-        let time = summary.length as f64 * dt;
-        let distance = obs.forward_distance;
-        e.mean_speed = if time > 0.0 { distance / time } else { 0.0 };
-        e.yaw_rate = if time > 0.0 { obs.turned / time } else { 0.0 };
-        e.sideways = e.sideways.abs();
-        e.speed_error /= summary.length.max(1) as f64;
-        e.cost_of_transport = if distance > 0.0 { e.energy / (mass * gravity * distance) } else { f64::INFINITY };
-        let diagnostics = policy.diagnostics();
-        e.qp_failures = diagnostics.iter().find(|(n, _)| *n == "qp_failures").map_or(0.0, |(_, v)| *v);
-        e.diagnostics = diagnostics.into_iter().filter(|(n, _)| !matches!(*n, "qp_failures" | "ticks")).collect();
-        out.push(e);
-    }
-    Ok(out)
+    let mut obs = GaitObserver {
+        profile,
+        dt,
+        episode: GaitEpisode::default(),
+        pose: ([0.0; 2], 0.0),
+        forward_distance: 0.0,
+        turned: 0.0,
+    };
+    let summary = run_episode(env, policy, episode, reset_seed, &mut obs)?;
+    let mut e = obs.episode;
+    e.episode_return = summary.episode_return;
+    e.length = summary.length;
+    e.fell = summary.terminated || summary.unstable;
+    e.reward_terms = summary.term_totals.clone();
+    let time = summary.length as f64 * dt;
+    let distance = obs.forward_distance;
+    e.mean_speed = if time > 0.0 { distance / time } else { 0.0 };
+    e.yaw_rate = if time > 0.0 { obs.turned / time } else { 0.0 };
+    e.sideways = e.sideways.abs();
+    e.speed_error /= summary.length.max(1) as f64;
+    e.cost_of_transport = if distance > 0.0 { e.energy / (mass * gravity * distance) } else { f64::INFINITY };
+    let diagnostics = policy.diagnostics();
+    e.qp_failures = diagnostics.iter().find(|(n, _)| *n == "qp_failures").map_or(0.0, |(_, v)| *v);
+    e.diagnostics = diagnostics.into_iter().filter(|(n, _)| !matches!(*n, "qp_failures" | "ticks")).collect();
+    Ok(e)
 }
 
 /// The columns both `locobench baseline` and the report's baseline-vs-RL tables show for a set of

@@ -130,6 +130,8 @@ pub trait Env: Send {
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError>;
     /// The simulation state, for recorders and model-based controllers.
     fn data(&self) -> &Data;
+    /// The simulation state, to perturb it between steps (applied forces, see `evaluation::push`).
+    fn data_mut(&mut self) -> &mut Data;
     /// Overwrites positions and velocities mid-episode (Gymnasium's `set_state`), e.g. to start
     /// from a recorded state. Lengths are checked; the values are the caller's responsibility.
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError>;

@@ -71,6 +71,10 @@ impl<T: Task> Env for MujocoEnv<T> {
         &self.core.sim.data
     }
 
+    fn data_mut(&mut self) -> &mut Data {
+        &mut self.core.sim.data
+    }
+
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
         Ok(self.core.sim.data.set_state(qpos, qvel)?)
     }

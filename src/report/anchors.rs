@@ -13,6 +13,10 @@ pub struct Anchor {
     pub value: f64,
     pub std: Option<f64>,
     pub steps: u64,
+    /// Training seeds behind the value, when the source says.
+    pub seeds: Option<usize>,
+    /// What the ± is taken over, when it is not seeds.
+    pub spread: Option<String>,
     pub source: String,
 }
 
@@ -40,6 +44,7 @@ pub struct PublishedCurve {
     pub env: String,
     pub algo: String,
     pub source: String,
+    pub seeds: usize,
     pub steps: Vec<u64>,
     pub mean: Vec<f64>,
     pub std: Vec<f64>,

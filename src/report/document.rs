@@ -9,11 +9,13 @@ pub enum Block {
         text: String,
     },
     Paragraph(String),
-    /// An SVG chart: the Markdown links `file`, the HTML page embeds `svg`.
+    /// An SVG chart: the Markdown links `file`; the HTML page embeds `svg`, or links `file`
+    /// when the chart is not `inline` (detail charts, to keep the page light).
     Figure {
         file: String,
         svg: String,
         caption: String,
+        inline: bool,
     },
     Table {
         header: Vec<String>,
@@ -43,7 +45,17 @@ impl Document {
     }
 
     pub fn figure(&mut self, file: impl Into<String>, svg: String, caption: impl Into<String>) {
-        self.blocks.push(Block::Figure { file: file.into(), svg, caption: caption.into() });
+        self.blocks.push(Block::Figure { file: file.into(), svg, caption: caption.into(), inline: true });
+    }
+
+    /// A chart written beside the page and linked from it, not embedded.
+    pub fn linked_figure(&mut self, file: impl Into<String>, caption: impl Into<String>) {
+        self.blocks.push(Block::Figure {
+            file: file.into(),
+            svg: String::new(),
+            caption: caption.into(),
+            inline: false,
+        });
     }
 
     pub fn table(&mut self, header: &[&str], rows: Vec<Vec<String>>) {
@@ -95,8 +107,11 @@ impl Document {
                 Block::Paragraph(text) => {
                     let _ = writeln!(body, "<p>{}</p>", escape(text));
                 }
-                Block::Figure { svg, caption, .. } => {
+                Block::Figure { svg, caption, inline: true, .. } => {
                     let _ = writeln!(body, "<figure>{svg}<figcaption>{}</figcaption></figure>", escape(caption));
+                }
+                Block::Figure { file, caption, inline: false, .. } => {
+                    let _ = writeln!(body, "<p><a href=\"{}\">{}</a></p>", escape(file), escape(caption));
                 }
                 Block::Table { header, rows } => {
                     body.push_str("<table><tr>");

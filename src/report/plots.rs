@@ -1,28 +1,56 @@
-//! SVG charts with plotters: mean lines with a ±std band per series.
+//! SVG charts with plotters: a line per series with a shaded interval band, and points with
+//! error bars.
 use anyhow::{anyhow, Result};
 use plotters::prelude::*;
 
-/// One series: a mean line and a shaded band of ±std around it, optionally over the raw
-/// values it summarises (drawn faint).
+/// One series: a line through `mean` and a shaded band from `low` to `high` (no band where
+/// they equal the mean).
 #[derive(Debug, Clone, Default)]
 pub struct Band {
     pub label: String,
     pub x: Vec<f64>,
     pub mean: Vec<f64>,
-    pub std: Vec<f64>,
-    /// Raw values at the same x (empty: none).
-    pub raw: Vec<f64>,
+    pub low: Vec<f64>,
+    pub high: Vec<f64>,
 }
 
-/// A published point drawn over the curves: mean with a ±std error bar at its step.
+impl Band {
+    /// A band of mean ± `half` at every point.
+    pub fn symmetric(label: String, x: Vec<f64>, mean: Vec<f64>, half: &[f64]) -> Band {
+        let low = mean.iter().zip(half).map(|(m, h)| m - h).collect();
+        let high = mean.iter().zip(half).map(|(m, h)| m + h).collect();
+        Band { label, x, mean, low, high }
+    }
+
+    /// At most `max_points` points, evenly spaced in index, keeping the last.
+    pub fn thinned(self, max_points: usize) -> Band {
+        let n = self.x.len();
+        if n <= max_points || max_points < 2 {
+            return self;
+        }
+        let keep: Vec<usize> = (0..max_points).map(|i| i * (n - 1) / (max_points - 1)).collect();
+        let pick = |v: &[f64]| keep.iter().map(|&i| v[i]).collect::<Vec<f64>>();
+        Band {
+            x: pick(&self.x),
+            mean: pick(&self.mean),
+            low: pick(&self.low),
+            high: pick(&self.high),
+            label: self.label,
+        }
+    }
+}
+
+/// A point drawn over the curves (a published result, a policy's outcome) with an error bar
+/// from `low` to `high`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Marker {
     /// Legend entry; markers with the same label share one.
     pub label: String,
     pub x: f64,
     pub y: f64,
-    pub err: f64,
-    /// Index of the band whose colour it takes.
+    pub low: f64,
+    pub high: f64,
+    /// Index of the colour it takes (a band's, to match it).
     pub color_of: usize,
 }
 
@@ -84,11 +112,11 @@ pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band], mark
     {
         let root = SVGBackend::with_string(&mut svg, (760, 420)).into_drawing_area();
         root.fill(&WHITE).map_err(err)?;
-        let points = bands.iter().flat_map(|b| {
-            let band = b.x.iter().zip(b.mean.iter().zip(&b.std)).flat_map(|(&x, (&m, &s))| [(x, m - s), (x, m + s)]);
-            band.chain(b.x.iter().copied().zip(b.raw.iter().copied()))
-        });
-        let points = points.chain(markers.iter().flat_map(|m| [(m.x, m.y - m.err), (m.x, m.y + m.err)]));
+        let points = bands
+            .iter()
+            .flat_map(|b| b.x.iter().zip(b.low.iter().zip(&b.high)).flat_map(|(&x, (&l, &h))| [(x, l), (x, h)]));
+        let points = points.chain(bands.iter().flat_map(|b| b.x.iter().copied().zip(b.mean.iter().copied())));
+        let points = points.chain(markers.iter().flat_map(|m| [(m.x, m.low), (m.x, m.high), (m.x, m.y)]));
         let (mut x0, mut x1, mut y0, mut y1) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
         for (x, y) in points.filter(|(x, y)| x.is_finite() && y.is_finite()) {
             (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
@@ -131,14 +159,11 @@ pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band], mark
         for (i, b) in bands.iter().enumerate() {
             let (red, green, blue) = COLORS[i % COLORS.len()];
             let color = RGBColor(red, green, blue).to_rgba();
-            let upper = b.x.iter().zip(b.mean.iter().zip(&b.std)).map(|(&x, (&m, &s))| (x, m + s));
-            let lower = b.x.iter().zip(b.mean.iter().zip(&b.std)).rev().map(|(&x, (&m, &s))| (x, m - s));
-            let outline: Vec<(f64, f64)> = upper.chain(lower).collect();
-            if !b.raw.is_empty() {
-                let raw = b.x.iter().copied().zip(b.raw.iter().copied());
-                chart.draw_series(LineSeries::new(raw, color.mix(0.3).stroke_width(1))).map_err(err)?;
-            }
-            if b.std.iter().any(|&s| s > 0.0) {
+            let upper = b.x.iter().copied().zip(b.high.iter().copied());
+            let lower = b.x.iter().copied().zip(b.low.iter().copied()).rev();
+            let outline: Vec<(f64, f64)> = upper.chain(lower).filter(|(x, y)| x.is_finite() && y.is_finite()).collect();
+            let has_band = b.low.iter().zip(&b.mean).chain(b.high.iter().zip(&b.mean)).any(|(a, m)| a != m);
+            if has_band {
                 chart.draw_series(std::iter::once(Polygon::new(outline, color.mix(0.18).filled()))).map_err(err)?;
             }
             chart
@@ -150,7 +175,7 @@ pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band], mark
         for (i, m) in markers.iter().enumerate() {
             let (red, green, blue) = COLORS[m.color_of % COLORS.len()];
             let color = RGBColor(red, green, blue).to_rgba();
-            let bar = PathElement::new(vec![(m.x, m.y - m.err), (m.x, m.y + m.err)], color.stroke_width(2));
+            let bar = PathElement::new(vec![(m.x, m.low), (m.x, m.high)], color.stroke_width(2));
             chart.draw_series(std::iter::once(bar)).map_err(err)?;
             let dot =
                 chart.draw_series(std::iter::once(Circle::new((m.x, m.y), 5, color.stroke_width(2)))).map_err(err)?;
@@ -176,12 +201,8 @@ mod tests {
 
     #[test]
     fn svg_has_a_path_per_series_and_the_labels() {
-        let band = |label: &str, k: f64| Band {
-            label: label.into(),
-            x: vec![0.0, 1.0, 2.0],
-            mean: vec![0.0, k, 2.0 * k],
-            std: vec![0.1, 0.2, 0.3],
-            raw: vec![],
+        let band = |label: &str, k: f64| {
+            Band::symmetric(label.into(), vec![0.0, 1.0, 2.0], vec![0.0, k, 2.0 * k], &[0.1, 0.2, 0.3])
         };
         let svg = bands_svg("returns", "step", "return", &[band("td3", 1.0), band("sac", 2.0)], &[]).unwrap();
         assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
@@ -200,14 +221,9 @@ mod tests {
         assert_eq!(value_label(-2.5), "-2.5");
         assert_eq!(value_label(0.125), "0.125");
         assert_eq!(value_label(0.0), "0");
-        let band = Band {
-            label: "sac".into(),
-            x: vec![0.0, 150_000.0, 300_000.0],
-            mean: vec![0.0, 4000.0, 8000.0],
-            std: vec![0.0; 3],
-            raw: vec![],
-        };
-        let marker = |x: f64| Marker { label: "sac, published".into(), x, y: 5000.0, err: 400.0, color_of: 0 };
+        let band = Band::symmetric("sac".into(), vec![0.0, 150_000.0, 300_000.0], vec![0.0, 4000.0, 8000.0], &[0.0; 3]);
+        let marker =
+            |x: f64| Marker { label: "sac, published".into(), x, y: 5000.0, low: 4600.0, high: 5400.0, color_of: 0 };
         let svg =
             bands_svg("c", "environment steps", "return", &[band], &[marker(100_000.0), marker(300_000.0)]).unwrap();
         let labels: Vec<&str> = svg.lines().map(str::trim).collect();
@@ -215,5 +231,16 @@ mod tests {
         assert!(!svg.contains("150000") && !svg.contains("25000.0"));
         assert_eq!(svg.matches("sac, published").count(), 1);
         assert!(svg.matches("<circle").count() >= 2);
+    }
+
+    #[test]
+    fn thinning_keeps_the_ends_and_at_most_the_asked_points() {
+        let n = 1000;
+        let x: Vec<f64> = (0..n).map(f64::from).collect();
+        let b = Band::symmetric("a".into(), x.clone(), x.clone(), &vec![1.0; n as usize]).thinned(100);
+        assert_eq!(b.x.len(), 100);
+        assert_eq!((b.x[0], *b.x.last().unwrap()), (0.0, 999.0));
+        assert_eq!(b.low[5], b.mean[5] - 1.0);
+        assert_eq!(Band::symmetric("a".into(), vec![1.0], vec![2.0], &[0.0]).thinned(100).x.len(), 1);
     }
 }

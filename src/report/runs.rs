@@ -84,13 +84,27 @@ impl Run {
         changed.join(",")
     }
 
-    /// Runs that differ only in their seed share a group.
+    /// The name a person gave the run: its directory's name without a trailing `-seed<N>`
+    /// (sweeps name runs `<algo>-<grid point>-seed<N>`).
+    pub fn variant_name(&self) -> String {
+        let name = self.dir.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
+        match name.rfind("-seed") {
+            Some(i) if name[i + 5..].chars().all(|c| c.is_ascii_digit()) && i + 5 < name.len() => name[..i].to_string(),
+            _ => name,
+        }
+    }
+
+    /// Runs that differ only in their seed share a group. Runs with the shipped settings group
+    /// by algorithm and reward whatever their directories are called; runs with other settings
+    /// also by the name they were given.
     pub fn group(&self) -> Group {
+        let settings = self.settings_label();
         Group {
             env: self.env().to_string(),
             algo: self.algo().to_string(),
             reward: self.reward_label(),
-            settings: self.settings_label(),
+            variant: if settings.is_empty() { String::new() } else { self.variant_name() },
+            settings,
         }
     }
 
@@ -118,18 +132,28 @@ pub struct Group {
     pub reward: String,
     /// `Run::settings_label`: empty for the shipped settings.
     pub settings: String,
+    /// `Run::variant_name` for runs with other settings than the shipped ones, else empty.
+    pub variant: String,
 }
 
 impl Group {
+    /// What tables call the group: the algorithm (with its reward when not the default) for the
+    /// shipped settings, the name the runs were given otherwise. `description` says the rest.
     pub fn label(&self) -> String {
-        let mut label = self.algo.clone();
-        if !self.settings.is_empty() {
-            label += &format!(" [{}]", self.settings);
+        if !self.variant.is_empty() {
+            return self.variant.clone();
         }
+        let mut label = self.algo.clone();
         if self.reward != "default reward" {
             label += &format!(" ({})", self.reward);
         }
         label
+    }
+
+    /// Algorithm, reward and settings in full.
+    pub fn description(&self) -> String {
+        let settings = if self.settings.is_empty() { "shipped settings".to_string() } else { self.settings.clone() };
+        format!("{}, {}, {settings}", self.algo, self.reward)
     }
 }
 
@@ -203,11 +227,20 @@ mod tests {
         let plain = run("half-cheetah", Algo::Td3, "total_steps=300000", &[]);
         assert_eq!(plain.settings_label(), "");
         assert_eq!(plain.group().label(), "td3");
-        let scaled = run("half-cheetah", Algo::Td3, "reward_scale=100,normalize_observations=true", &[]);
+        let mut scaled = run("half-cheetah", Algo::Td3, "reward_scale=100,normalize_observations=true", &[]);
+        scaled.dir = PathBuf::from("results/td3-scaled-seed3");
         assert_eq!(scaled.settings_label(), "normalize_observations=true,reward_scale=100.0");
         assert_ne!(plain.group(), scaled.group());
-        let relaxed = run("minitaur", Algo::Sac, "", &[("fall_up_threshold", "0.7"), ("drift_weight", "0.5")]);
+        assert_eq!(scaled.group().label(), "td3-scaled");
+        assert!(scaled.group().description().contains("reward_scale=100.0"));
+        let mut relaxed = run("minitaur", Algo::Sac, "", &[("fall_up_threshold", "0.7"), ("drift_weight", "0.5")]);
+        relaxed.dir = PathBuf::from("sweep/runs/sac-drift0.5-seed10");
         assert_eq!(relaxed.settings_label(), "fall_up_threshold=0.7");
-        assert_eq!(relaxed.group().label(), "sac [fall_up_threshold=0.7] (drift=0.5)");
+        assert_eq!(relaxed.group().label(), "sac-drift0.5");
+        // The shipped settings group by algorithm and reward whatever the directory is called.
+        let mut shipped = run("minitaur", Algo::Sac, "", &[("drift_weight", "0.5")]);
+        shipped.dir = PathBuf::from("anything-seed2");
+        assert_eq!(shipped.group().label(), "sac (drift=0.5)");
+        assert_eq!(run("minitaur", Algo::Sac, "", &[]).variant_name(), "r");
     }
 }

@@ -37,7 +37,21 @@ use recording::TrainingRecorder;
 use seeds::{init_rng, train_episode_seed, training_rng, RngState};
 
 pub use run_config::{read_run_config, RunConfig};
-pub use run_dir::{export_policy, has_policy, load_policy, resolve_checkpoint, run_progress, RunProgress};
+pub use run_dir::{
+    budget_policy_steps, export_policy, has_policy, load_budget_policy, load_policy, resolve_checkpoint, run_progress,
+    RunProgress,
+};
+
+/// The step budgets results are reported at (Henderson et al. 2018 and the TD3/SAC papers report
+/// 100k-1M). A run writes its actor at each one it passes, and at its own last step, to
+/// `policies/step-<N>.safetensors`, so a report evaluates every run at the same budget even when
+/// some went further.
+pub const POLICY_BUDGETS: [u64; 3] = [100_000, 300_000, 1_000_000];
+pub const BUDGET_POLICY_DIR: &str = "policies";
+
+pub fn budget_policy_path(run_dir: &Path, step: u64) -> PathBuf {
+    run_dir.join(BUDGET_POLICY_DIR).join(format!("step-{step}.safetensors"))
+}
 
 /// How a call to `train`/`resume` ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -327,6 +341,11 @@ impl Trainer {
                 }
             }
 
+            // The actor at each reporting budget, for the report's per-budget rows.
+            if POLICY_BUDGETS.contains(&self.step) || self.step == cfg.total_steps {
+                self.save_budget_policy()?;
+            }
+
             // Evaluate.
             if self.step % cfg.eval_every == 0 || self.step == cfg.total_steps {
                 let e = evaluate(self.agent.as_ref(), self.eval_env.as_mut(), cfg.eval_episodes, self.seed)?;
@@ -371,6 +390,12 @@ impl Trainer {
             best_eval_mean: best_eval,
             checkpoint,
         })
+    }
+
+    fn save_budget_policy(&self) -> Result<()> {
+        let dir = self.run_dir.join(BUDGET_POLICY_DIR);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        checkpoint::save_actor(&budget_policy_path(&self.run_dir, self.step), self.agent.as_ref())
     }
 
     fn save(&mut self, at_episode_boundary: bool, wall_time: f64) -> Result<PathBuf> {

@@ -111,6 +111,32 @@ pub fn load_policy(checkpoint: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
     Ok((run, agent))
 }
 
+/// The actor a run wrote when it passed `step` (`train::POLICY_BUDGETS`, or its last step).
+pub fn load_budget_policy(run_dir: &Path, step: u64) -> Result<(RunConfig, Box<dyn Agent>)> {
+    let file = super::budget_policy_path(run_dir, step);
+    if !file.is_file() {
+        bail!("{} has no policy at step {step} (expected {})", run_dir.display(), file.display());
+    }
+    let (run, agent) = run_agent(run_dir)?;
+    checkpoint::load_actor(&file, agent.as_ref())?;
+    Ok((run, agent))
+}
+
+/// The steps at which a run directory holds a policy file (`policies/step-<N>.safetensors`).
+pub fn budget_policy_steps(run_dir: &Path) -> Vec<u64> {
+    let mut steps: Vec<u64> = std::fs::read_dir(run_dir.join(super::BUDGET_POLICY_DIR))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().into_string().ok()?;
+            name.strip_prefix("step-")?.strip_suffix(".safetensors")?.parse().ok()
+        })
+        .collect();
+    steps.sort_unstable();
+    steps
+}
+
 /// The config of the run in `dir` and a freshly initialised agent of its shape.
 fn run_agent(dir: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
     let run = read_run_config(dir)?;

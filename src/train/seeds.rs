@@ -34,6 +34,13 @@ pub fn eval_episode_seed(run_seed: u64, i: u64) -> u64 {
     mix(mix(run_seed ^ 0xE7A1_0000_0000_0000) ^ i)
 }
 
+/// Reset seed of held-out episode `i` of an evaluation protocol seeded `protocol_seed`: a third
+/// domain, apart from every run's training and evaluation episodes (`evaluation::protocol`
+/// checks that no run's seeds collide with them).
+pub fn held_out_episode_seed(protocol_seed: u64, i: u64) -> u64 {
+    mix(mix(protocol_seed ^ 0x4E1D_0000_0000_0000) ^ i)
+}
+
 /// A ChaCha8 stream's position, to save and restore it exactly.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RngState {

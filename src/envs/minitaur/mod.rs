@@ -378,6 +378,10 @@ impl Env for Minitaur {
         &self.core.sim.data
     }
 
+    fn data_mut(&mut self) -> &mut Data {
+        &mut self.core.sim.data
+    }
+
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
         Ok(self.core.sim.data.set_state(qpos, qvel)?)
     }

@@ -1,0 +1,215 @@
+//! The controller as a family: one controller per commanded speed, evaluated over a grid of
+//! speeds up to where it stops working, and evaluated again at any speed a learned policy runs
+//! at, so a learned policy is compared with the controller at its own speed.
+use std::collections::BTreeMap;
+
+use anyhow::Result;
+
+use super::protocol::Protocol;
+use super::push::Push;
+use crate::controller::baseline::{baseline_controller, baseline_env_like, RAMP_TIME};
+use crate::controller::command::SpeedProfile;
+use crate::controller::measure::GaitEpisode;
+use crate::envs::{make, EnvConfig};
+
+/// A speed works when no episode falls and the mean speed is within this share of the command.
+pub const TRACKING_TOLERANCE: f64 = 0.10;
+
+/// The controller commanded one speed, over the protocol's episodes.
+#[derive(Debug, Clone)]
+pub struct SpeedPoint {
+    pub commanded: f64,
+    pub episodes: Vec<GaitEpisode>,
+}
+
+impl SpeedPoint {
+    pub fn achieved(&self) -> f64 {
+        super::stats::mean(&self.episodes.iter().map(|e| e.mean_speed).collect::<Vec<_>>())
+    }
+    pub fn falls(&self) -> usize {
+        self.episodes.iter().filter(|e| e.fell).count()
+    }
+    pub fn tracking_error(&self) -> f64 {
+        (self.achieved() - self.commanded).abs() / self.commanded.abs().max(1e-9)
+    }
+    pub fn works(&self) -> bool {
+        self.falls() == 0 && self.tracking_error() <= TRACKING_TOLERANCE
+    }
+    pub fn returns(&self) -> Vec<f64> {
+        self.episodes.iter().map(|e| e.episode_return).collect()
+    }
+}
+
+/// Evaluates a controller of `env_config`'s env (Minitaur or Ant) under that config's reward and
+/// options, caching each commanded speed.
+pub struct ControllerFamily {
+    env_config: EnvConfig,
+    protocol: Protocol,
+    cache: BTreeMap<(i64, i64), SpeedPoint>,
+    /// Speeds evaluated at once.
+    pub threads: usize,
+}
+
+fn round_speed(speed: f64) -> f64 {
+    (speed * 1000.0).round() / 1000.0
+}
+
+fn key(speed: f64, push: Option<Push>) -> (i64, i64) {
+    ((round_speed(speed) * 1000.0).round() as i64, push.map_or(-1, |p| (p.delta_v * 1000.0).round() as i64))
+}
+
+impl ControllerFamily {
+    /// `env_config`: the environment the learned policies ran in; the controller runs in it with
+    /// its own action mode (`baseline_env_like`).
+    pub fn new(env_config: &EnvConfig, protocol: Protocol) -> Result<ControllerFamily> {
+        Ok(ControllerFamily {
+            env_config: baseline_env_like(env_config)?,
+            protocol,
+            cache: BTreeMap::new(),
+            threads: super::parallel::default_threads(),
+        })
+    }
+
+    pub fn env(&self) -> &str {
+        &self.env_config.name
+    }
+
+    /// The controller commanded `speed` (m/s, rounded to 1 mm/s), optionally under a push.
+    pub fn at(&mut self, speed: f64, push: Option<Push>) -> Result<&SpeedPoint> {
+        self.prefetch(&[(speed, push)])?;
+        Ok(&self.cache[&key(speed, push)])
+    }
+
+    /// Evaluates the (speed, push) pairs not yet evaluated, several at once.
+    pub fn prefetch(&mut self, jobs: &[(f64, Option<Push>)]) -> Result<()> {
+        let mut missing: Vec<(f64, Option<Push>)> = jobs
+            .iter()
+            .filter(|(s, p)| !self.cache.contains_key(&key(*s, *p)))
+            .map(|&(s, p)| (round_speed(s), p))
+            .collect();
+        missing.dedup_by_key(|(s, p)| key(*s, *p));
+        let (cfg, protocol) = (&self.env_config, &self.protocol);
+        let points = super::parallel::map_in_order(&missing, self.threads, |&(speed, push)| -> Result<SpeedPoint> {
+            let mut env = make(cfg)?;
+            let mut controller = baseline_controller(&cfg.name, speed, None)?;
+            let profile = SpeedProfile::ramp(speed, RAMP_TIME);
+            let episodes = protocol.run(env.as_mut(), controller.as_mut(), Some(&profile), push)?;
+            Ok(SpeedPoint { commanded: speed, episodes })
+        })?;
+        for ((speed, push), point) in missing.into_iter().zip(points) {
+            self.cache.insert(key(speed, push), point);
+        }
+        Ok(())
+    }
+
+    /// Commanded speeds `step, 2 step, ...` up to and including the first that does not work
+    /// (or `max`), then two bisections between the last that works and the first that does not,
+    /// so the top of the range is known to a quarter of a step. Sorted by command.
+    pub fn sweep(&mut self, step: f64, max: f64) -> Result<Vec<SpeedPoint>> {
+        let mut out = Vec::new();
+        let mut k = 1;
+        while step * k as f64 <= max + 1e-9 {
+            // The next few speeds at once (one per thread); those past a failure go unused.
+            let ahead: Vec<(f64, Option<Push>)> =
+                (k..k + self.threads).map(|j| (step * j as f64, None)).filter(|(s, _)| *s <= max + 1e-9).collect();
+            self.prefetch(&ahead)?;
+            let point = self.at(step * k as f64, None)?.clone();
+            let works = point.works();
+            out.push(point);
+            if !works {
+                break;
+            }
+            k += 1;
+        }
+        if out.len() >= 2 && !out[out.len() - 1].works() && out[out.len() - 2].works() {
+            let (mut good, mut bad) = (out[out.len() - 2].commanded, out[out.len() - 1].commanded);
+            for _ in 0..2 {
+                let mid = 0.5 * (good + bad);
+                let point = self.at(mid, None)?.clone();
+                if point.works() {
+                    good = mid;
+                } else {
+                    bad = mid;
+                }
+                out.push(point);
+            }
+            out.sort_by(|a, b| a.commanded.total_cmp(&b.commanded));
+        }
+        Ok(out)
+    }
+
+    /// The controller at the speed a learned policy ran at: the command whose achieved speed on
+    /// the grid interpolates to `speed` (over the working points below the first failing one),
+    /// evaluated. None, with the reason, when the grid shows
+    /// the controller cannot walk that fast, or the policy did not move forward.
+    pub fn matched(&mut self, grid: &[SpeedPoint], speed: f64) -> Result<Result<SpeedPoint, String>> {
+        match command_for(grid, speed) {
+            Ok(c) => Ok(Ok(self.at(c, None)?.clone())),
+            Err(why) => Ok(Err(why)),
+        }
+    }
+}
+
+/// The command that achieves `speed`, by linear interpolation of (achieved, commanded) over the
+/// grid's working points (the ramp from standing makes the achieved speed trail the command).
+pub fn command_for(grid: &[SpeedPoint], speed: f64) -> Result<f64, String> {
+    let working: Vec<(f64, f64)> = grid.iter().take_while(|p| p.works()).map(|p| (p.achieved(), p.commanded)).collect();
+    let Some(&(top, top_cmd)) = working.last() else {
+        return Err("the controller works at no speed of the grid".into());
+    };
+    if !(speed > 0.0) {
+        return Err(format!("the policy does not move forward ({speed:.3} m/s)"));
+    }
+    if speed > top * (1.0 + 1e-9) {
+        return Err(format!("beyond the controller's range ({top:.2} m/s achieved at {top_cmd:.2} commanded)"));
+    }
+    let (a0, c0) = working[0];
+    if speed <= a0 {
+        return Ok(speed * c0 / a0);
+    }
+    for w in working.windows(2) {
+        let ((a0, c0), (a1, c1)) = (w[0], w[1]);
+        if speed <= a1 {
+            return Ok(c0 + (speed - a0) * (c1 - c0) / (a1 - a0).max(1e-12));
+        }
+    }
+    Ok(top_cmd)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(commanded: f64, achieved: f64, fell: bool) -> SpeedPoint {
+        SpeedPoint { commanded, episodes: vec![GaitEpisode { mean_speed: achieved, fell, ..Default::default() }] }
+    }
+
+    #[test]
+    fn a_speed_works_without_falls_and_within_tolerance() {
+        assert!(point(1.0, 0.93, false).works());
+        assert!(!point(1.0, 0.85, false).works());
+        assert!(!point(1.0, 1.0, true).works());
+    }
+
+    #[test]
+    fn commands_interpolate_over_working_points_only() {
+        let grid = vec![point(0.5, 0.45, false), point(1.0, 0.95, false), point(1.5, 1.0, true)];
+        assert!((command_for(&grid, 0.7).unwrap() - 0.75).abs() < 1e-12);
+        assert!((command_for(&grid, 0.225).unwrap() - 0.25).abs() < 1e-12);
+        assert!(command_for(&grid, 0.98).unwrap_err().contains("beyond"));
+        assert!(command_for(&grid, -0.1).unwrap_err().contains("forward"));
+        assert!(command_for(&[point(0.5, 0.1, false)], 0.1).unwrap_err().contains("no speed"));
+    }
+
+    #[test]
+    fn minitaur_sweep_stops_at_the_first_speed_that_fails() {
+        let mut family = ControllerFamily::new(&EnvConfig::new("minitaur"), Protocol { episodes: 2, seed: 0 }).unwrap();
+        let grid = family.sweep(1.0, 3.0).unwrap();
+        assert!(grid[0].works(), "1 m/s works");
+        assert!(grid.windows(2).all(|w| w[0].commanded < w[1].commanded), "sorted by command");
+        // 1 and 2 m/s, then two bisections when 2 fails (1.5, then 1.75 or 1.25); or 1, 2, 3.
+        assert!(grid.len() == 4 || (grid.len() == 3 && grid.iter().all(|p| p.works())), "{}", grid.len());
+        // Cached: asking again gives the same episodes.
+        assert_eq!(family.at(1.0, None).unwrap().episodes, grid[0].episodes);
+    }
+}

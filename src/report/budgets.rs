@@ -1,0 +1,92 @@
+//! Which policy of which run answers a row at a given step budget. A run contributes the actor
+//! it wrote when it passed the budget (`train::POLICY_BUDGETS`), never a later one; a shipped
+//! policy (`models/policies/*`) counts at the step its `source.toml` names. A run that reached
+//! the budget without a policy there is listed, never dropped.
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+
+use super::runs::Run;
+use crate::agents::Agent;
+use crate::train::{budget_policy_path, load_budget_policy, load_policy, RunConfig, POLICY_BUDGETS};
+
+/// Where a run's policy at a budget comes from.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PolicySource {
+    /// `policies/step-<budget>.safetensors`, written by training.
+    BudgetFile(PathBuf),
+    /// An exported `policy.safetensors` whose `source.toml` says it is the actor at this step.
+    Shipped(PathBuf),
+}
+
+impl PolicySource {
+    pub fn load(&self, run_dir: &Path, budget: u64) -> Result<(RunConfig, Box<dyn Agent>)> {
+        match self {
+            PolicySource::BudgetFile(_) => load_budget_policy(run_dir, budget),
+            PolicySource::Shipped(_) => load_policy(run_dir),
+        }
+    }
+}
+
+/// The step of an exported policy, from the `step = N` line of its `source.toml`.
+pub fn shipped_step(run_dir: &Path) -> Option<u64> {
+    if !run_dir.join(crate::train::checkpoint::POLICY_FILE).is_file() {
+        return None;
+    }
+    let text = std::fs::read_to_string(run_dir.join("source.toml")).ok()?;
+    text.parse::<toml::Table>().ok()?.get("step")?.as_integer().map(|s| s as u64)
+}
+
+/// The furthest step a run reached (its metrics, or its exported policy's step).
+pub fn reached(run: &Run) -> u64 {
+    run.steps().max(shipped_step(&run.dir).unwrap_or(0))
+}
+
+/// The run's policy at `budget`, or why there is none (the run must have reached the budget).
+pub fn policy_at(run: &Run, budget: u64) -> Result<PolicySource, String> {
+    let file = budget_policy_path(&run.dir, budget);
+    if file.is_file() {
+        return Ok(PolicySource::BudgetFile(file));
+    }
+    if shipped_step(&run.dir) == Some(budget) {
+        return Ok(PolicySource::Shipped(run.dir.join(crate::train::checkpoint::POLICY_FILE)));
+    }
+    let held = crate::train::budget_policy_steps(&run.dir);
+    Err(if held.is_empty() && shipped_step(&run.dir).is_none() {
+        "no policy kept (config and metrics only)".to_string()
+    } else {
+        let mut steps: Vec<u64> = held;
+        steps.extend(shipped_step(&run.dir));
+        steps.sort_unstable();
+        let list: Vec<String> = steps.iter().map(|s| super::plots::step_label(*s as f64)).collect();
+        format!("no policy at this budget (policies at {})", list.join(", "))
+    })
+}
+
+/// The budgets a set of runs is reported at: each standard budget some run reached, and each
+/// run's own last step when it holds a policy there and it is not a standard budget (short runs).
+pub fn budgets(runs: &[&Run]) -> Vec<u64> {
+    let mut out: Vec<u64> = POLICY_BUDGETS.iter().copied().filter(|&b| runs.iter().any(|r| reached(r) >= b)).collect();
+    for r in runs {
+        let last = reached(r);
+        if !POLICY_BUDGETS.contains(&last) && policy_at(r, last).is_ok() {
+            out.push(last);
+        }
+    }
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shipped_policies_name_their_step() {
+        let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/policies");
+        assert_eq!(shipped_step(&root.join("minitaur-td3")), Some(1_000_000));
+        assert_eq!(shipped_step(&root.join("minitaur-sac")), Some(300_000));
+        assert_eq!(shipped_step(&root), None);
+    }
+}

@@ -1,0 +1,111 @@
+//! The controller beside the learned policies on an env that has one (Minitaur, Ant): its grid
+//! of commanded speeds, the controller at each learned row's own speed, the probability that the
+//! learned policy beats it on the same episodes, and survival under pushes.
+use anyhow::Result;
+
+use super::heldout::{estimate, BudgetRow, Estimate};
+use crate::envs::EnvConfig;
+use crate::evaluation::stats;
+use crate::evaluation::{ControllerFamily, Protocol, Push, SpeedPoint};
+
+/// Grid of commanded speeds: multiples of `GRID_STEP` up to the first that fails, or `GRID_MAX`.
+pub const GRID_STEP: f64 = 0.25;
+pub const GRID_MAX: f64 = 4.0;
+
+/// Pushes of the robustness table (velocity change, m/s).
+pub const PUSH_LEVELS: [f64; 4] = [0.25, 0.5, 1.0, 1.5];
+
+#[derive(Debug, Clone)]
+pub struct MatchedRow {
+    /// Index into the env's budget rows.
+    pub row: usize,
+    pub rl_speed: f64,
+    /// The controller at the RL row's speed, or why there is none.
+    pub controller: Result<SpeedPoint, String>,
+    /// P(RL return > controller return) on the same episodes: at the matched speed, and against
+    /// the controller's best speed.
+    pub beats_matched: Option<Estimate>,
+    pub beats_best: Option<Estimate>,
+}
+
+/// Survival (episodes without a fall) of one policy under each push level.
+#[derive(Debug, Clone)]
+pub struct PushRow {
+    pub policy: String,
+    pub speed: f64,
+    pub survived: Vec<(usize, usize)>,
+}
+
+#[derive(Debug, Clone)]
+pub struct ControllerSection {
+    pub grid: Vec<SpeedPoint>,
+    pub best: Option<SpeedPoint>,
+    pub matched: Vec<MatchedRow>,
+    pub pushes: Vec<PushRow>,
+}
+
+/// P(x > y) per seed, as per-seed vectors of 1 / 0.5 / 0 over the paired episodes.
+fn improvement(row: &BudgetRow, controller: &SpeedPoint, seed: u64) -> Estimate {
+    let per_seed: Vec<Vec<f64>> = row
+        .evaluated
+        .iter()
+        .map(|s| {
+            s.episodes
+                .iter()
+                .zip(&controller.episodes)
+                .map(|(a, b)| stats::probability_of_improvement(&[(a.episode_return, b.episode_return)]))
+                .collect()
+        })
+        .collect();
+    estimate(&per_seed, stats::mean, seed)
+}
+
+/// The best working grid point by mean return.
+pub fn best_point(grid: &[SpeedPoint]) -> Option<SpeedPoint> {
+    grid.iter()
+        .filter(|p| p.works())
+        .max_by(|a, b| stats::mean(&a.returns()).total_cmp(&stats::mean(&b.returns())))
+        .cloned()
+}
+
+/// Everything about the controller on one env. `rows`: the env's held-out rows (all under one
+/// env config, `env_config`); `push_rows`: for each RL row to push, its index and its episodes
+/// under each push level (computed by the caller, which holds the policies).
+pub fn controller_section(
+    env_config: &EnvConfig,
+    rows: &[BudgetRow],
+    protocol: &Protocol,
+    seed: u64,
+    threads: usize,
+) -> Result<(ControllerSection, ControllerFamily)> {
+    let mut family = ControllerFamily::new(env_config, *protocol)?;
+    family.threads = threads;
+    let grid = family.sweep(GRID_STEP, GRID_MAX)?;
+    let best = best_point(&grid);
+    let commands: Vec<(f64, Option<Push>)> = rows
+        .iter()
+        .filter(|r| r.seeds() > 0)
+        .filter_map(|r| crate::evaluation::speed_grid::command_for(&grid, r.speed()).ok())
+        .map(|c| (c, None))
+        .collect();
+    family.prefetch(&commands)?;
+    let mut matched = Vec::new();
+    for (i, row) in rows.iter().enumerate().filter(|(_, r)| r.seeds() > 0) {
+        let rl_speed = row.speed();
+        let controller = family.matched(&grid, rl_speed)?;
+        let beats_matched = controller.as_ref().ok().map(|c| improvement(row, c, seed ^ i as u64));
+        let beats_best = best.as_ref().map(|b| improvement(row, b, seed ^ 0x100 ^ i as u64));
+        matched.push(MatchedRow { row: i, rl_speed, controller, beats_matched, beats_best });
+    }
+    Ok((ControllerSection { grid, best, matched, pushes: Vec::new() }, family))
+}
+
+/// Survival of the controller commanded `speed` under each push level.
+pub fn controller_pushes(family: &mut ControllerFamily, speed: f64, label: String) -> Result<PushRow> {
+    let mut survived = Vec::new();
+    for &dv in &PUSH_LEVELS {
+        let p = family.at(speed, Some(Push { delta_v: dv }))?;
+        survived.push((p.episodes.len() - p.falls(), p.episodes.len()));
+    }
+    Ok(PushRow { policy: label, speed, survived })
+}

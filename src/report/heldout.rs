@@ -1,0 +1,186 @@
+//! Rows of the held-out evaluation: one per group of runs (the same env, algorithm, reward and
+//! settings) and step budget, every run that reached the budget evaluated from its policy at that
+//! budget under the evaluation protocol, and listed when it has none.
+use std::collections::BTreeSet;
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+
+use super::budgets::{policy_at, reached};
+use super::runs::{Group, Run};
+use crate::controller::measure::{mean_cost_of_transport, GaitEpisode};
+use crate::envs::{make, EnvConfig};
+use crate::evaluation::stats::{self, Interval};
+use crate::evaluation::{Protocol, Push};
+use crate::policy::AgentPolicy;
+use crate::train::provenance;
+
+/// Rows with fewer seeds than this say so: intervals over so few seeds are rough.
+pub const FEW_SEEDS: usize = 3;
+
+/// One run's episodes at a budget.
+#[derive(Debug, Clone)]
+pub struct SeedResult {
+    pub run_dir: PathBuf,
+    pub seed: u64,
+    pub episodes: Vec<GaitEpisode>,
+}
+
+#[derive(Debug, Clone)]
+pub struct BudgetRow {
+    pub group: Group,
+    pub budget: u64,
+    pub evaluated: Vec<SeedResult>,
+    /// Runs that reached the budget without a policy there, with the reason.
+    pub missing: Vec<(PathBuf, String)>,
+    /// The env the policies ran in (the first run's).
+    pub env_config: Option<EnvConfig>,
+    /// What computed the runs up to the budget, and whether they differ.
+    pub provenance: String,
+    pub mixed_provenance: bool,
+    /// Mean over seeds of the wall time to reach the budget (s), where recorded.
+    pub wall_time: Option<f64>,
+}
+
+/// An interval and what it was resampled over.
+#[derive(Debug, Clone, Copy)]
+pub struct Estimate {
+    pub interval: Interval,
+    /// "seeds", or "episodes" for a single seed.
+    pub over: &'static str,
+}
+
+/// `statistic` of per-seed values with its 95% bootstrap interval: resampling seeds (each seed
+/// summarised by the mean of its values) when there are two or more, else the one seed's values.
+pub fn estimate(per_seed: &[Vec<f64>], statistic: fn(&[f64]) -> f64, seed: u64) -> Estimate {
+    if per_seed.len() >= 2 {
+        let scores: Vec<f64> = per_seed.iter().map(|v| stats::mean(v)).collect();
+        let i = stats::stratified_bootstrap(&[scores], |s| statistic(&s[0]), stats::BOOTSTRAP_REPS, seed);
+        Estimate { interval: i, over: "seeds" }
+    } else {
+        let values = per_seed.first().cloned().unwrap_or_default();
+        let i = stats::stratified_bootstrap(&[values], |s| statistic(&s[0]), stats::BOOTSTRAP_REPS, seed);
+        Estimate { interval: i, over: "episodes" }
+    }
+}
+
+impl BudgetRow {
+    pub fn seeds(&self) -> usize {
+        self.evaluated.len()
+    }
+    pub fn episodes_per_seed(&self) -> usize {
+        self.evaluated.first().map_or(0, |s| s.episodes.len())
+    }
+    pub fn all_episodes(&self) -> impl Iterator<Item = &GaitEpisode> {
+        self.evaluated.iter().flat_map(|s| s.episodes.iter())
+    }
+    pub fn returns_per_seed(&self) -> Vec<Vec<f64>> {
+        self.evaluated.iter().map(|s| s.episodes.iter().map(|e| e.episode_return).collect()).collect()
+    }
+    pub fn mean_return(&self, seed: u64) -> Estimate {
+        estimate(&self.returns_per_seed(), stats::mean, seed)
+    }
+    pub fn iqm_return(&self, seed: u64) -> Estimate {
+        estimate(&self.returns_per_seed(), stats::iqm, seed ^ 0x1)
+    }
+    pub fn falls(&self) -> (usize, usize) {
+        (self.all_episodes().filter(|e| e.fell).count(), self.all_episodes().count())
+    }
+    pub fn speed(&self) -> f64 {
+        stats::mean(&self.all_episodes().map(|e| e.mean_speed).collect::<Vec<_>>())
+    }
+    pub fn cost_of_transport(&self) -> f64 {
+        mean_cost_of_transport(&self.all_episodes().cloned().collect::<Vec<_>>())
+    }
+}
+
+/// Evaluates `runs` (one group) at `budget`.
+/// Evaluates `runs` (one group) at `budget`, optionally under a push.
+pub fn evaluate_row(
+    group: &Group,
+    runs: &[&Run],
+    budget: u64,
+    protocol: &Protocol,
+    push: Option<Push>,
+) -> Result<BudgetRow> {
+    let mut row = BudgetRow {
+        group: group.clone(),
+        budget,
+        evaluated: Vec::new(),
+        missing: Vec::new(),
+        env_config: None,
+        provenance: String::new(),
+        mixed_provenance: false,
+        wall_time: None,
+    };
+    let mut machines = BTreeSet::new();
+    let mut walls = Vec::new();
+    for run in runs.iter().filter(|r| reached(r) >= budget) {
+        let source = match policy_at(run, budget) {
+            Ok(s) => s,
+            Err(why) => {
+                row.missing.push((run.dir.clone(), why));
+                continue;
+            }
+        };
+        let (cfg, agent) = match source.load(&run.dir, budget) {
+            Ok(x) => x,
+            Err(e) => {
+                row.missing.push((run.dir.clone(), format!("policy unreadable: {e:#}")));
+                continue;
+            }
+        };
+        protocol.check_disjoint(cfg.seed, cfg.train.total_steps, cfg.train.eval_episodes)?;
+        let mut env = make(&cfg.env).with_context(|| format!("making the env of {}", run.dir.display()))?;
+        let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.algo().to_string() };
+        let episodes = protocol.run(env.as_mut(), &mut policy, None, push)?;
+        row.env_config.get_or_insert(cfg.env.clone());
+        row.evaluated.push(SeedResult { run_dir: run.dir.clone(), seed: cfg.seed, episodes });
+        machines.insert(machine_of(run, budget));
+        if let Some(w) = run.metrics.iter().filter(|m| m.step <= budget).last().map(|m| m.wall_time) {
+            walls.push(w);
+        }
+    }
+    row.mixed_provenance = machines.len() > 1;
+    row.provenance = machines.into_iter().collect::<Vec<_>>().join("; ");
+    if !walls.is_empty() && walls.len() == row.evaluated.len() {
+        row.wall_time = Some(stats::mean(&walls));
+    }
+    Ok(row)
+}
+
+/// What computed `run` up to `budget`: CPU, SIMD level, kernels and commit of each stretch.
+pub fn machine_of(run: &Run, budget: u64) -> String {
+    match provenance::read(&run.dir) {
+        Ok(stretches) if !stretches.is_empty() => {
+            let mut parts: Vec<String> = stretches
+                .iter()
+                .filter(|s| s.from_step < budget.max(1))
+                .map(|s| {
+                    let commit: String = s.git_commit.chars().take(8).collect();
+                    format!("{} ({}, {} kernels) @ {commit}", s.cpu_model, s.simd, s.kernel_path)
+                })
+                .collect();
+            parts.dedup();
+            parts.join(" then ")
+        }
+        _ => "not recorded".to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn estimates_resample_seeds_or_the_single_seeds_episodes() {
+        let two = estimate(&[vec![1.0, 3.0], vec![5.0, 7.0]], stats::mean, 1);
+        assert_eq!(two.over, "seeds");
+        assert_eq!(two.interval.estimate, 4.0);
+        // Two seed means, 2 and 6: every resample's mean is 2, 4 or 6.
+        assert!(two.interval.low >= 2.0 && two.interval.high <= 6.0);
+        let one = estimate(&[vec![1.0, 2.0, 3.0, 10.0]], stats::iqm, 1);
+        assert_eq!(one.over, "episodes");
+        assert_eq!(one.interval.estimate, 2.5);
+    }
+}

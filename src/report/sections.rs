@@ -1,0 +1,634 @@
+//! The report's sections, each written into the document in the order a reader needs them.
+use std::path::Path;
+
+use anyhow::Result;
+
+use super::anchors::{bundled_anchors, published_curve};
+use super::controller::{controller_pushes, controller_section, ControllerSection, PushRow, GRID_STEP, PUSH_LEVELS};
+use super::curves::{eval_curve, rolling};
+use super::document::Document;
+use super::format::{budget, fixed, fmt_return, interval, rate};
+use super::heldout::{evaluate_row, BudgetRow, FEW_SEEDS};
+use super::plots::{bands_svg, Band, Marker};
+use super::runs::{Group, Run};
+use super::{summarise, GroupSummary, ReportOptions, BOOTSTRAP_SEED, ROLLING_WINDOW};
+use crate::envs::{make, EnvConfig};
+use crate::evaluation::parallel::map_in_order;
+use crate::evaluation::stats::{self, Interval, Verdict};
+use crate::evaluation::{Protocol, Push, SpeedPoint};
+use crate::io::write_bytes_atomic;
+use crate::policy::RandomPolicy;
+
+/// Points per curve in the charts.
+const CURVE_POINTS: usize = 120;
+
+pub fn protocol(doc: &mut Document, opts: &ReportOptions) {
+    let p = &opts.protocol;
+    doc.heading(1, "Protocol");
+    doc.lines(vec![
+        format!(
+            "Every policy (trained agent or controller) plays the same {} held-out episodes per seed: reset seeds from \
+             their own stream (protocol seed {}), checked disjoint from every run's training and in-training \
+             evaluation seeds; the run's own env options and reward; deterministic actions.",
+            p.episodes, p.seed
+        ),
+        "A row is one step budget: each run contributes the actor it saved when it passed that budget, never a \
+         later one. Runs that reached the budget without a saved actor are listed under the table."
+            .into(),
+        "Return: mean and interquartile mean (IQM, Agarwal et al. 2021) of the per-seed mean returns, each with a 95% \
+         percentile bootstrap interval over seeds (20,000 resamples, seeded). A row with one seed resamples its \
+         episodes instead and says so (\"over: episodes\"). Spread, where shown, is the sample standard deviation."
+            .into(),
+        "Falls: episodes ended by a fall or a physics blow-up, with the 95% Wilson interval of the rate.".into(),
+        format!(
+            "Controller (Minitaur, Ant): commanded {GRID_STEP} m/s, {} m/s, ... up to the first speed with a fall or a \
+             mean speed more than 10% off the command. Each learned row meets the controller commanded to reach the \
+             row's own mean speed, on the same episodes; P(RL > controller) is the share of paired episodes the \
+             learned policy scores higher on (ties count half), with the same kind of interval.",
+            2.0 * GRID_STEP
+        ),
+        format!(
+            "Pushes: once per episode, 2-6 s in, a sideways impulse that would change the whole robot's velocity by \
+             Δv (spread over 0.1 s); {} episodes per level; survival = episodes without a fall.",
+            opts.push_episodes
+        ),
+    ]);
+}
+
+/// Evaluation curves during training and their summary table.
+pub fn learning_curves(
+    doc: &mut Document,
+    out: &Path,
+    env: &str,
+    groups: &[(&Group, &Vec<&Run>)],
+) -> Result<Vec<GroupSummary>> {
+    doc.heading(2, "Groups");
+    doc.table(
+        &["name", "runs", "algorithm, reward, settings (what differs from `locobench train --env E --algo A`)"],
+        groups.iter().map(|(g, rs)| vec![g.label(), rs.len().to_string(), g.description()]).collect(),
+    );
+    doc.heading(2, "Learning curves (evaluation during training)");
+    let summaries: Vec<GroupSummary> = groups.iter().map(|(g, rs)| summarise(g, rs)).collect();
+    let mut bands = Vec::new();
+    let mut markers = Vec::new();
+    for (i, ((g, rs), s)) in groups.iter().zip(&summaries).enumerate() {
+        let per_seed: Vec<Vec<(u64, f64)>> = rs.iter().map(|r| r.evals().collect()).collect();
+        let curve = eval_curve(&per_seed);
+        let (mut low, mut high) = (Vec::new(), Vec::new());
+        for &step in &curve.steps {
+            let values: Vec<f64> =
+                per_seed.iter().filter_map(|p| p.iter().find(|(t, _)| *t == step).map(|(_, v)| *v)).collect();
+            let ci = stats::stratified_bootstrap(&[values], |v| stats::mean(&v[0]), 2000, BOOTSTRAP_SEED ^ step);
+            low.push(ci.low);
+            high.push(ci.high);
+        }
+        let x = curve.steps.iter().map(|&x| x as f64).collect();
+        bands.push(
+            Band { label: format!("{} ({} seeds)", g.label(), s.seeds), x, mean: curve.mean.clone(), low, high }
+                .thinned(CURVE_POINTS),
+        );
+        if let Some(c) = published_curve(env, &g.algo) {
+            let reach = s.curve.steps.last().copied().unwrap_or(0);
+            for (j, &step) in c.steps.iter().enumerate().filter(|(_, &st)| st <= reach.max(1)) {
+                markers.push(Marker {
+                    label: format!("{} published, mean ± std over {} seeds", g.algo, c.seeds),
+                    x: step as f64,
+                    y: c.mean[j],
+                    low: c.mean[j] - c.std[j],
+                    high: c.mean[j] + c.std[j],
+                    color_of: i,
+                });
+            }
+        }
+    }
+    let file = format!("{env}_evaluation.svg");
+    let svg = bands_svg(
+        &format!("{env}: evaluation return during training, mean and 95% interval over seeds"),
+        "environment steps",
+        "return",
+        &bands,
+        &markers,
+    )?;
+    write_bytes_atomic(&out.join(&file), svg.as_bytes())?;
+    doc.figure(file, svg, "evaluation during training (the run's own evaluation seeds)");
+    doc.table(
+        &[
+            "policy",
+            "seeds",
+            "last common step",
+            "evaluation there (mean ± sample std over seeds)",
+            "normalised AUC",
+            "wall time (min)",
+        ],
+        summaries
+            .iter()
+            .zip(groups)
+            .map(|(s, (_, rs))| {
+                let finals: Vec<f64> = rs
+                    .iter()
+                    .filter_map(|r| {
+                        s.curve.last().and_then(|(t, _, _)| r.evals().find(|(u, _)| *u == t).map(|(_, v)| v))
+                    })
+                    .collect();
+                vec![
+                    s.group.label(),
+                    s.seeds.to_string(),
+                    s.curve.last().map_or("–".into(), |(t, _, _)| budget(t)),
+                    format!("{} ± {}", fmt_return(stats::mean(&finals)), fmt_return(stats::sample_std(&finals))),
+                    fmt_return(s.auc),
+                    fixed(s.wall_time / 60.0, 1),
+                ]
+            })
+            .collect(),
+    );
+    Ok(summaries)
+}
+
+/// The held-out rows of every group at every budget its runs reached.
+pub fn held_out(doc: &mut Document, groups: &[(&Group, &Vec<&Run>)], opts: &ReportOptions) -> Result<Vec<BudgetRow>> {
+    doc.heading(2, "Held-out evaluation at fixed budgets");
+    let jobs: Vec<(&Group, &Vec<&Run>, u64)> =
+        groups.iter().flat_map(|(g, rs)| super::budgets::budgets(rs).into_iter().map(move |b| (*g, *rs, b))).collect();
+    let rows = map_in_order(&jobs, opts.threads, |(g, rs, b)| evaluate_row(g, rs, *b, &opts.protocol, None))?;
+    let mut notes = Vec::new();
+    let table = rows
+        .iter()
+        .map(|r| {
+            let (falls, n) = r.falls();
+            let (m, q) = (r.mean_return(BOOTSTRAP_SEED), r.iqm_return(BOOTSTRAP_SEED));
+            if r.seeds() > 0 && r.seeds() < FEW_SEEDS {
+                notes.push(format!(
+                    "{} at {}: {} seed(s) with a policy, fewer than {FEW_SEEDS}; the interval is rough.",
+                    r.group.label(),
+                    budget(r.budget),
+                    r.seeds()
+                ));
+            }
+            if r.mixed_provenance {
+                notes.push(format!(
+                    "{} at {}: pools runs computed on different machines or commits ({}).",
+                    r.group.label(),
+                    budget(r.budget),
+                    r.provenance
+                ));
+            }
+            for (dir, why) in &r.missing {
+                notes.push(format!("{} at {}: `{}`: {why}.", r.group.label(), budget(r.budget), dir.display()));
+            }
+            if r.seeds() == 0 {
+                return vec![
+                    r.group.label(),
+                    budget(r.budget),
+                    "0".into(),
+                    "–".into(),
+                    "no policy at this budget (see below)".into(),
+                    "–".into(),
+                    "–".into(),
+                    "–".into(),
+                    "–".into(),
+                    "–".into(),
+                    "–".into(),
+                    "–".into(),
+                ];
+            }
+            vec![
+                r.group.label(),
+                budget(r.budget),
+                format!("{} of {}", r.seeds(), r.seeds() + r.missing.len()),
+                r.episodes_per_seed().to_string(),
+                interval(m.interval, fmt_return),
+                interval(q.interval, fmt_return),
+                m.over.to_string(),
+                rate(falls, n),
+                fixed(r.speed(), 3),
+                fixed(r.cost_of_transport(), 2),
+                r.wall_time.map_or("–".into(), |w| fixed(w / 60.0, 0)),
+                r.provenance.clone(),
+            ]
+        })
+        .collect();
+    doc.table(
+        &[
+            "policy",
+            "budget",
+            "seeds",
+            "episodes per seed",
+            "return: mean [95% CI]",
+            "IQM [95% CI]",
+            "over",
+            "falls (95% CI)",
+            "speed m/s",
+            "CoT",
+            "minutes to budget",
+            "machine",
+        ],
+        table,
+    );
+    if !notes.is_empty() {
+        doc.lines(notes);
+    }
+    // What no learning scores under the same protocol.
+    let env_config = rows.iter().find_map(|r| r.env_config.clone()).unwrap_or_else(|| EnvConfig::new(&groups[0].0.env));
+    let mut env = make(&env_config)?;
+    let random = opts.protocol.run(env.as_mut(), &mut RandomPolicy::new(0), None, None)?;
+    let returns: Vec<f64> = random.iter().map(|e| e.episode_return).collect();
+    let ci = stats::stratified_bootstrap(&[returns], |v| stats::mean(&v[0]), stats::BOOTSTRAP_REPS, BOOTSTRAP_SEED);
+    doc.paragraph(format!(
+        "Uniform random actions on the same episodes: return {} (95% CI over {} episodes), falls {}.",
+        interval(ci, fmt_return),
+        random.len(),
+        rate(random.iter().filter(|e| e.fell).count(), random.len())
+    ));
+    Ok(rows)
+}
+
+/// Published results at our budgets, with a verdict from the two intervals.
+pub fn published(doc: &mut Document, env: &str, rows: &[BudgetRow]) {
+    let mut table = Vec::new();
+    for r in rows.iter().filter(|r| r.seeds() > 0 && r.group.settings.is_empty()) {
+        let Some(c) = published_curve(env, &r.group.algo) else { continue };
+        let Some((mean, std)) = c.at(r.budget) else { continue };
+        let ours = r.mean_return(BOOTSTRAP_SEED);
+        // Their mean's 95% interval from mean ± std over n seeds (normal approximation).
+        let half = 1.96 * std / (c.seeds as f64).sqrt();
+        let verdict = Verdict::of(ours.interval, mean - half, mean + half);
+        table.push(vec![
+            r.group.label(),
+            budget(r.budget),
+            format!("{} ({} seeds, over {})", interval(ours.interval, fmt_return), r.seeds(), ours.over),
+            format!("{} ± {}", fmt_return(mean), fmt_return(std)),
+            c.seeds.to_string(),
+            format!("[{}, {}]", fmt_return(mean - half), fmt_return(mean + half)),
+            verdict.word().to_string(),
+            c.source.clone(),
+        ]);
+    }
+    let anchors: Vec<_> = bundled_anchors().into_iter().filter(|a| a.env == env).collect();
+    if table.is_empty() && anchors.is_empty() {
+        return;
+    }
+    doc.heading(2, "Published results");
+    if !table.is_empty() {
+        doc.paragraph(
+            "At the same budget. Verdict: below or above when our 95% interval and the published mean's (mean ± 1.96 \
+             std / sqrt(seeds)) do not overlap, else inside. Published runs use older Gym/Gymnasium versions of the \
+             models (named in the source); compare magnitudes, not decimals.",
+        );
+        doc.table(
+            &[
+                "policy",
+                "budget",
+                "ours: mean [95% CI]",
+                "published mean ± std",
+                "seeds",
+                "published 95% CI",
+                "verdict",
+                "source",
+            ],
+            table,
+        );
+    }
+    if !anchors.is_empty() {
+        if env == "minitaur" {
+            doc.paragraph(
+                "Minitaur anchors come from PyBullet's MinitaurBulletEnv-v0, whose reward this env reproduces on MuJoCo \
+                 physics (contacts, motors and friction differ): they place our numbers, they do not grade them. \
+                 PyBullet registers a reward threshold of 15 for the env (about 1.5 m/s held for 10 s).",
+            );
+        }
+        doc.table(
+            &["algorithm", "steps", "return", "spread", "seeds", "source"],
+            anchors
+                .iter()
+                .map(|a| {
+                    vec![
+                        a.algo.clone(),
+                        budget(a.steps),
+                        fmt_return(a.value),
+                        a.std.map_or("–".into(), fmt_return),
+                        a.seeds.map_or("not stated".into(), |s| s.to_string()),
+                        format!("{}{}", a.source, a.spread.as_ref().map_or(String::new(), |s| format!("; ± over {s}"))),
+                    ]
+                })
+                .collect(),
+        );
+    }
+}
+
+fn returns_interval(point: &SpeedPoint) -> Interval {
+    stats::stratified_bootstrap(&[point.returns()], |v| stats::mean(&v[0]), stats::BOOTSTRAP_REPS, BOOTSTRAP_SEED)
+}
+
+/// The controller's grid, the learned rows against it, and pushes.
+pub fn controller(
+    doc: &mut Document,
+    out: &Path,
+    env: &str,
+    groups: &[(&Group, &Vec<&Run>)],
+    rows: &[BudgetRow],
+    opts: &ReportOptions,
+) -> Result<Option<ControllerSection>> {
+    // The controller runs under the learned policies' env options and reward; rows trained under
+    // other options than the first are compared with a controller under theirs only if they are the same.
+    let env_config = rows.iter().find_map(|r| r.env_config.clone()).unwrap_or_else(|| crate::envs::EnvConfig::new(env));
+    let env_config = crate::envs::EnvConfig { options: env_config.resolved_options()?, ..env_config };
+    let same_env = |r: &BudgetRow| {
+        r.env_config.as_ref().is_none_or(|c| c.resolved_options().ok().as_ref() == Some(&env_config.options))
+    };
+    let comparable: Vec<BudgetRow> = rows.iter().filter(|r| same_env(r)).cloned().collect();
+    let (mut section, _) = controller_section(&env_config, &comparable, &opts.protocol, BOOTSTRAP_SEED, opts.threads)?;
+
+    doc.heading(2, "Controller across commanded speeds");
+    doc.table(
+        &["commanded m/s", "achieved m/s", "return: mean [95% CI over episodes]", "falls (95% CI)", "CoT", "works"],
+        section
+            .grid
+            .iter()
+            .map(|p| {
+                vec![
+                    fixed(p.commanded, 2),
+                    fixed(p.achieved(), 3),
+                    interval(returns_interval(p), fmt_return),
+                    rate(p.falls(), p.episodes.len()),
+                    fixed(crate::controller::measure::mean_cost_of_transport(&p.episodes), 2),
+                    if p.works() {
+                        "yes".into()
+                    } else {
+                        format!("no (tracking error {:.0}%)", 100.0 * p.tracking_error())
+                    },
+                ]
+            })
+            .collect(),
+    );
+    match &section.best {
+        Some(b) => doc.paragraph(format!(
+            "Best return: {} at {:.2} m/s commanded ({:.3} m/s achieved).",
+            interval(returns_interval(b), fmt_return),
+            b.commanded,
+            b.achieved()
+        )),
+        None => doc.paragraph("The controller works at no speed of the grid."),
+    }
+    speed_charts(doc, out, env, &section, &comparable)?;
+
+    doc.heading(2, "Learned policies against the controller");
+    doc.table(
+        &[
+            "policy",
+            "budget",
+            "seeds",
+            "speed m/s",
+            "return [95% CI]",
+            "controller at that speed: commanded → achieved",
+            "controller return [95% CI]",
+            "P(RL > controller there) [95% CI]",
+            "P(RL > controller's best) [95% CI]",
+            "falls RL / controller",
+            "CoT RL / controller",
+        ],
+        section
+            .matched
+            .iter()
+            .map(|m| {
+                let r = &comparable[m.row];
+                let p = |e: &Option<super::heldout::Estimate>| {
+                    e.map_or("–".into(), |e| format!("{} (over {})", interval(e.interval, |v| fixed(v, 2)), e.over))
+                };
+                let (falls, n) = r.falls();
+                let (c_speed, c_return, c_falls, c_cot) = match &m.controller {
+                    Ok(c) => (
+                        format!("{:.3} → {:.3}", c.commanded, c.achieved()),
+                        interval(returns_interval(c), fmt_return),
+                        rate(c.falls(), c.episodes.len()),
+                        fixed(crate::controller::measure::mean_cost_of_transport(&c.episodes), 2),
+                    ),
+                    Err(why) => (why.clone(), "–".into(), "–".into(), "–".into()),
+                };
+                vec![
+                    r.group.label(),
+                    budget(r.budget),
+                    r.seeds().to_string(),
+                    fixed(m.rl_speed, 3),
+                    interval(r.mean_return(BOOTSTRAP_SEED).interval, fmt_return),
+                    c_speed,
+                    c_return,
+                    p(&m.beats_matched),
+                    p(&m.beats_best),
+                    format!("{} / {c_falls}", rate(falls, n)),
+                    format!("{} / {c_cot}", fixed(r.cost_of_transport(), 2)),
+                ]
+            })
+            .collect(),
+    );
+    let skipped = rows.len() - comparable.len();
+    if skipped > 0 {
+        doc.paragraph(format!(
+            "{skipped} row(s) trained under other env options or rewards than the first are not compared with the controller."
+        ));
+    }
+
+    if opts.push_episodes > 0 {
+        section.pushes = pushes(groups, &comparable, &env_config, &section, opts)?;
+        doc.heading(2, "Pushes");
+        let mut header = vec!["policy".to_string(), "speed m/s".to_string()];
+        header.extend(PUSH_LEVELS.iter().map(|dv| format!("survived, Δv {dv} m/s (95% CI)")));
+        let header: Vec<&str> = header.iter().map(String::as_str).collect();
+        doc.table(
+            &header,
+            section
+                .pushes
+                .iter()
+                .map(|p| {
+                    let mut cells = vec![p.policy.clone(), fixed(p.speed, 3)];
+                    cells.extend(p.survived.iter().map(|&(k, n)| rate(k, n)));
+                    cells
+                })
+                .collect(),
+        );
+    }
+    Ok(Some(section))
+}
+
+/// Push survival of the controller (at its best speed and at each pushed row's speed) and of
+/// each group's largest-budget row.
+fn pushes(
+    groups: &[(&Group, &Vec<&Run>)],
+    rows: &[BudgetRow],
+    env_config: &crate::envs::EnvConfig,
+    section: &ControllerSection,
+    opts: &ReportOptions,
+) -> Result<Vec<PushRow>> {
+    let protocol = Protocol { episodes: opts.push_episodes, ..opts.protocol };
+    let mut family = crate::evaluation::ControllerFamily::new(env_config, protocol)?;
+    family.threads = opts.threads;
+    // Each group's largest-budget row, and the controller at its speed.
+    let pushed_rows: Vec<(usize, &Group, &Vec<&Run>)> = groups
+        .iter()
+        .filter_map(|(g, rs)| {
+            rows.iter().enumerate().filter(|(_, r)| &r.group == *g && r.seeds() > 0).last().map(|(i, _)| (i, *g, *rs))
+        })
+        .collect();
+    let matched_speed = |i: usize| {
+        section.matched.iter().find(|m| m.row == i).and_then(|m| m.controller.as_ref().ok()).map(|c| c.commanded)
+    };
+    let mut controller_jobs = Vec::new();
+    for speed in
+        section.best.iter().map(|b| b.commanded).chain(pushed_rows.iter().filter_map(|(i, _, _)| matched_speed(*i)))
+    {
+        controller_jobs.extend(PUSH_LEVELS.iter().map(|&dv| (speed, Some(Push { delta_v: dv }))));
+    }
+    family.prefetch(&controller_jobs)?;
+    let rl_jobs: Vec<(usize, f64)> =
+        pushed_rows.iter().flat_map(|(i, _, _)| PUSH_LEVELS.iter().map(move |&dv| (*i, dv))).collect();
+    let rl = map_in_order(&rl_jobs, opts.threads, |&(i, dv)| {
+        let (_, g, rs) = pushed_rows.iter().find(|(j, _, _)| *j == i).unwrap();
+        evaluate_row(g, rs, rows[i].budget, &protocol, Some(Push { delta_v: dv })).map(|r| r.falls())
+    })?;
+    let mut out = Vec::new();
+    if let Some(b) = &section.best {
+        out.push(controller_pushes(&mut family, b.commanded, "controller at its best speed".into())?);
+    }
+    for (k, (i, g, _)) in pushed_rows.iter().enumerate() {
+        let row = &rows[*i];
+        let survived =
+            rl[k * PUSH_LEVELS.len()..(k + 1) * PUSH_LEVELS.len()].iter().map(|&(f, n)| (n - f, n)).collect();
+        out.push(PushRow {
+            policy: format!("{} at {} ({} seeds)", g.label(), budget(row.budget), row.seeds()),
+            speed: row.speed(),
+            survived,
+        });
+        if let Some(c) = matched_speed(*i) {
+            out.push(controller_pushes(&mut family, c, format!("controller at the speed of {}", g.label()))?);
+        }
+    }
+    Ok(out)
+}
+
+/// Return, cost of transport and fall rate against speed: the controller's grid as a line with
+/// its interval, the learned rows as points with theirs.
+fn speed_charts(
+    doc: &mut Document,
+    out: &Path,
+    env: &str,
+    section: &ControllerSection,
+    rows: &[BudgetRow],
+) -> Result<()> {
+    type Measure = fn(&[crate::controller::measure::GaitEpisode]) -> (f64, f64, f64);
+    let ret: Measure = |eps| {
+        let i = stats::stratified_bootstrap(
+            &[eps.iter().map(|e| e.episode_return).collect()],
+            |v| stats::mean(&v[0]),
+            2000,
+            BOOTSTRAP_SEED,
+        );
+        (i.estimate, i.low, i.high)
+    };
+    let cot: Measure = |eps| {
+        let c = crate::controller::measure::mean_cost_of_transport(eps);
+        (c, c, c)
+    };
+    let falls: Measure = |eps| {
+        let w = stats::wilson(eps.iter().filter(|e| e.fell).count(), eps.len());
+        (w.estimate, w.low, w.high)
+    };
+    for (name, y_label, measure) in
+        [("return", "return", ret), ("cot", "cost of transport", cot), ("falls", "fall rate", falls)]
+    {
+        let grid: Vec<(f64, (f64, f64, f64))> =
+            section.grid.iter().map(|p| (p.achieved(), measure(&p.episodes))).collect();
+        let band = Band {
+            label: "controller (commanded grid)".into(),
+            x: grid.iter().map(|g| g.0).collect(),
+            mean: grid.iter().map(|g| g.1 .0).collect(),
+            low: grid.iter().map(|g| g.1 .1).collect(),
+            high: grid.iter().map(|g| g.1 .2).collect(),
+        };
+        let markers: Vec<Marker> = rows
+            .iter()
+            .enumerate()
+            .filter(|(_, r)| r.seeds() > 0)
+            .map(|(i, r)| {
+                let eps: Vec<_> = r.all_episodes().cloned().collect();
+                let (y, low, high) = if name == "return" {
+                    let e = r.mean_return(BOOTSTRAP_SEED).interval;
+                    (e.estimate, e.low, e.high)
+                } else {
+                    measure(&eps)
+                };
+                Marker {
+                    label: format!("{} at {}", r.group.label(), budget(r.budget)),
+                    x: r.speed(),
+                    y,
+                    low,
+                    high,
+                    color_of: i + 1,
+                }
+            })
+            .filter(|m| m.y.is_finite())
+            .collect();
+        let file = format!("{env}_speed_{name}.svg");
+        let svg = bands_svg(&format!("{env}: {y_label} against speed"), "mean speed m/s", y_label, &[band], &markers)?;
+        write_bytes_atomic(&out.join(&file), svg.as_bytes())?;
+        doc.figure(file, svg, format!("{y_label} against speed (95% intervals)"));
+    }
+    Ok(())
+}
+
+/// Training returns per group: each seed's rolling mean, thinned; linked, not embedded.
+pub fn training_returns(doc: &mut Document, out: &Path, env: &str, groups: &[(&Group, &Vec<&Run>)]) -> Result<()> {
+    doc.heading(2, "Training returns");
+    for (g, rs) in groups {
+        let bands: Vec<Band> = rs
+            .iter()
+            .map(|r| {
+                let (x, y): (Vec<f64>, Vec<f64>) = r.episodes().map(|(s, v)| (s as f64, v)).unzip();
+                let (mean, _) = rolling(&y, ROLLING_WINDOW);
+                Band { label: format!("seed {}", r.config.seed), x, low: mean.clone(), high: mean.clone(), mean }
+                    .thinned(CURVE_POINTS * 2)
+            })
+            .collect();
+        let file = format!("{env}_{}_training.svg", file_stem(g));
+        let title = format!("{env} {}: {ROLLING_WINDOW}-episode rolling mean of training returns", g.label());
+        let svg = bands_svg(&title, "environment steps", "episode return", &bands, &[])?;
+        write_bytes_atomic(&out.join(&file), svg.as_bytes())?;
+        doc.linked_figure(file, format!("training returns: {}", g.label()));
+    }
+    Ok(())
+}
+
+/// A short file name for a group: algorithm, then a hash of its reward and settings when they
+/// differ from the defaults (the label says what they are).
+fn file_stem(g: &Group) -> String {
+    if g.settings.is_empty() && g.reward == "default reward" {
+        return g.algo.clone();
+    }
+    let text = format!("{}|{}", g.reward, g.settings);
+    let hash = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3));
+    format!("{}-{:08x}", g.algo, hash as u32)
+}
+
+pub fn runs(doc: &mut Document, runs: &[Run]) {
+    doc.heading(1, "Runs");
+    doc.lines(
+        runs.iter()
+            .map(|r| {
+                let mut held = crate::train::budget_policy_steps(&r.dir);
+                held.extend(super::budgets::shipped_step(&r.dir));
+                held.sort_unstable();
+                let policies = if held.is_empty() {
+                    "no policy kept".to_string()
+                } else {
+                    format!("policies at {}", held.iter().map(|&s| budget(s)).collect::<Vec<_>>().join(", "))
+                };
+                format!(
+                    "`{}`: {} seed {}, reached {}, {policies}; {}",
+                    r.dir.display(),
+                    r.group().label(),
+                    r.config.seed,
+                    budget(super::budgets::reached(r)),
+                    super::heldout::machine_of(r, u64::MAX)
+                )
+            })
+            .collect(),
+    );
+}
