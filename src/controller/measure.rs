@@ -26,6 +26,8 @@ pub struct GaitEpisode {
     pub energy: f64,
     /// energy / (m g distance); infinite when the robot did not advance.
     pub cost_of_transport: f64,
+    /// m g distance (J): the denominator of the cost of transport, 0 when it did not advance.
+    pub weight_times_distance: f64,
     /// Sum of |sideways step| (m), PyBullet's drift term: sway counts as well as drift.
     pub drift: f64,
     /// Sum of |vertical step| (m), PyBullet's shake term.
@@ -38,13 +40,16 @@ pub struct GaitEpisode {
     pub reward_terms: Vec<(&'static str, f64)>,
 }
 
-/// Mean cost of transport over the episodes that moved forward (infinite if none did).
+/// Cost of transport of a set of episodes: their energy over their weight times distance, both
+/// summed over the episodes that moved forward (a ratio of totals, so an episode that barely
+/// moved does not dominate as a mean of ratios would); infinite if none did.
 pub fn mean_cost_of_transport(episodes: &[GaitEpisode]) -> f64 {
-    let finite: Vec<f64> = episodes.iter().map(|e| e.cost_of_transport).filter(|c| c.is_finite()).collect();
-    if finite.is_empty() {
-        f64::INFINITY
+    let forward = episodes.iter().filter(|e| e.weight_times_distance > 0.0);
+    let (energy, work): (f64, f64) = forward.fold((0.0, 0.0), |(a, b), e| (a + e.energy, b + e.weight_times_distance));
+    if work > 0.0 {
+        energy / work
     } else {
-        finite.iter().sum::<f64>() / finite.len() as f64
+        f64::INFINITY
     }
 }
 
@@ -143,7 +148,8 @@ pub fn measure_episode(
     e.yaw_rate = if time > 0.0 { obs.turned / time } else { 0.0 };
     e.sideways = e.sideways.abs();
     e.speed_error /= summary.length.max(1) as f64;
-    e.cost_of_transport = if distance > 0.0 { e.energy / (mass * gravity * distance) } else { f64::INFINITY };
+    e.weight_times_distance = if distance > 0.0 { mass * gravity * distance } else { 0.0 };
+    e.cost_of_transport = if distance > 0.0 { e.energy / e.weight_times_distance } else { f64::INFINITY };
     let diagnostics = policy.diagnostics();
     e.qp_failures = diagnostics.iter().find(|(n, _)| *n == "qp_failures").map_or(0.0, |(_, v)| *v);
     e.diagnostics = diagnostics.into_iter().filter(|(n, _)| !matches!(*n, "qp_failures" | "ticks")).collect();
@@ -187,4 +193,18 @@ pub fn summary_cells(episodes: &[GaitEpisode], fmt_return: impl Fn(f64) -> Strin
         format!("{}/{}", episodes.iter().filter(|e| e.fell).count(), episodes.len()),
         fixed(mean(|e| e.length as f64), 0),
     ]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn cost_of_transport_is_a_ratio_of_totals() {
+        let ep = |energy: f64, wd: f64| GaitEpisode { energy, weight_times_distance: wd, ..Default::default() };
+        // CoT 1 and CoT 100 (barely moved): 11 J over 10.01 J, not the mean of ratios 50.5.
+        let c = mean_cost_of_transport(&[ep(10.0, 10.0), ep(1.0, 0.01), ep(5.0, 0.0)]);
+        assert!((c - 11.0 / 10.01).abs() < 1e-12, "{c}");
+        assert_eq!(mean_cost_of_transport(&[ep(5.0, 0.0)]), f64::INFINITY);
+    }
 }

@@ -40,6 +40,8 @@ pub struct BudgetRow {
     pub mixed_provenance: bool,
     /// Mean over seeds of the wall time to reach the budget (s), where recorded.
     pub wall_time: Option<f64>,
+    /// Seeds that more than one run of the row used (not independent samples).
+    pub duplicate_seeds: Vec<u64>,
 }
 
 /// An interval and what it was resampled over.
@@ -112,6 +114,7 @@ pub fn evaluate_row(
         provenance: String::new(),
         mixed_provenance: false,
         wall_time: None,
+        duplicate_seeds: Vec::new(),
     };
     let mut machines = BTreeSet::new();
     let mut walls = Vec::new();
@@ -141,6 +144,9 @@ pub fn evaluate_row(
             walls.push(w);
         }
     }
+    let mut seeds: Vec<u64> = row.evaluated.iter().map(|s| s.seed).collect();
+    seeds.sort_unstable();
+    row.duplicate_seeds = seeds.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect();
     row.mixed_provenance = machines.len() > 1;
     row.provenance = machines.into_iter().collect::<Vec<_>>().join("; ");
     if !walls.is_empty() && walls.len() == row.evaluated.len() {

@@ -164,6 +164,14 @@ pub fn held_out(doc: &mut Document, groups: &[(&Group, &Vec<&Run>)], opts: &Repo
                     r.seeds()
                 ));
             }
+            if !r.duplicate_seeds.is_empty() {
+                notes.push(format!(
+                    "{} at {}: seed(s) {:?} appear in more than one run; those runs are not independent samples.",
+                    r.group.label(),
+                    budget(r.budget),
+                    r.duplicate_seeds
+                ));
+            }
             if r.mixed_provenance {
                 notes.push(format!(
                     "{} at {}: pools runs computed on different machines or commits ({}).",
