@@ -148,6 +148,17 @@ fn resume_continues_exactly_like_an_uninterrupted_run() {
         "weights after resume differ from the uninterrupted run"
     );
     assert_eq!(eval_rows(&whole), eval_rows(&split));
+    // The actor saved at the run's last step (its budget) is the same file either way, and is
+    // the checkpoint's actor.
+    let budget_policy = |run: &std::path::Path| std::fs::read(run.join("policies/step-3000.safetensors")).unwrap();
+    assert_eq!(budget_policy(&whole), budget_policy(&split));
+    assert_eq!(train::budget_policy_steps(&whole), vec![3000]);
+    let (_, from_file) = train::load_budget_policy(&whole, 3000).unwrap();
+    let (_, from_checkpoint) = train::load_policy(&a.checkpoint).unwrap();
+    let obs = vec![0.1f32, -0.2, 0.05, 0.3];
+    assert_eq!(from_file.act(&obs).unwrap(), from_checkpoint.act(&obs).unwrap());
+    let missing = train::load_budget_policy(&whole, 1000).err().expect("no policy at 1000").to_string();
+    assert!(missing.contains("no policy at step 1000"), "{missing}");
 }
 
 #[test]
