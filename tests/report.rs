@@ -182,3 +182,19 @@ fn sweep_and_report_reject_bad_input() {
     let (ok, _, err) = locobench(&["report", "--runs", s, "--out", dir.path().join("r").to_str().unwrap()]);
     assert!(!ok && err.contains("no run directories"), "{err}");
 }
+
+/// The committed reports stay light and open without a network.
+#[test]
+fn committed_reports_are_light_and_self_contained() {
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("benches/results");
+    for report in ["report", "returns/quick/report"] {
+        let index = root.join(report).join("index.html");
+        let html = std::fs::read_to_string(&index).unwrap();
+        assert!(html.len() < 500_000, "{}: {} bytes", index.display(), html.len());
+        assert!(!html.contains("<script") && !html.contains("src=\"http"), "{}", index.display());
+        assert!(html.contains("Protocol") && html.contains("held-out episodes"), "{}", index.display());
+        for file in ["held_out.csv", "controller.csv", "README.md"] {
+            assert!(root.join(report).join(file).is_file(), "{report}/{file}");
+        }
+    }
+}

@@ -130,9 +130,12 @@ pub fn learning_curves(
                         s.curve.last().and_then(|(t, _, _)| r.evals().find(|(u, _)| *u == t).map(|(_, v)| v))
                     })
                     .collect();
+                let mut episodes: Vec<usize> = rs.iter().map(|r| r.config.train.eval_episodes).collect();
+                episodes.dedup();
                 vec![
                     s.group.label(),
                     s.seeds.to_string(),
+                    episodes.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("/"),
                     s.curve.last().map_or("–".into(), |(t, _, _)| budget(t)),
                     format!("{} ± {}", fmt_return(stats::mean(&finals)), fmt_return(stats::sample_std(&finals))),
                     fmt_return(s.auc),
@@ -263,7 +266,13 @@ pub fn published(doc: &mut Document, env: &str, rows: &[BudgetRow]) {
         table.push(vec![
             r.group.label(),
             budget(r.budget),
-            format!("{} ({} seeds, over {})", interval(ours.interval, fmt_return), r.seeds(), ours.over),
+            format!(
+                "{} ({} seeds x {} episodes, over {})",
+                interval(ours.interval, fmt_return),
+                r.seeds(),
+                r.episodes_per_seed(),
+                ours.over
+            ),
             format!("{} ± {}", fmt_return(mean), fmt_return(std)),
             c.seeds.to_string(),
             format!("[{}, {}]", fmt_return(mean - half), fmt_return(mean + half)),
@@ -385,6 +394,7 @@ pub fn controller(
             "policy",
             "budget",
             "seeds",
+            "episodes per seed",
             "speed m/s",
             "return [95% CI]",
             "controller at that speed: commanded → achieved",
@@ -416,6 +426,7 @@ pub fn controller(
                     r.group.label(),
                     budget(r.budget),
                     r.seeds().to_string(),
+                    r.episodes_per_seed().to_string(),
                     fixed(m.rl_speed, 3),
                     interval(r.mean_return(BOOTSTRAP_SEED).interval, fmt_return),
                     c_speed,
@@ -438,7 +449,7 @@ pub fn controller(
     if opts.push_episodes > 0 {
         section.pushes = pushes(groups, &comparable, &env_config, &section, opts)?;
         doc.heading(2, "Pushes");
-        let mut header = vec!["policy".to_string(), "speed m/s".to_string()];
+        let mut header = vec!["policy".to_string(), "speed m/s".to_string(), "episodes per level".to_string()];
         header.extend(PUSH_LEVELS.iter().map(|dv| format!("survived, Δv {dv} m/s (95% CI)")));
         let header: Vec<&str> = header.iter().map(String::as_str).collect();
         doc.table(
@@ -447,7 +458,8 @@ pub fn controller(
                 .pushes
                 .iter()
                 .map(|p| {
-                    let mut cells = vec![p.policy.clone(), fixed(p.speed, 3)];
+                    let n = p.survived.first().map_or(0, |s| s.1);
+                    let mut cells = vec![p.policy.clone(), fixed(p.speed, 3), n.to_string()];
                     cells.extend(p.survived.iter().map(|&(k, n)| rate(k, n)));
                     cells
                 })
