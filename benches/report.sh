@@ -11,14 +11,14 @@ out=${1:-benches/results/report}
 cargo build --locked --release --quiet
 r=benches/results
 runs=(
-  # Minitaur: TD3 (the preset: normalised observations, rewards x 100), SAC and DDPG with their
-  # policies at 100k and 300k; the shipped TD3 policy (seed 1, 1M); earlier runs kept without
-  # policies (curves only).
-  $r/minitaur/td3-seed0-with-policies $r/minitaur/sac-seed0-with-policies $r/minitaur/ddpg-seed0-with-policies
+  # Minitaur: TD3 (the preset: normalised observations, rewards x 100), SAC and DDPG with the
+  # policies they saved at 100k and 300k; the shipped TD3 policy (seed 1, 1M); earlier runs kept
+  # without policies (curves only).
+  $r/minitaur/*-with-policies
   models/policies/minitaur-td3
   $r/minitaur/td3-norm-rs100-seed{0,2,3,4} $r/minitaur/sac-seed0-1m $r/minitaur/sac-seed1
   # Ant
-  $r/ant/td3-seed0-with-policies $r/ant/sac-seed0-with-policies $r/ant/ddpg-seed0-with-policies
+  $r/ant/*-with-policies
   $r/ant/{td3,ddpg}-seed{0,1}-300k $r/ant/sac-seed{0,1,2,3,4}-300k
   # HalfCheetah and Humanoid: curves only
   $r/half-cheetah/{td3,sac,ddpg}-seed{0,1}-300k
@@ -28,4 +28,4 @@ existing=()
 for d in "${runs[@]}"; do
   if [ -d "$d" ]; then existing+=("$d"); else echo "not committed (yet): $d" >&2; fi
 done
-./target/release/locobench report --runs "${existing[@]}" --out "$out"
+./target/release/locobench report --runs "${existing[@]}" --out "$out" "${@:2}"

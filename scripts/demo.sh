@@ -5,7 +5,8 @@
 #   3. two Minitaur walking policies (trained with SAC for 300k steps and TD3 for 1M, shipped in
 #      models/policies/, retrain them with the commands in their READMEs) are evaluated and
 #      recorded, beside the Raibert/QP baseline controller at 0.35 m/s;
-#   4. a report compares everything: learning curves, baseline vs RL under three rewards.
+#   4. a report evaluates every policy on the same held-out episodes, beside the controller
+#      across its speeds and under pushes.
 # Everything goes under demo/; the paths are printed at the end.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -28,7 +29,7 @@ for p in "$policy" "$td3_policy"; do "$bin" eval --checkpoint "$p" --episodes 10
 "$bin" record --env minitaur --policy raibert --speed 0.35 --out "$out/minitaur-raibert.rrd"
 "$bin" record --policy "$policy" --out "$out/minitaur-sac.rrd"
 "$bin" record --policy "$td3_policy" --out "$out/minitaur-td3.rrd"
-"$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/pendulum-sweep" "$policy" "$td3_policy" --out "$out/report" --episodes 3
+"$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/pendulum-sweep" "$policy" "$td3_policy" --out "$out/report" --episodes 3 --push-episodes 2
 echo
 echo "Report (open in a browser):   $(pwd)/$out/report/index.html  (Markdown: $out/report/README.md)"
 echo "rerun recordings:             $(pwd)/$out/*.rrd  (viewer: pip install rerun-sdk==0.36.3; rerun FILE)"
