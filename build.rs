@@ -11,11 +11,34 @@ fn fail(msg: &str) -> ! {
     std::process::exit(1);
 }
 
+/// The commit the binary is built from, for run directories' config.toml and provenance.csv
+/// (`LOCOBENCH_GIT_COMMIT`; absent outside a git checkout). Rebuilt when HEAD moves.
+fn record_git_commit() {
+    let git = |args: &[&str]| {
+        std::process::Command::new("git")
+            .args(args)
+            .output()
+            .ok()
+            .filter(|o| o.status.success())
+            .map(|o| String::from_utf8_lossy(&o.stdout).trim().to_string())
+    };
+    let Some(git_dir) = git(&["rev-parse", "--git-dir"]).map(PathBuf::from) else { return };
+    let mut watched = vec![git_dir.join("HEAD"), git_dir.join("packed-refs")];
+    watched.extend(git(&["symbolic-ref", "-q", "HEAD"]).map(|r| git_dir.join(r)));
+    for path in watched.iter().filter(|p| p.exists()) {
+        println!("cargo:rerun-if-changed={}", path.display());
+    }
+    if let Some(commit) = git(&["rev-parse", "HEAD"]) {
+        println!("cargo:rustc-env=LOCOBENCH_GIT_COMMIT={commit}");
+    }
+}
+
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
     println!("cargo:rerun-if-changed=src/mujoco/shim.c");
     println!("cargo:rerun-if-env-changed=MUJOCO_INCLUDE_DIR");
     println!("cargo:rerun-if-env-changed=MUJOCO_LIB_DIR");
+    record_git_commit();
 
     let include_dir = PathBuf::from(std::env::var("MUJOCO_INCLUDE_DIR").unwrap_or_else(|_| "/usr/include".into()));
     let header = include_dir.join("mujoco/mujoco.h");

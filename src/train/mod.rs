@@ -93,13 +93,9 @@ pub struct RunControl {
     pub threads: usize,
 }
 
+/// The commit this binary was built from (build.rs), not whatever the source tree holds now.
 pub(crate) fn git_commit() -> Option<String> {
-    let out = std::process::Command::new("git")
-        .args(["rev-parse", "HEAD"])
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .ok()?;
-    out.status.success().then(|| String::from_utf8_lossy(&out.stdout).trim().to_string())
+    option_env!("LOCOBENCH_GIT_COMMIT").map(str::to_string)
 }
 
 /// Starts a new run in `run_dir`. An existing non-empty directory is an error unless `force`.
