@@ -28,4 +28,5 @@ existing=()
 for d in "${runs[@]}"; do
   if [ -d "$d" ]; then existing+=("$d"); else echo "not committed (yet): $d" >&2; fi
 done
+rm -rf "$out"  # no chart of an earlier layout left behind
 ./target/release/locobench report --runs "${existing[@]}" --out "$out" "${@:2}"

@@ -370,6 +370,8 @@ pub fn controller(
                     fixed(crate::controller::measure::mean_cost_of_transport(&p.episodes), 2),
                     if p.works() {
                         "yes".into()
+                    } else if p.falls() > 0 {
+                        "no (falls)".into()
                     } else {
                         format!("no (tracking error {:.0}%)", 100.0 * p.tracking_error())
                     },
