@@ -7,6 +7,7 @@ use locobench::evaluation::Protocol;
 use locobench::policy::AgentPolicy;
 use locobench::report::format::interval;
 use locobench::report::heldout::estimate;
+use locobench::report::BOOTSTRAP_SEED;
 use locobench::train::{evaluate::evaluate, load_budget_policy, load_policy};
 
 #[derive(clap::Args, Debug)]
@@ -68,9 +69,9 @@ pub fn run(args: EvalArgs) -> Result<()> {
     println!("{what}: {} held-out episodes (protocol seed {})", eps.len(), args.seed);
     println!(
         "  return  mean {} (95% CI over episodes)",
-        interval(estimate(&[returns.clone()], stats::mean, 2021).interval, fmt)
+        interval(estimate(&[returns.clone()], stats::mean, BOOTSTRAP_SEED).interval, fmt)
     );
-    println!("  return  IQM  {}", interval(estimate(&[returns.clone()], stats::iqm, 2022).interval, fmt));
+    println!("  return  IQM  {}", interval(estimate(&[returns.clone()], stats::iqm, BOOTSTRAP_SEED ^ 1).interval, fmt));
     println!("  return  sample std {:.3}", stats::sample_std(&returns));
     println!("  falls   {falls}/{} ({:.2}-{:.2})", eps.len(), w.low, w.high);
     println!("  length  {:.1}", stats::mean(&eps.iter().map(|e| e.length as f64).collect::<Vec<_>>()));

@@ -21,8 +21,6 @@ pub struct Push {
 /// An environment whose base is pushed once per episode.
 pub struct Pushed<'a> {
     inner: &'a mut dyn Env,
-    push: Push,
-    mass: f64,
     /// Control steps the force acts for, and the force (N, along world y) while it does.
     steps: usize,
     force: f64,
@@ -44,7 +42,7 @@ impl<'a> Pushed<'a> {
         let dt = inner.spec().dt;
         let steps = ((PUSH_DURATION / dt).round() as usize).max(1);
         let force = mass * push.delta_v / (steps as f64 * dt);
-        Ok(Pushed { inner, push, mass, steps, force, start: usize::MAX, t: 0 })
+        Ok(Pushed { inner, steps, force, start: usize::MAX, t: 0 })
     }
 
     /// The control step the push starts at and its sign, drawn from the reset seed.
@@ -53,10 +51,6 @@ impl<'a> Pushed<'a> {
         let time = rng.random_range(2.0..6.0);
         let sign = if rng.random_bool(0.5) { 1.0 } else { -1.0 };
         ((time / dt).round() as usize, sign)
-    }
-
-    pub fn impulse(&self) -> f64 {
-        self.mass * self.push.delta_v
     }
 }
 

@@ -68,9 +68,6 @@ impl Interval {
     pub fn point(v: f64) -> Interval {
         Interval { estimate: v, low: v, high: v }
     }
-    pub fn contains(&self, v: f64) -> bool {
-        self.low <= v && v <= self.high
-    }
 }
 
 /// Percentile bootstrap interval of `statistic`, resampling each stratum (e.g. the seeds of one
@@ -101,16 +98,6 @@ pub fn stratified_bootstrap(
     values.sort_by(f64::total_cmp);
     let tail = (1.0 - LEVEL) / 2.0;
     Interval { estimate, low: quantile(&values, tail), high: quantile(&values, 1.0 - tail) }
-}
-
-/// Mean and IQM of one set of scores (one stratum), each with its bootstrap interval.
-pub fn mean_and_iqm(scores: &[f64], seed: u64) -> (Interval, Interval) {
-    let strata = [scores.to_vec()];
-    let flat = |s: &[Vec<f64>]| s.concat();
-    (
-        stratified_bootstrap(&strata, |s| mean(&flat(s)), BOOTSTRAP_REPS, seed),
-        stratified_bootstrap(&strata, |s| iqm(&flat(s)), BOOTSTRAP_REPS, seed ^ 1),
-    )
 }
 
 /// Wilson score interval of a rate of `k` in `n` (Wilson 1927): unlike the normal

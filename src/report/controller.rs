@@ -60,6 +60,17 @@ fn improvement(row: &BudgetRow, controller: &SpeedPoint, seed: u64) -> Estimate 
     estimate(&per_seed, stats::mean, seed)
 }
 
+/// A grid point's mean return with its 95% bootstrap interval over episodes (the controller has
+/// no seeds to resample).
+pub fn return_interval(point: &SpeedPoint) -> stats::Interval {
+    stats::stratified_bootstrap(
+        &[point.returns()],
+        |v| stats::mean(&v[0]),
+        stats::BOOTSTRAP_REPS,
+        super::BOOTSTRAP_SEED,
+    )
+}
+
 /// The best working grid point by mean return.
 pub fn best_point(grid: &[SpeedPoint]) -> Option<SpeedPoint> {
     grid.iter()
@@ -77,7 +88,7 @@ pub fn controller_section(
     protocol: &Protocol,
     seed: u64,
     threads: usize,
-) -> Result<(ControllerSection, ControllerFamily)> {
+) -> Result<ControllerSection> {
     let mut family = ControllerFamily::new(env_config, *protocol)?;
     family.threads = threads;
     let grid = family.sweep(GRID_STEP, GRID_MAX)?;
@@ -97,7 +108,7 @@ pub fn controller_section(
         let beats_best = best.as_ref().map(|b| improvement(row, b, seed ^ 0x100 ^ i as u64));
         matched.push(MatchedRow { row: i, rl_speed, controller, beats_matched, beats_best });
     }
-    Ok((ControllerSection { grid, best, matched, pushes: Vec::new() }, family))
+    Ok(ControllerSection { grid, best, matched, pushes: Vec::new() })
 }
 
 /// Survival of the controller commanded `speed` under each push level.

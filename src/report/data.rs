@@ -2,11 +2,10 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use super::controller::ControllerSection;
+use super::controller::{return_interval, ControllerSection};
 use super::heldout::BudgetRow;
 use super::BOOTSTRAP_SEED;
 use crate::controller::measure::mean_cost_of_transport;
-use crate::evaluation::stats;
 
 pub fn held_out_csv(rows: &BTreeMap<String, Vec<BudgetRow>>) -> String {
     let mut csv = String::from(
@@ -46,12 +45,7 @@ pub fn controller_csv(sections: &BTreeMap<String, ControllerSection>) -> String 
         String::from("env,commanded,achieved,mean,mean_low,mean_high,falls,episodes,cost_of_transport,works\n");
     for (env, s) in sections {
         for p in &s.grid {
-            let i = stats::stratified_bootstrap(
-                &[p.returns()],
-                |v| stats::mean(&v[0]),
-                stats::BOOTSTRAP_REPS,
-                BOOTSTRAP_SEED,
-            );
+            let i = return_interval(p);
             let _ = writeln!(
                 csv,
                 "{env},{},{},{},{},{},{},{},{},{}",

@@ -4,7 +4,9 @@ use std::path::Path;
 use anyhow::Result;
 
 use super::anchors::{bundled_anchors, published_curve};
-use super::controller::{controller_pushes, controller_section, ControllerSection, PushRow, GRID_STEP, PUSH_LEVELS};
+use super::controller::{
+    controller_pushes, controller_section, return_interval, ControllerSection, PushRow, GRID_STEP, PUSH_LEVELS,
+};
 use super::curves::{eval_curve, rolling};
 use super::document::Document;
 use super::format::{budget, fixed, fmt_return, interval, rate};
@@ -14,8 +16,8 @@ use super::runs::{Group, Run};
 use super::{summarise, GroupSummary, ReportOptions, BOOTSTRAP_SEED, ROLLING_WINDOW};
 use crate::envs::{make, EnvConfig};
 use crate::evaluation::parallel::map_in_order;
-use crate::evaluation::stats::{self, Interval, Verdict};
-use crate::evaluation::{Protocol, Push, SpeedPoint};
+use crate::evaluation::stats::{self, Verdict};
+use crate::evaluation::{Protocol, Push};
 use crate::io::write_bytes_atomic;
 use crate::policy::RandomPolicy;
 
@@ -332,10 +334,6 @@ pub fn published(doc: &mut Document, env: &str, rows: &[BudgetRow]) {
     }
 }
 
-fn returns_interval(point: &SpeedPoint) -> Interval {
-    stats::stratified_bootstrap(&[point.returns()], |v| stats::mean(&v[0]), stats::BOOTSTRAP_REPS, BOOTSTRAP_SEED)
-}
-
 /// The controller's grid, the learned rows against it, and pushes.
 pub fn controller(
     doc: &mut Document,
@@ -353,7 +351,7 @@ pub fn controller(
         r.env_config.as_ref().is_none_or(|c| c.resolved_options().ok().as_ref() == Some(&env_config.options))
     };
     let comparable: Vec<BudgetRow> = rows.iter().filter(|r| same_env(r)).cloned().collect();
-    let (mut section, _) = controller_section(&env_config, &comparable, &opts.protocol, BOOTSTRAP_SEED, opts.threads)?;
+    let mut section = controller_section(&env_config, &comparable, &opts.protocol, BOOTSTRAP_SEED, opts.threads)?;
 
     doc.heading(2, "Controller across commanded speeds");
     doc.table(
@@ -365,7 +363,7 @@ pub fn controller(
                 vec![
                     fixed(p.commanded, 2),
                     fixed(p.achieved(), 3),
-                    interval(returns_interval(p), fmt_return),
+                    interval(return_interval(p), fmt_return),
                     rate(p.falls(), p.episodes.len()),
                     fixed(crate::controller::measure::mean_cost_of_transport(&p.episodes), 2),
                     if p.works() {
@@ -382,7 +380,7 @@ pub fn controller(
     match &section.best {
         Some(b) => doc.paragraph(format!(
             "Best return: {} at {:.2} m/s commanded ({:.3} m/s achieved).",
-            interval(returns_interval(b), fmt_return),
+            interval(return_interval(b), fmt_return),
             b.commanded,
             b.achieved()
         )),
@@ -418,7 +416,7 @@ pub fn controller(
                 let (c_speed, c_return, c_falls, c_cot) = match &m.controller {
                     Ok(c) => (
                         format!("{:.3} → {:.3}", c.commanded, c.achieved()),
-                        interval(returns_interval(c), fmt_return),
+                        interval(return_interval(c), fmt_return),
                         rate(c.falls(), c.episodes.len()),
                         fixed(crate::controller::measure::mean_cost_of_transport(&c.episodes), 2),
                     ),
