@@ -104,7 +104,7 @@ fn mlp_flops(sizes: &[usize], batch: usize, skip_first: bool) -> f64 {
     layers.map(|w| 2.0 * (batch * w[0] * w[1]) as f64).sum()
 }
 
-/// Matmul FLOPs of one TD3 update at these sizes (REFERENCE §6 rounds it to 0.8 GFLOP): target
+/// Matmul FLOPs of one TD3 update at these sizes (about 0.8 GFLOP): target
 /// actor + two target critics forward; two critics forward and backward (weight gradients, and
 /// input gradients past the first layer); every second update the actor step (actor forward,
 /// critic 0 forward and its input gradients down to the action, actor backward).
@@ -200,7 +200,7 @@ fn main() -> Result<()> {
     let algo = Algo::parse(&arg("--algo").unwrap_or_else(|| "td3".into()))?;
     let updates: usize = arg("--updates").map(|v| v.parse()).transpose()?.unwrap_or(if smoke { 5 } else { 300 });
     let steps: u64 = arg("--steps").map(|v| v.parse()).transpose()?.unwrap_or(1000);
-    anyhow::ensure!(steps % 1000 == 0, "--steps must be a multiple of the 1000-step episode (0 skips it)");
+    anyhow::ensure!(steps.is_multiple_of(1000), "--steps must be a multiple of the 1000-step episode (0 skips it)");
     let ups = updates_per_second(algo, updates)?;
     let sps = if smoke || steps == 0 { f64::NAN } else { training_steps_per_second(algo, steps)? };
     println!(

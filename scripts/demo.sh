@@ -21,10 +21,10 @@ mkdir -p "$out"
 "$bin" envs
 "$bin" train --env inverted-pendulum --algo sac --seed 0 --out "$out/run-inverted-pendulum-sac" \
   --record "$out/inverted-pendulum-training.rrd" --quiet
-"$bin" eval --checkpoint "$out/run-inverted-pendulum-sac" --episodes 10
+"$bin" eval --policy "$out/run-inverted-pendulum-sac" --episodes 10
 "$bin" sweep --env inverted-pendulum --algo td3,ddpg --seeds 2 --jobs 2 --out "$out/pendulum-sweep"
 "$bin" sweep status "$out/pendulum-sweep"
-for p in "$policy" "$td3_policy"; do "$bin" eval --checkpoint "$p" --episodes 10; done
+for p in "$policy" "$td3_policy"; do "$bin" eval --policy "$p" --episodes 10; done
 "$bin" baseline --env minitaur --speed 0.35 --episodes 3 --seed 0
 "$bin" record --env minitaur --policy raibert --speed 0.35 --out "$out/minitaur-raibert.rrd"
 "$bin" record --policy "$policy" --out "$out/minitaur-sac.rrd"

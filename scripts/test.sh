@@ -1,14 +1,20 @@
 #!/usr/bin/env bash
-# Installs what the tests need, then runs the whole test suite: cargo's tests, then the Slurm
-# test (tests/slurm/cluster.sh: a real one-node Slurm on localhost) where it can be started,
-# i.e. as root (it installs slurm-wlm and munge) or with Slurm's daemons already installed.
+# Installs what the tests need, then runs the whole test suite: formatting, cargo's tests, clippy
+# with warnings as errors, the Python package's tests (python/test.sh: Gymnasium's env checker on
+# every env, in a virtual environment under target/), then the Slurm test (tests/slurm/cluster.sh:
+# a real one-node Slurm on localhost) where it can be started, i.e. as root (it installs
+# slurm-wlm and munge) or with Slurm's daemons already installed.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 # No incremental caches: a one-off run does not reuse them, and they cost disk (CI ran out once).
 export CARGO_INCREMENTAL=0
 status=0
+cargo fmt --all --check || status=$?
 cargo test --locked --all-targets --no-fail-fast || status=$?
+cargo clippy --locked --all-targets -- -D warnings || status=$?
+cargo clippy --locked -p locobench-python -- -D warnings || status=$?
+bash python/test.sh || status=$?
 if [ "$(id -u)" -eq 0 ] || { command -v slurmctld && command -v munged; } >/dev/null 2>&1; then
   bash tests/slurm/cluster.sh || status=1
 else

@@ -2,6 +2,7 @@
 pub mod agents;
 pub mod args;
 pub mod controller;
+pub mod docgen;
 pub mod envs;
 pub mod evaluation;
 pub mod io;

@@ -164,17 +164,20 @@ fn train_eval_resume_and_fine_tune_from_the_command_line() {
     assert!(out.contains("finished"), "{out}");
     assert!(run.join("metrics.csv").exists() && run.join("config.toml").exists());
 
-    let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "3"]);
+    let (ok, out, err) = locobench(&["eval", "--policy", r, "--episodes", "3"]);
     assert!(ok, "{err}");
     assert!(out.contains("3 held-out episodes") && out.contains("healthy") && out.contains("IQM"), "{out}");
     // The run's own evaluation episodes, as during training, on request.
-    let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "3", "--training-seeds"]);
+    let (ok, out, err) = locobench(&["eval", "--policy", r, "--episodes", "3", "--training-seeds"]);
     assert!(ok && out.contains("the run's evaluation episodes") && out.contains("over 3 episodes"), "{out}\n{err}");
     // The actor saved at the run's budget; a budget it never passed is a clear error.
-    let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "3", "--budget", "600"]);
+    let (ok, out, err) = locobench(&["eval", "--policy", r, "--episodes", "3", "--budget", "600"]);
     assert!(ok && out.contains("3 held-out episodes"), "{out}\n{err}");
-    let (ok, _, err) = locobench(&["eval", "--checkpoint", r, "--budget", "500"]);
+    let (ok, _, err) = locobench(&["eval", "--policy", r, "--budget", "500"]);
     assert!(!ok && err.contains("no policy at step 500"), "{err}");
+    // The old spelling still works, with a note.
+    let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "3"]);
+    assert!(ok && out.contains("3 held-out episodes") && err.contains("--checkpoint is deprecated"), "{out}\n{err}");
 
     // Same directory again: refused without --force.
     let (ok, _, err) =
@@ -219,7 +222,7 @@ fn train_rejects_bad_arguments() {
         (&["train", "--env", "hoppr", "--algo", "td3", "--out", o], "unknown environment 'hoppr'"),
         (&["train", "--env", "ant", "--algo", "td3", "--set", "tau=7", "--out", o], "tau"),
         (&["train", "--env", "ant", "--algo", "td3", "--reward", "wobble=1", "--out", o], "wobble"),
-        (&["eval", "--checkpoint", "/no/such/run"], "no checkpoint"),
+        (&["eval", "--policy", "/no/such/run"], "no checkpoint"),
         (&["train", "--env", "ant", "--algo", "td3", "--threads", "3", "--out", o], "3 is not in 1..=2"),
     ];
     for (args, expect) in cases {
@@ -274,7 +277,7 @@ fn an_exported_policy_acts_exactly_as_its_checkpoint() {
         ["train", "--env", "inverted-pendulum", "--algo", "td3", "--steps", "300", "--set", set, "--out", r, "--quiet"];
     let (ok, _, err) = locobench(&args);
     assert!(ok, "{err}");
-    let (ok, out, err) = locobench(&["export", "--checkpoint", r, "--out", exported.to_str().unwrap()]);
+    let (ok, out, err) = locobench(&["export", "--policy", r, "--out", exported.to_str().unwrap()]);
     assert!(ok, "{err}");
     assert!(out.contains("policy.safetensors"), "{out}");
     let policy = std::fs::metadata(exported.join("policy.safetensors")).unwrap().len();
@@ -284,7 +287,7 @@ fn an_exported_policy_acts_exactly_as_its_checkpoint() {
     assert!(exported.join("config.toml").exists() && exported.join("metrics.csv").exists());
     // Same evaluation, number for number, from the export and from the checkpoint.
     let eval = |p: &str| {
-        let (ok, out, err) = locobench(&["eval", "--checkpoint", p, "--episodes", "3", "--seed", "7"]);
+        let (ok, out, err) = locobench(&["eval", "--policy", p, "--episodes", "3", "--seed", "7"]);
         assert!(ok, "{err}");
         out.split_once(": ").unwrap().1.to_string()
     };
@@ -332,7 +335,7 @@ fn env_options_file_option_and_reward_work_alike_everywhere() {
         assert!(config.contains(line), "{line} missing:\n{config}");
     }
     // eval, baseline and rollout read the same file; a reward term an env lacks is an error.
-    let (ok, out, err) = locobench(&["eval", "--checkpoint", r, "--episodes", "1", "--env-config", f]);
+    let (ok, out, err) = locobench(&["eval", "--policy", r, "--episodes", "1", "--env-config", f]);
     assert!(ok && out.contains("length  30.0"), "{out}\n{err}");
     let (ok, out, err) =
         locobench(&["baseline", "--env", "minitaur", "--episodes", "1", "--env-config", f, "--reward", "drift=1"]);
@@ -344,4 +347,19 @@ fn env_options_file_option_and_reward_work_alike_everywhere() {
     assert!(std::fs::read_to_string(&csv).unwrap().lines().count() <= 31);
     let (ok, _, err) = locobench(&["baseline", "--env", "ant", "--episodes", "1", "--reward", "energy=1"]);
     assert!(!ok && err.contains("energy"), "{err}");
+}
+
+#[test]
+fn every_command_help_shows_defaults_and_ends_with_an_example() {
+    for cmd in ["envs", "rollout", "train", "eval", "export", "baseline", "record", "report", "sweep", "docs"] {
+        let (ok, out, err) = locobench(&[cmd, "--help"]);
+        assert!(ok, "{cmd}: {err}");
+        let last = out.trim_end().lines().last().unwrap_or("");
+        assert!(last.trim_start().starts_with(&format!("locobench {cmd}")), "{cmd} --help ends with: {last}");
+    }
+    // The commands that evaluate share their defaults, and say so.
+    for cmd in ["eval", "report", "baseline"] {
+        let (_, out, _) = locobench(&[cmd, "--help"]);
+        assert!(out.contains("[default: 50]") && out.contains("[default: 0]"), "{cmd}:\n{out}");
+    }
 }

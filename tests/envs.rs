@@ -218,7 +218,8 @@ fn planar_walkers_reward_by_hand_health_and_clipped_velocities() {
         env.reset(Some(3)).unwrap();
         let mut qvel = vec![0.0; env.data().qvel().len()];
         qvel[0] = 50.0;
-        env.set_state(&env.data().qpos().to_vec(), &qvel).unwrap();
+        let qpos = env.data().qpos().to_vec();
+        env.set_state(&qpos, &qvel).unwrap();
         let s = env.step(&vec![0.0; n]).unwrap();
         let nq = env.data().qpos().len();
         assert!(env.data().qvel()[0] > 40.0, "{name}");

@@ -4,7 +4,8 @@
 //!
 //! MuJoCo versions differ (Debian's 2.2.2 here): HalfCheetah and InvertedPendulum have no
 //! version-sensitive contact paths and must agree to rounding; Humanoid and Ant contacts diverge
-//! slowly between versions (REFERENCE §1), so they are compared over their first steps only.
+//! slowly between versions (measured here, docs/environments.md), so they are compared over
+//! their first steps only.
 //! Walker2d agrees to rounding through its contacts; Hopper's contacts (margin 0.001, condim 1
 //! geoms) part between the versions, so it is compared before its foot lands.
 use locobench::envs::{make, EnvConfig};

@@ -117,7 +117,7 @@ impl ReplayBuffer {
         self.obs[i * self.obs_dim..(i + 1) * self.obs_dim].copy_from_slice(obs);
         self.actions[i * self.act_dim..(i + 1) * self.act_dim].copy_from_slice(action);
         self.rewards[i] = reward;
-        self.flags[i] = (terminated as u8) * TERMINATED | (truncated as u8) * TRUNCATED;
+        self.flags[i] = ((terminated as u8) * TERMINATED) | ((truncated as u8) * TRUNCATED);
         if truncated && !terminated {
             self.side_next.insert(i, next_obs.to_vec());
         }

@@ -52,7 +52,7 @@ pub enum WeightInit {
     /// what Stable-Baselines3, CleanRL and the TD3 authors' code start from.
     Uniform,
     /// Orthogonal weights with gain sqrt(2) and zero biases, as jaxrl's `default_init` (the code
-    /// behind the published SAC curves of REFERENCE §5b); SAC's log-std rows get gain 1, as
+    /// behind the published SAC curves: repository ikostrikov/jaxrl, `learning_curves`); SAC's log-std rows get gain 1, as
     /// jaxrl's `log_std_scale`.
     Orthogonal,
 }
@@ -248,7 +248,8 @@ impl TrainConfig {
         self.sac.as_ref().expect("a SAC config")
     }
 
-    /// The defaults each algorithm was published with (REFERENCE §5), from its registry entry.
+    /// The defaults each algorithm was published with (sources in docs/references.md), from its
+    /// registry entry.
     pub fn defaults(algo: Algo) -> TrainConfig {
         (super::registry::entry(algo).defaults)()
     }

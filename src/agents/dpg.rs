@@ -142,7 +142,7 @@ impl Agent for DeterministicAgent {
         self.updates += 1;
 
         let mut losses = Losses { critic: critic_loss.to_scalar::<f32>()? as f64, ..Default::default() };
-        if self.updates % self.policy_delay == 0 {
+        if self.updates.is_multiple_of(self.policy_delay) {
             let pi = self.actor.forward(&obs)?;
             let actor_loss = self.critics.first_frozen(&Self::critic_input(&obs, &pi)?)?.mean_all()?.neg()?;
             let grads = actor_loss.backward()?;

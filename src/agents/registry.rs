@@ -15,8 +15,11 @@ pub struct AlgoEntry {
     /// The keys of its own `config.toml` section (`[train.<name>]`).
     pub settings: &'static [&'static str],
     /// Builds the agent for observation and action sizes, initialised from the RNG.
-    pub build: fn(&TrainConfig, usize, usize, &mut ChaCha8Rng) -> Result<Box<dyn Agent>>,
+    pub build: BuildAgent,
 }
+
+/// Builds an agent from its config, the observation and action sizes and the initialisation RNG.
+pub type BuildAgent = fn(&TrainConfig, usize, usize, &mut ChaCha8Rng) -> Result<Box<dyn Agent>>;
 
 pub const ALGOS: &[AlgoEntry] = &[
     AlgoEntry {
@@ -67,7 +70,7 @@ mod tests {
             assert_eq!(e.algo.name(), e.name);
             assert_eq!((e.defaults)().algo, e.algo);
             // The serialised name is the registry's.
-            let table = toml::Table::try_from(&(e.defaults)()).unwrap();
+            let table = toml::Table::try_from((e.defaults)()).unwrap();
             assert_eq!(table["algo"].as_str(), Some(e.name));
         }
         for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg] {

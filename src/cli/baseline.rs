@@ -1,24 +1,27 @@
 use anyhow::Result;
 use locobench::controller::baseline::{baseline_controller_for, baseline_env, parse_gait, RAMP_TIME};
 use locobench::controller::command::{Command, SpeedProfile};
-use locobench::controller::measure::{measure, summary_cells, SUMMARY_COLUMNS};
+use locobench::controller::measure::{summary_cells, SUMMARY_COLUMNS};
 use locobench::envs::make;
+use locobench::evaluation::Protocol;
 
 #[derive(clap::Args, Debug)]
 pub struct BaselineArgs {
     /// minitaur or ant.
     #[arg(long)]
     pub env: String,
-    /// Forward speed set-points (m/s), comma-separated for a sweep: `--speed 0.35,1.0,2.0`;
-    /// each is reached over the first second.
+    /// The controller's commanded forward speeds (m/s), comma-separated for a sweep:
+    /// `--speed 0.35,1.0,2.0`; each is reached over the first second.
     #[arg(long, value_delimiter = ',', default_value = "0.35")]
     pub speed: Vec<f64>,
     #[command(flatten)]
     pub command: CommandArgs,
-    #[arg(long, default_value_t = 10)]
+    /// Held-out episodes per command (the evaluation protocol's, as `eval` and `report` play).
+    #[arg(long, default_value_t = locobench::evaluation::DEFAULT_EPISODES)]
     pub episodes: usize,
-    #[command(flatten)]
-    pub seed: super::SeedArg,
+    /// Protocol seed: picks the held-out reset seeds, the same ones `eval` and `report` use.
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
     /// trot, bound or pace for Minitaur (bound by default); row (default) or trot for Ant.
     #[arg(long)]
     pub gait: Option<String>,
@@ -80,7 +83,8 @@ pub fn run(args: BaselineArgs) -> Result<()> {
         let speed = command.speed.final_speed();
         let profile = command.speed.clone();
         let mut controller = baseline_controller_for(&args.env, command, gait)?;
-        let eps = measure(env.as_mut(), controller.as_mut(), args.episodes, args.seed.seed, &profile)?;
+        let protocol = Protocol { episodes: args.episodes, seed: args.seed };
+        let eps = protocol.run(env.as_mut(), controller.as_mut(), Some(&profile), None)?;
         let qp_failures = eps.iter().map(|e| e.qp_failures).sum::<f64>();
         line(format!("{speed:.2}"), &summary_cells(&eps, |v| format!("{v:.2}")), qp_failures.to_string());
         if args.limits {

@@ -12,9 +12,10 @@ use locobench::train::{evaluate::evaluate, load_budget_policy, load_policy};
 
 #[derive(clap::Args, Debug)]
 pub struct EvalArgs {
-    /// A run directory (its newest checkpoint), a checkpoint directory, or an exported policy.
-    #[arg(long)]
-    pub checkpoint: PathBuf,
+    /// A trained policy: a run directory (its newest checkpoint), a checkpoint directory, or an
+    /// exported policy. `--checkpoint` is the old spelling.
+    #[arg(long, alias = "checkpoint", value_name = "RUN_DIR|CHECKPOINT|POLICY_DIR")]
+    pub policy: PathBuf,
     /// Evaluate the actor the run saved at this step budget (`policies/step-N.safetensors`).
     #[arg(long)]
     pub budget: Option<u64>,
@@ -35,14 +36,15 @@ pub struct EvalArgs {
 }
 
 pub fn run(args: EvalArgs) -> Result<()> {
+    super::deprecated_flag("--checkpoint", "--policy");
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
     let (run, agent) = match args.budget {
-        Some(b) => load_budget_policy(&args.checkpoint, b)?,
-        None => load_policy(&args.checkpoint)?,
+        Some(b) => load_budget_policy(&args.policy, b)?,
+        None => load_policy(&args.policy)?,
     };
     let env_cfg = args.env_options.apply(run.env.clone())?;
     let mut env = make(&env_cfg)?;
-    let what = format!("{} {} on {}", args.checkpoint.display(), run.train.algo.name(), run.env.name);
+    let what = format!("{} {} on {}", args.policy.display(), run.train.algo.name(), run.env.name);
     if args.training_seeds {
         let e = evaluate(agent.as_ref(), env.as_mut(), args.episodes, run.seed)?;
         println!(
@@ -69,9 +71,12 @@ pub fn run(args: EvalArgs) -> Result<()> {
     println!("{what}: {} held-out episodes (protocol seed {})", eps.len(), args.seed);
     println!(
         "  return  mean {} (95% CI over episodes)",
-        interval(estimate(&[returns.clone()], stats::mean, BOOTSTRAP_SEED).interval, fmt)
+        interval(estimate(std::slice::from_ref(&returns), stats::mean, BOOTSTRAP_SEED).interval, fmt)
     );
-    println!("  return  IQM  {}", interval(estimate(&[returns.clone()], stats::iqm, BOOTSTRAP_SEED ^ 1).interval, fmt));
+    println!(
+        "  return  IQM  {}",
+        interval(estimate(std::slice::from_ref(&returns), stats::iqm, BOOTSTRAP_SEED ^ 1).interval, fmt)
+    );
     println!("  return  sample std {:.3}", stats::sample_std(&returns));
     println!("  falls   {falls}/{} ({:.2}-{:.2})", eps.len(), w.low, w.high);
     println!("  length  {:.1}", stats::mean(&eps.iter().map(|e| e.length as f64).collect::<Vec<_>>()));

@@ -4,16 +4,18 @@ use anyhow::Result;
 
 #[derive(clap::Args, Debug)]
 pub struct ExportArgs {
-    /// A checkpoint directory, or a run directory (its newest checkpoint).
-    #[arg(long)]
-    pub checkpoint: PathBuf,
+    /// A trained policy: a run directory (its newest checkpoint) or a checkpoint directory.
+    /// `--checkpoint` is the old spelling.
+    #[arg(long, alias = "checkpoint", value_name = "RUN_DIR|CHECKPOINT")]
+    pub policy: PathBuf,
     /// Where to write policy.safetensors (the actor only), config.toml and metrics.csv.
     #[arg(long)]
     pub out: PathBuf,
 }
 
 pub fn run(args: ExportArgs) -> Result<()> {
-    let file = locobench::train::export_policy(&args.checkpoint, &args.out)?;
+    super::deprecated_flag("--checkpoint", "--policy");
+    let file = locobench::train::export_policy(&args.policy, &args.out)?;
     let size = std::fs::metadata(&file)?.len();
     println!(
         "wrote {} ({:.0} KB); eval, record and report take {} like a run directory",

@@ -1,5 +1,6 @@
 //! The `locobench` command line.
 mod baseline;
+mod docs;
 mod envs;
 mod eval;
 mod export;
@@ -22,23 +23,44 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// List the environments with their observation/action sizes and control period.
+    #[command(after_help = "Example:\n  locobench envs")]
     Envs,
     /// Run a simple policy (random, zero, or recorded actions) and write every step to CSV.
+    #[command(
+        after_help = "Example:\n  locobench rollout --env ant --policy random --episodes 2 --seed 0 --out ant.csv"
+    )]
     Rollout(rollout::RolloutArgs),
     /// Train TD3, SAC or DDPG; resume a run; fine-tune from a checkpoint.
+    #[command(
+        after_help = "Example:\n  locobench train --env inverted-pendulum --algo sac --seed 0 --out runs/pendulum-sac"
+    )]
     Train(train::TrainArgs),
     /// Evaluate a checkpoint: mean and std of the return and of every reward term.
+    #[command(after_help = "Example:\n  locobench eval --policy models/policies/minitaur-td3 --episodes 50 --seed 0")]
     Eval(eval::EvalArgs),
     /// Write a run's policy alone (actor weights, config, metrics) to share or ship.
+    #[command(after_help = "Example:\n  locobench export --policy runs/pendulum-sac --out my-policy")]
     Export(export::ExportArgs),
     /// Run the Raibert/QP baseline controller and report how it walks.
+    #[command(after_help = "Example:\n  locobench baseline --env minitaur --speed 0.5,1.0,1.5 --episodes 50 --seed 0")]
     Baseline(baseline::BaselineArgs),
     /// Write a rerun recording (.rrd) of a policy's rollouts: checkpoint, raibert, random, zero.
+    #[command(
+        after_help = "Example:\n  locobench record --env minitaur --policy raibert --speed 1.0 --out minitaur.rrd"
+    )]
     Record(record::RecordArgs),
     /// Write an HTML + Markdown report of runs: learning curves, baseline vs RL.
+    #[command(
+        after_help = "Example:\n  locobench report --runs models/policies/minitaur-td3 --out report --episodes 10"
+    )]
     Report(report::ReportArgs),
     /// Train a grid of reward weights x algorithms x seeds, each job a separate process.
+    #[command(
+        after_help = "Example:\n  locobench sweep --env inverted-pendulum --algo td3,ddpg --seeds 2 --jobs 2 --out sweeps/pendulum"
+    )]
     Sweep(sweep::SweepArgs),
+    /// Rewrite the generated sections of README.md and docs/ from the committed result files.
+    Docs(docs::DocsArgs),
 }
 
 pub fn run() -> Result<()> {
@@ -52,6 +74,14 @@ pub fn run() -> Result<()> {
         Command::Record(args) => record::run(args),
         Command::Report(args) => report::run(args),
         Command::Sweep(args) => sweep::run(args),
+        Command::Docs(args) => docs::run(args),
+    }
+}
+
+/// Prints a deprecation note when the command line uses an old spelling of a flag.
+fn deprecated_flag(old: &str, new: &str) {
+    if std::env::args().any(|a| a == old || a.starts_with(&format!("{old}="))) {
+        eprintln!("note: {old} is deprecated; use {new} (same meaning)");
     }
 }
 

@@ -15,14 +15,17 @@ pub struct RecordArgs {
     /// Environment name (see `locobench envs`); optional with a checkpoint (its run's env).
     #[arg(long)]
     pub env: Option<String>,
-    /// A checkpoint (or run directory), `raibert`, `random`, `zero`, or `actions:FILE.csv`.
+    /// A trained policy (run directory, checkpoint or exported policy), `raibert` (the
+    /// controller), `random`, `zero`, or `actions:FILE.csv`.
     #[arg(long)]
     pub policy: String,
+    /// Episodes to record, one after another (reset seeds from --seed on).
     #[arg(long, default_value_t = 1)]
     pub episodes: usize,
     #[command(flatten)]
     pub seed: super::SeedArg,
-    /// Speed set-point of the Raibert controller (m/s), reached over the first second.
+    /// The controller's commanded forward speed (m/s), reached over the first second (as in
+    /// `baseline`).
     #[arg(long, default_value_t = 0.35)]
     pub speed: f64,
     #[command(flatten)]

@@ -31,7 +31,7 @@ pub fn simple_policy(spec: &str, seed: u64) -> Result<Box<dyn Policy>> {
     Ok(match spec {
         "zero" => Box::new(ZeroPolicy),
         // The policy's stream is distinct from the environment's (which uses `seed` itself).
-        "random" => Box::new(RandomPolicy::new(seed ^ 0x5eed_0f_ac71_0e5)),
+        "random" => Box::new(RandomPolicy::new(seed ^ 0x0005_eed0_fac7_10e5)),
         s if s.starts_with("actions:") => Box::new(ReplayPolicy::from_csv(&s["actions:".len()..])?),
         other => bail!("unknown policy '{other}': use random, zero or actions:FILE.csv"),
     })

@@ -2,7 +2,7 @@
 //!
 //! Ant's hips turn about the vertical and its legs sit on the body's diagonals, so a trot moves
 //! the body at 45° to its heading, and pinned feet cannot carry it straight without pitching it
-//! (README, "Why Ant cannot trot straight on pinned feet"). Turned -45°, legs 2 and 4 point
+//! (benches/results/2026-11-23-amd-epyc-controller/NOTES.md, "Why Ant cannot trot straight"). Turned -45°, legs 2 and 4 point
 //! across the direction of travel: their hip strokes move the feet along the travel line at
 //! almost constant reach, so they row the body straight ahead, while legs 1 and 3, along the
 //! travel line, hold one pose and slide as skids. The controller first turns on the spot into that pose (both diagonal
@@ -113,7 +113,7 @@ impl AntRowParams {
     /// 0.42 m at 0.35 m/s and 0.71 m at 0.5 (the fast posture: 2.1 and 3.2 m), for about half
     /// the energy. It does not reach 1.0 m/s, hence the fast posture. Found by coordinate
     /// searches over these settings on reset seeds 0-29, checked on seeds 200-229 and 300-399
-    /// (README).
+    /// (benches/results/2026-11-23-amd-epyc-controller/NOTES.md).
     pub fn steady() -> AntRowParams {
         AntRowParams {
             duty_factor: 0.63,
@@ -390,11 +390,9 @@ impl AntRowController {
                 self.side_was_in_stance = side.in_stance;
                 let goal = p.command.speed.at(self.time);
                 let stroke_amplitude = self.feed_forward_stroke(goal) + sign(goal) * self.stroke_integral;
-                for k in 0..LEGS {
-                    let skid_ankle = if side.in_stance { p.skid_stance_ankle } else { p.skid_ankle };
-                    targets[k] = (0.0, skid_ankle, p.skid_kp, p.joint_kd);
-                    self.last_phase[k] = (true, 0.0);
-                }
+                let skid_ankle = if side.in_stance { p.skid_stance_ankle } else { p.skid_ankle };
+                targets.fill((0.0, skid_ankle, p.skid_kp, p.joint_kd));
+                self.last_phase.fill((true, 0.0));
                 // The free joint's angular velocity about the body's z axis stands for the yaw
                 // rate: the body stays within a few degrees of level.
                 let yaw_correction = p.yaw_gain * yaw_error + p.yaw_damping * (v[5] - p.command.yaw_rate);

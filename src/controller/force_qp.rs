@@ -1,4 +1,4 @@
-//! Stance-force distribution (REFERENCE §4): find ground reaction forces f at the stance feet
+//! Stance-force distribution (Cheetah-Software's BalanceController, mit-biomimetics/Cheetah-Software): find ground reaction forces f at the stance feet
 //! that best produce a desired body wrench b,
 //!     minimise (A f - b)' S (A f - b) + alpha |f|^2
 //!     subject to |f_x|, |f_y| <= mu f_z and f_min <= f_z <= f_max,
@@ -246,7 +246,7 @@ impl ForceQp {
                         // An absolute duality gap of 1e-6 (the relative one stays at 1e-8: the
                         // solver's objective omits b'Sb, so a relative test would stop early)
                         // and no iterative refinement: about half the solve time
-                        // (benches/controller.rs, README), same cost to 1e-4 (tests below).
+                        // (benches/controller.rs), same cost to 1e-4 (tests below).
                         .tol_gap_abs(1e-6)
                         .tol_feas(1e-6)
                         .iterative_refinement_enable(false)

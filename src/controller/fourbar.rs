@@ -19,7 +19,7 @@ pub fn forward(outer: f64, inner: f64) -> Option<[f64; 2]> {
     let (a, b) = knees(outer, inner);
     let (dx, dz) = (b[0] - a[0], b[1] - a[1]);
     let d = (dx * dx + dz * dz).sqrt();
-    if d < 1e-12 || d > 2.0 * LOWER {
+    if !(1e-12..=2.0 * LOWER).contains(&d) {
         return None;
     }
     let h = (LOWER * LOWER - 0.25 * d * d).sqrt();
@@ -72,7 +72,7 @@ mod tests {
             let depth = -UPPER * theta.cos() + (LOWER * LOWER - (UPPER * theta.sin()).powi(2)).sqrt();
             assert!(f[0].abs() < 1e-12 && (f[1] + depth).abs() < 1e-12, "{theta}: {f:?}");
         }
-        // Zero leg-model action (5pi/8) puts the foot about 0.213 m below the axis (REFERENCE: 0.215).
+        // Zero leg-model action (5pi/8) puts the foot about 0.213 m below the axis (PyBullet's minitaur.py: 0.215).
         assert!((forward(5.0 * PI / 8.0, 5.0 * PI / 8.0).unwrap()[1] + 0.2129).abs() < 1e-3);
     }
 

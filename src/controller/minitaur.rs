@@ -56,7 +56,7 @@ pub struct MinitaurGaitParams {
     /// The swing gain grows with the commanded speed, swing_kp x clamp(|v| / this, 1, 2): a
     /// swing lasts about 43 ms whatever the speed while the stride grows with it, and with the
     /// low-speed gain the feet landed 10-11 cm short of their footholds at 1.1-1.2 m/s and the
-    /// robot fell (`baseline --limits`, README). A stiffer swing at low speed only costs energy.
+    /// robot fell (`baseline --limits`; benches/results/2026-11-23-amd-epyc-controller/NOTES.md). A stiffer swing at low speed only costs energy.
     pub swing_gain_speed: f64,
     /// Friction coefficient the force QP assumes: the lowest foot friction PyBullet's
     /// randomisation draws (0.8).

@@ -1,4 +1,4 @@
-//! The conventional baseline: Raibert-style gaits with QP force distribution (REFERENCE §3-4).
+//! The conventional baseline: Raibert-style gaits with QP force distribution (Raibert 1986; MIT Cheetah-Software's BalanceController; docs/controller.md).
 //! Gait scheduling, Raibert foot placement, Minitaur four-bar leg kinematics, the stance-force
 //! QP (clarabel), and the Minitaur and Ant controllers, which implement the same `Policy`
 //! interface as every other policy and run through the same `Env`, scored by the same reward.

@@ -157,7 +157,7 @@ pub fn command_for(grid: &[SpeedPoint], speed: f64) -> Result<f64, String> {
     let Some(&(top, top_cmd)) = working.last() else {
         return Err("the controller works at no speed of the grid".into());
     };
-    if !(speed > 0.0) {
+    if speed.is_nan() || speed <= 0.0 {
         return Err(format!("the policy does not move forward ({speed:.3} m/s)"));
     }
     if speed > top * (1.0 + 1e-9) {

@@ -42,6 +42,9 @@ impl ObjKind {
     }
 }
 
+/// A mesh's vertices (x y z each) and triangles (three vertex indices each).
+pub type MeshData = (Vec<[f32; 3]>, Vec<[u32; 3]>);
+
 pub struct Model {
     ptr: NonNull<sys::mjModel>,
 }
@@ -297,7 +300,7 @@ impl Model {
         self.raw().nmesh.max(0) as usize
     }
     /// Vertices (x y z each) and triangles (three vertex indices each) of mesh `mesh`.
-    pub fn mesh(&self, mesh: usize) -> MjResult<(Vec<[f32; 3]>, Vec<[u32; 3]>)> {
+    pub fn mesh(&self, mesh: usize) -> MjResult<MeshData> {
         let count = self.nmesh();
         if mesh >= count {
             return Err(MjError::BadIndex { kind: "mesh", index: mesh, count });

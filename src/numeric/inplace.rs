@@ -2,7 +2,7 @@
 //! over the parameter, no temporary tensors).
 //! candle's tensor expressions allocate a new tensor per operation, and `Var::set` copies once
 //! more; the throughput bench measured those as the biggest cost outside the matmuls
-//! (README, "Training throughput"). Each kernel is tested against the tensor expression it
+//! (benches/results/2026-11-22-amd-epyc-training/NOTES.md, "Training throughput"). Each kernel is tested against the tensor expression it
 //! replaces.
 use std::cell::RefCell;
 

@@ -153,7 +153,7 @@ fn wait_for(state: &AtomicU32, wanted: &[u32]) -> u32 {
             return now;
         }
         spins = spins.wrapping_add(1);
-        if spins % 256 == 0 {
+        if spins.is_multiple_of(256) {
             let waited = started.elapsed();
             if waited >= SPIN {
                 std::thread::park();

@@ -8,7 +8,6 @@ use crate::mujoco::{Model, ObjKind};
 
 // MuJoCo's geom type codes (mjtGeom).
 const PLANE: i32 = 0;
-const HFIELD: i32 = 1;
 const SPHERE: i32 = 2;
 const CAPSULE: i32 = 3;
 const ELLIPSOID: i32 = 4;
@@ -157,7 +156,7 @@ pub fn log_scene(rec: &RecordingStream, model: &Model) -> Result<Vec<String>> {
                     &rerun::Mesh3D::new(verts).with_triangle_indices(faces).with_albedo_factor(c.0),
                 )?;
             }
-            HFIELD | _ => continue,
+            _ => continue, // height fields (1) and anything newer are not drawn
         }
         written.push(path);
     }

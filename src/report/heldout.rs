@@ -140,7 +140,7 @@ pub fn evaluate_row(
         row.env_config.get_or_insert(cfg.env.clone());
         row.evaluated.push(SeedResult { run_dir: run.dir.clone(), seed: cfg.seed, episodes });
         machines.insert(machine_of(run, budget));
-        if let Some(w) = run.metrics.iter().filter(|m| m.step <= budget).last().map(|m| m.wall_time) {
+        if let Some(w) = run.metrics.iter().rfind(|m| m.step <= budget).map(|m| m.wall_time) {
             walls.push(w);
         }
     }

@@ -31,6 +31,8 @@ pub use format::fmt_return;
 /// The held-out rows and the controller grids as data, beside the report (what docs quote).
 pub const HELD_OUT_CSV: &str = "held_out.csv";
 pub const CONTROLLER_CSV: &str = "controller.csv";
+pub const CURVES_CSV: &str = "curves.csv";
+pub const VERSUS_CONTROLLER_CSV: &str = "versus_controller.csv";
 
 /// Seed of every bootstrap in the report.
 pub const BOOTSTRAP_SEED: u64 = 2021;
@@ -141,6 +143,11 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
     sections::runs(&mut doc, &runs);
     write_bytes_atomic(&out.join(HELD_OUT_CSV), data::held_out_csv(&report.rows).as_bytes())?;
     write_bytes_atomic(&out.join(CONTROLLER_CSV), data::controller_csv(&report.controllers).as_bytes())?;
+    write_bytes_atomic(&out.join(CURVES_CSV), data::curves_csv(&envs).as_bytes())?;
+    write_bytes_atomic(
+        &out.join(VERSUS_CONTROLLER_CSV),
+        data::versus_controller_csv(&report.rows, &report.controllers).as_bytes(),
+    )?;
     write_bytes_atomic(&report.index, doc.to_html().as_bytes())?;
     write_bytes_atomic(&report.readme, doc.to_markdown().as_bytes())?;
     Ok(report)

@@ -150,6 +150,11 @@ impl Group {
         label
     }
 
+    /// Shipped settings and the env's default reward: what published curves are comparable with.
+    pub fn is_default_setting(&self) -> bool {
+        self.settings.is_empty() && self.reward == "default reward"
+    }
+
     /// Algorithm, reward and settings in full.
     pub fn description(&self) -> String {
         let settings = if self.settings.is_empty() { "shipped settings".to_string() } else { self.settings.clone() };

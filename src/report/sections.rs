@@ -117,6 +117,7 @@ pub fn learning_curves(
         &[
             "policy",
             "seeds",
+            "evaluation episodes",
             "last common step",
             "evaluation there (mean ± sample std over seeds)",
             "normalised AUC",
@@ -485,7 +486,7 @@ fn pushes(
     let pushed_rows: Vec<(usize, &Group, &Vec<&Run>)> = groups
         .iter()
         .filter_map(|(g, rs)| {
-            rows.iter().enumerate().filter(|(_, r)| &r.group == *g && r.seeds() > 0).last().map(|(i, _)| (i, *g, *rs))
+            rows.iter().enumerate().rfind(|(_, r)| &r.group == *g && r.seeds() > 0).map(|(i, _)| (i, *g, *rs))
         })
         .collect();
     let matched_speed = |i: usize| {

@@ -343,7 +343,7 @@ impl Trainer {
             }
 
             // Evaluate.
-            if self.step % cfg.eval_every == 0 || self.step == cfg.total_steps {
+            if self.step.is_multiple_of(cfg.eval_every) || self.step == cfg.total_steps {
                 let e = evaluate(self.agent.as_ref(), self.eval_env.as_mut(), cfg.eval_episodes, self.seed)?;
                 best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
@@ -357,7 +357,7 @@ impl Trainer {
                 if let Some(r) = &mut recorder {
                     r.curves(self.metrics.last().unwrap())?;
                     let evaluations = self.metrics.iter().filter(|m| m.kind == "eval").count() as u64;
-                    if (evaluations - 1) % control.record_every.max(1) == 0 {
+                    if (evaluations - 1).is_multiple_of(control.record_every.max(1)) {
                         r.evaluation_rollout(self.agent.as_ref(), self.step, self.seed)?;
                     }
                 }

@@ -1,4 +1,4 @@
-//! PyBullet's Minitaur leg model (`minitaur.py`, ConvertFromLegModel; REFERENCE §3): per leg one
+//! PyBullet's Minitaur leg model (bullet3's `pybullet_envs/bullet/minitaur.py`, `ConvertFromLegModel`): per leg one
 //! swing and one extension command in [-1, 1] become the two motors' desired angles.
 use std::f64::consts::PI;
 
@@ -8,7 +8,7 @@ pub const NUM_LEGS: usize = 4;
 
 /// Sign of the swing term for motor `i`: (-1)^i on the left legs, -(-1)^i on the right legs.
 pub fn swing_sign(motor: usize) -> f64 {
-    let alternating = if motor % 2 == 0 { 1.0 } else { -1.0 };
+    let alternating = if motor.is_multiple_of(2) { 1.0 } else { -1.0 };
     if motor < 4 {
         alternating
     } else {

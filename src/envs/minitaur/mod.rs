@@ -1,4 +1,4 @@
-//! Minitaur as PyBullet's `MinitaurBulletEnv` defines it (REFERENCE §3): 28-dim observation
+//! Minitaur as PyBullet's `MinitaurBulletEnv` defines it (bulletphysics/bullet3, `examples/pybullet/gym/pybullet_envs/bullet/minitaur_gym_env.py`): 28-dim observation
 //! (motor angles, velocities, observed torques, base quaternion x-y-z-w), 8 actions through the
 //! leg model, PD motor model applied every 0.002 s physics step, 100 Hz control, reward
 //! distance * dx - energy * |tau . qdot| * dt - drift * |dy| - shake * |dz|, falls end episodes.

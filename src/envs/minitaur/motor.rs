@@ -1,4 +1,4 @@
-//! The Minitaur motor model of PyBullet's `motor.py` (REFERENCE §3): a PD loop produces a PWM
+//! The Minitaur motor model of PyBullet's `pybullet_envs/bullet/motor.py` (bulletphysics/bullet3): a PD loop produces a PWM
 //! duty cycle; the battery voltage, back-EMF and winding resistance give a current; a measured
 //! current-torque curve gives the torque.
 

@@ -1,0 +1,94 @@
+"""Env steps per second through the Python API, beside Gymnasium's own MuJoCo envs, in one run.
+
+    python python/bench_speed.py [STEPS] > benches/results/<date>-<machine>/python-speed.csv
+
+Per env: (1) locobench through gymnasium.make (wrappers, NumPy conversions), (2) the same env's
+raw binding call per step (one Python-to-Rust crossing), (3) the same steps looped in Rust (no
+crossing), and (4) Gymnasium's own v5 env (MuJoCo 4.0 from PyPI) through gymnasium.make. The
+binding's overhead per step is (2) - (3). Zero actions; episodes reset when they end.
+"""
+import os
+import platform
+import subprocess
+import sys
+import time
+
+import gymnasium as gym
+import numpy as np
+
+import locobench
+
+ENVS = [("half-cheetah", "HalfCheetah-v5"), ("hopper", "Hopper-v5"), ("ant", "Ant-v5"), ("minitaur", None)]
+
+
+def rate(step, n):
+    step(n // 10)  # warm up
+    start = time.perf_counter()
+    step(n)
+    return n / (time.perf_counter() - start)
+
+
+def gym_loop(env):
+    action = np.zeros(env.action_space.shape, dtype=np.float32)
+    env.reset(seed=0)
+
+    def run(n):
+        for _ in range(n):
+            _, _, term, trunc, _ = env.step(action)
+            if term or trunc:
+                env.reset()
+
+    return run
+
+
+def raw_loop(env):
+    core = env.unwrapped._core
+    action = [0.0] * env.action_space.shape[0]
+    core.reset(0)
+
+    def run(n):
+        for _ in range(n):
+            _, _, term, trunc, _ = core.step(action)
+            if term or trunc:
+                core.reset(None)
+
+    return run
+
+
+def rust_loop(env):
+    core = env.unwrapped._core
+    action = [0.0] * env.action_space.shape[0]
+    core.reset(0)
+    return lambda n: core.step_repeat(action, n)
+
+
+def cpu():
+    for line in open("/proc/cpuinfo"):
+        if line.startswith("model name"):
+            return line.split(":", 1)[1].strip()
+    return platform.processor()
+
+
+def main():
+    steps = int(sys.argv[1]) if len(sys.argv) > 1 else 20000
+    commit = subprocess.run(["git", "rev-parse", "--short=10", "HEAD"], capture_output=True, text=True).stdout.strip()
+    if subprocess.run(["git", "diff", "--quiet", "HEAD", "--", "src", "python", "Cargo.toml"]).returncode != 0:
+        commit += "+dirty"
+    flags = open("/proc/cpuinfo").read()
+    simd = "avx512" if "avx512f" in flags else "avx2" if "avx2" in flags else "sse"
+    note = os.environ.get("LOCOBENCH_BENCH_NOTE", "")
+    print(f"# machine: {cpu()} ({simd}), {os.cpu_count()} cores; commit {commit}; python {platform.python_version()}, "
+          f"gymnasium {gym.__version__}; command: python python/bench_speed.py {steps}" + (f"; {note}" if note else ""))
+    print("env,locobench_gym_steps_per_s,locobench_raw_steps_per_s,locobench_rust_steps_per_s,binding_overhead_us,gymnasium_steps_per_s")
+    for name, gym_id in ENVS:
+        ours = gym.make(locobench.ENV_IDS[name])
+        g = rate(gym_loop(ours), steps)
+        raw = rate(raw_loop(ours), steps)
+        rust = rate(rust_loop(ours), steps)
+        overhead = (1 / raw - 1 / rust) * 1e6
+        theirs = rate(gym_loop(gym.make(gym_id)), steps) if gym_id else float("nan")
+        print(f"{name},{g:.0f},{raw:.0f},{rust:.0f},{overhead:.2f},{theirs:.0f}")
+
+
+if __name__ == "__main__":
+    main()

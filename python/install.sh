@@ -1,0 +1,23 @@
+#!/usr/bin/env bash
+# Builds the locobench Python package (release) and installs it into a virtual environment,
+# creating it if needed, with Gymnasium and NumPy. On a fresh Debian 12 machine, as root or with
+# sudo; needs a Rust toolchain.
+#
+#   bash python/install.sh [VENV]        (default .venv; then: source VENV/bin/activate)
+set -euo pipefail
+cd "$(dirname "$0")/.."
+venv=${1:-.venv}
+profile=${LOCOBENCH_PY_PROFILE:-release}
+bash scripts/setup.sh
+if ! python3 -m venv --help >/dev/null 2>&1 || ! python3 -c "import ensurepip" >/dev/null 2>&1; then
+  SUDO=""; [ "$(id -u)" -ne 0 ] && SUDO="sudo"
+  $SUDO apt-get install -y -q python3-venv
+fi
+[ -x "$venv/bin/python" ] || python3 -m venv "$venv"
+"$venv/bin/pip" install -q --upgrade "maturin>=1.5,<2" "gymnasium>=1.0" numpy ${LOCOBENCH_PY_EXTRA:-}
+# dev builds share their compiled dependencies with `cargo test` (same target directory and
+# settings), which keeps the test command's clock short.
+if [ "$profile" = release ]; then flag=--release; else flag=; fi
+VIRTUAL_ENV="$PWD/$venv" PATH="$PWD/$venv/bin:$PATH" CARGO_INCREMENTAL=0 \
+  "$venv/bin/maturin" develop -q $flag -m python/Cargo.toml
+"$venv/bin/python" -c "import locobench; print('locobench', 'installed into $venv:', ', '.join(locobench.ENV_IDS.values()))"

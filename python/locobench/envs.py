@@ -1,0 +1,115 @@
+"""Every locobench environment as a Gymnasium environment."""
+import json
+import numbers
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from locobench import _core
+
+# Gymnasium ids: the Gymnasium-v5 tasks keep their version; Minitaur is this project's first.
+ENV_IDS = {
+    "minitaur": "locobench/Minitaur-v0",
+    "half-cheetah": "locobench/HalfCheetah-v5",
+    "ant": "locobench/Ant-v5",
+    "humanoid": "locobench/Humanoid-v5",
+    "inverted-pendulum": "locobench/InvertedPendulum-v5",
+    "walker2d": "locobench/Walker2d-v5",
+    "hopper": "locobench/Hopper-v5",
+}
+
+_NO_RENDERING = (
+    "render_mode={!r}: this build has no rendering (Debian's MuJoCo 2.2.2 needs an OpenGL context "
+    "for offscreen images, which a headless machine lacks); record rollouts with `locobench record` "
+    "and view them in the rerun viewer"
+)
+
+
+def _toml_value(key, value):
+    """An option value as the TOML text the Rust side parses."""
+    if isinstance(value, (bool, np.bool_)):
+        return "true" if value else "false"
+    if isinstance(value, numbers.Integral):
+        return str(int(value))
+    if isinstance(value, numbers.Real):
+        value = float(value)
+        if not np.isfinite(value):
+            raise ValueError(f"option {key}: {value} is not finite")
+        return repr(value)
+    if isinstance(value, str):
+        return json.dumps(value)
+    if isinstance(value, (list, tuple)):
+        return "[" + ", ".join(_toml_value(key, v) for v in value) + "]"
+    raise TypeError(f"option {key}: {value!r} is not a bool, number, string or list")
+
+
+class LocobenchEnv(gym.Env):
+    """A locobench environment (Rust and MuJoCo underneath) with Gymnasium's API.
+
+    ``name`` is the env's locobench name (``locobench.env_names()``); every other keyword is an
+    env option (``locobench envs`` and docs/environments.md list them), and ``reward`` maps
+    reward-term names to weights. ``info["reward_terms"]`` holds each term's signed contribution;
+    they sum to the reward. The episode limit is the env's own ``max_episode_steps`` option
+    (truncation), so no TimeLimit wrapper is needed.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(self, name, render_mode=None, reward=None, _option_pairs=None, **options):
+        if render_mode is not None:
+            raise ValueError(_NO_RENDERING.format(render_mode))
+        self.render_mode = None
+        pairs = list(_option_pairs or [])
+        pairs += [(k, _toml_value(k, v)) for k, v in options.items()]
+        weights = [(str(t), float(w)) for t, w in (reward or {}).items()]
+        self._core = _core.Env(name, pairs, weights)
+        self.name = self._core.name
+        low, high = self._core.observation_bounds
+        self.observation_space = spaces.Box(np.array(low), np.array(high), dtype=np.float64)
+        low, high = self._core.action_bounds
+        self.action_space = spaces.Box(
+            np.array(low, dtype=np.float32), np.array(high, dtype=np.float32), dtype=np.float32
+        )
+        self.metadata = {"render_modes": [], "render_fps": int(round(1.0 / self._core.dt))}
+        self.episode = -1
+
+    def reset(self, *, seed=None, options=None):
+        """Starts an episode. ``seed`` reseeds the env's own stream; without one it continues."""
+        super().reset(seed=seed)
+        if options:
+            raise ValueError("reset(options=...) is not supported: give env options to gymnasium.make")
+        if seed is not None and (not isinstance(seed, numbers.Integral) or seed < 0):
+            raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
+        obs, info = self._core.reset(None if seed is None else int(seed))
+        self.episode += 1
+        return np.asarray(obs, dtype=np.float64), info
+
+    def step(self, action):
+        a = np.asarray(action)
+        if a.dtype.kind not in "fiu":
+            raise TypeError(f"action dtype {a.dtype} is not numeric")
+        if a.shape != self.action_space.shape:
+            raise ValueError(f"action shape {a.shape}, expected {self.action_space.shape}")
+        obs, reward, terminated, truncated, info = self._core.step(a.astype(np.float64).ravel().tolist())
+        return np.asarray(obs, dtype=np.float64), float(reward), bool(terminated), bool(truncated), info
+
+    def set_state(self, qpos, qvel):
+        """Overwrites the simulation's positions and velocities (Gymnasium MujocoEnv's set_state)."""
+        self._core.set_state(np.asarray(qpos, dtype=np.float64).tolist(), np.asarray(qvel, dtype=np.float64).tolist())
+
+    @property
+    def state(self):
+        """(qpos, qvel) of the simulation now."""
+        qpos, qvel = self._core.state
+        return np.asarray(qpos), np.asarray(qvel)
+
+    def render(self):
+        return None
+
+
+def register_envs():
+    """Registers every locobench env with Gymnasium (done on import)."""
+    for name, env_id in ENV_IDS.items():
+        if env_id not in gym.registry:
+            gym.register(id=env_id, entry_point="locobench.envs:LocobenchEnv", kwargs={"name": name})

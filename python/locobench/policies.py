@@ -1,0 +1,83 @@
+"""The controller and trained policies, called the way Stable-Baselines3 policies are."""
+import os
+
+import gymnasium as gym
+import numpy as np
+
+from locobench import _core
+from locobench.envs import LocobenchEnv
+
+
+class Controller:
+    """The Raibert/QP controller, commanded to a forward speed (m/s) and yaw rate (rad/s).
+
+    It reads the whole simulation state, not only the observation, so it drives a locobench env:
+    pass an env name to get one made in the controller's action mode (``controller.env``), or an
+    env made with the options ``Controller.env_options(name)`` lists. ``predict`` follows SB3.
+    """
+
+    def __init__(self, env, speed=0.35, yaw_rate=0.0, gait=None):
+        if isinstance(env, str):
+            env = make_controller_env(env)
+        base = env.unwrapped if isinstance(env, gym.Env) else env
+        if not isinstance(base, LocobenchEnv):
+            raise TypeError("Controller drives a locobench env (or give an env name)")
+        for key, value in _core.Controller.env_options(base.name):
+            if base._core.option_value(key) != value:
+                raise ValueError(
+                    f"the controller needs the env made with {key}={value} "
+                    f"(Controller.env_options('{base.name}')); this one has {base._core.option_value(key)}"
+                )
+        self._core = _core.Controller(base.name, float(speed), float(yaw_rate), gait)
+        self.env = env
+        self._base = base
+        self._episode = None
+
+    @staticmethod
+    def env_options(name):
+        """The options an env needs for the controller to drive it, as a dict of TOML texts."""
+        return dict(_core.Controller.env_options(name))
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        """(action, state) for the env's current state, as SB3's ``predict``."""
+        if self._base.episode != self._episode:
+            self._episode = self._base.episode
+            self._core.begin_episode(max(self._episode, 0))
+        obs = np.asarray(observation, dtype=np.float64).ravel().tolist()
+        return np.asarray(self._core.act(self._base._core, obs), dtype=np.float32), state
+
+
+def make_controller_env(name, **options):
+    """A Gymnasium env in the controller's action mode (Minitaur: torque actions)."""
+    from locobench.envs import ENV_IDS
+
+    if name not in ENV_IDS:
+        raise ValueError(f"unknown env '{name}': one of {sorted(ENV_IDS)}")
+    return gym.make(ENV_IDS[name], _option_pairs=list(_core.Controller.env_options(name)), **options)
+
+
+class TrainedPolicy:
+    """A trained actor acting deterministically; ``predict`` follows SB3."""
+
+    def __init__(self, path):
+        self._core = _core.TrainedPolicy(os.fspath(path))
+        self.env_name = self._core.env
+
+    def make_env(self, **options):
+        """A Gymnasium env with the options the policy was trained with (and any given here)."""
+        from locobench.envs import ENV_IDS
+
+        return gym.make(ENV_IDS[self.env_name], _option_pairs=list(self._core.env_options), **options)
+
+    def predict(self, observation, state=None, episode_start=None, deterministic=True):
+        """(action, state): the actor's action for one observation, in the env's bounds."""
+        obs = np.asarray(observation, dtype=np.float64)
+        if obs.ndim == 2:
+            actions = [self._core.act(o.tolist()) for o in obs]
+            return np.asarray(actions, dtype=np.float32), state
+        return np.asarray(self._core.act(obs.ravel().tolist()), dtype=np.float32), state
+
+
+def load_policy(path):
+    """A trained policy from a run directory, a checkpoint or an exported policy directory."""
+    return TrainedPolicy(path)

@@ -1,0 +1,89 @@
+//! Sections quoting the newest speed and memory measurements (`bash benches/speed.sh`).
+use std::fmt::Write as _;
+use std::path::{Path, PathBuf};
+
+use anyhow::{bail, Context, Result};
+
+use super::csv_rows::{comments, read};
+
+/// The newest `benches/results/<date>-<machine>/<file>`: directories sort by their date prefix.
+fn newest(results: &Path, file: &str) -> Result<PathBuf> {
+    let mut dirs: Vec<PathBuf> = std::fs::read_dir(results)
+        .with_context(|| format!("reading {}", results.display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.join(file).is_file())
+        .collect();
+    dirs.sort();
+    match dirs.pop() {
+        Some(d) => Ok(d.join(file)),
+        None => bail!("no {file} under {}: run bash benches/speed.sh", results.display()),
+    }
+}
+
+fn duration(ns: f64) -> String {
+    match ns {
+        n if n >= 1e6 => format!("{:.2} ms", n / 1e6),
+        n if n >= 1e3 => format!("{:.2} µs", n / 1e3),
+        n => format!("{n:.0} ns"),
+    }
+}
+
+fn relative(path: &Path, results: &Path) -> String {
+    let dir = results.file_name().map_or("results".into(), |d| d.to_string_lossy().to_string());
+    format!("benches/{dir}/{}", path.strip_prefix(results).unwrap_or(path).display())
+}
+
+/// Every criterion measurement of the newest `speed.csv`, one table per group.
+pub fn speed(results: &Path) -> Result<String> {
+    let path = newest(results, "speed.csv")?;
+    let rows = read(&path)?;
+    let mut out = format!("From `{}` ({}).\n", relative(&path, results), comments(&path)?.join("; "));
+    let mut group = String::new();
+    for r in &rows {
+        if r.text("group") != group {
+            group = r.text("group").to_string();
+            let _ = write!(out, "\n`{group}`:\n\n| benchmark | mean time | 95% CI |\n|---|---|---|\n");
+        }
+        let _ = writeln!(
+            out,
+            "| {} | {} | {} – {} |",
+            r.text("benchmark"),
+            duration(r.num("mean_ns")),
+            duration(r.num("low_ns")),
+            duration(r.num("high_ns"))
+        );
+    }
+    Ok(out)
+}
+
+/// The newest `memory-bench.md`, as the memory bench printed it.
+pub fn memory(results: &Path) -> Result<String> {
+    let path = newest(results, "memory-bench.md")?;
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(format!("From `{}`: {}", relative(&path, results), text.trim()))
+}
+
+/// The newest `python-speed.csv` (`python python/bench_speed.py`).
+pub fn python_speed(results: &Path) -> Result<String> {
+    let path = newest(results, "python-speed.csv")?;
+    let rows = read(&path)?;
+    let mut out = format!(
+        "From `{}` ({}).\n\n| env | locobench through Gymnasium (steps/s) | raw binding (steps/s) | looped in Rust (steps/s) | binding overhead per step | Gymnasium's own env (steps/s) |\n|---|---|---|---|---|---|\n",
+        relative(&path, results),
+        comments(&path)?.join("; ")
+    );
+    let count = |v: f64| if v.is_finite() { format!("{v:.0}") } else { "–".into() };
+    for r in &rows {
+        let _ = writeln!(
+            out,
+            "| {} | {} | {} | {} | {:.1} µs | {} |",
+            r.text("env"),
+            count(r.num("locobench_gym_steps_per_s")),
+            count(r.num("locobench_raw_steps_per_s")),
+            count(r.num("locobench_rust_steps_per_s")),
+            r.num("binding_overhead_us"),
+            count(r.num("gymnasium_steps_per_s")),
+        );
+    }
+    Ok(out)
+}
