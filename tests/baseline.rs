@@ -56,7 +56,7 @@ fn minitaur_tracks_1_0_m_per_s() {
     assert_tracks("minitaur", 1.0);
 }
 
-/// The highest speed the README reports it sustains: 1.5 m/s (1.7 m/s falls in half the
+/// The highest speed docs/controller.md reports it sustains: 1.5 m/s (1.7 m/s falls in half the
 /// episodes, `locobench baseline --limits` shows why).
 #[test]
 fn minitaur_sustains_1_5_m_per_s() {
@@ -64,7 +64,7 @@ fn minitaur_sustains_1_5_m_per_s() {
 }
 
 /// Below the top speed, the swing legs land near their footholds and the friction cone is rarely
-/// reached: the limits the controller reports are the measurement the README quotes.
+/// reached: the limits the controller reports are what `baseline --limits` prints.
 #[test]
 fn minitaur_reports_where_it_meets_its_limits() {
     let slow = run("minitaur", 0.35, None);
@@ -140,8 +140,8 @@ fn mean_drift(eps: &[GaitEpisode]) -> f64 {
     eps.iter().map(|e| e.drift).sum::<f64>() / eps.len() as f64
 }
 
-/// Rowing cuts the trot's sideways stepping to a twentieth at 0.5 m/s (README: 0.7 m against
-/// 15.5 m per episode).
+/// Rowing cuts the trot's sideways stepping to a twentieth at 0.5 m/s (0.7 m against 15.5 m per
+/// episode in benches/results/2026-11-23-amd-epyc-controller/NOTES.md).
 #[test]
 fn ant_rowing_drifts_less_than_its_trot() {
     let row = run("ant", 0.5, None);
@@ -154,7 +154,7 @@ fn ant_rowing_drifts_less_than_its_trot() {
 /// The steady posture (up to 0.7 m/s) keeps the sideways drift (PyBullet's term: every sideways
 /// step summed, sway included) below 1 m per 50 s episode at 0.5 m/s and below 0.6 m at 0.35 m/s,
 /// on average over reset seeds 0-9, where the tall fast posture drifts 3.3 and 2.1 m; and it
-/// costs less energy. (The settings were searched on reset seeds 0-29; the README's figures come
+/// costs less energy. (The settings were searched on reset seeds 0-29; the notes' figures come
 /// from seeds 300-399.)
 #[test]
 fn ant_rows_steadily_with_little_drift() {

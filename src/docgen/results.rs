@@ -101,7 +101,7 @@ pub fn glance(report: &Path) -> Result<String> {
 pub fn curves(report: &Path) -> Result<String> {
     let rows = read(&report.join(CURVES_CSV))?;
     let mut out = String::from(
-        "| env | policy | steps | seeds × evaluation episodes | ours: mean [95% CI over seeds] | sample std | published: mean ± std (seeds) | ours against the published band |\n\
+        "| env | policy | steps | runs × evaluation episodes (their seeds) | ours: mean [95% CI over runs] | sample std | published: mean ± std (seeds) | ours against the published band |\n\
          |---|---|---|---|---|---|---|---|\n",
     );
     for r in &rows {
@@ -121,12 +121,13 @@ pub fn curves(report: &Path) -> Result<String> {
         };
         let _ = writeln!(
             out,
-            "| {} | {} | {} | {} × {} | {} | {} | {published} | {verdict} |",
+            "| {} | {} | {} | {} × {} ({}) | {} | {} | {published} | {verdict} |",
             r.text("env"),
             r.text("policy"),
             budget(r.num("step") as u64),
             r.count("seeds"),
             r.text("evaluation_episodes"),
+            r.text("seed_values"),
             if r.count("seeds") > 1 { ci(r, "mean", "low", "high") } else { fmt_return(r.num("mean")) },
             fmt_return(r.num("sample_std")),
         );

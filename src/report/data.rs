@@ -8,6 +8,7 @@ use super::heldout::BudgetRow;
 use super::runs::{Group, Run};
 use super::BOOTSTRAP_SEED;
 use crate::controller::measure::mean_cost_of_transport;
+use crate::evaluation::speed_grid::SpeedPoint;
 use crate::evaluation::stats;
 
 /// Budgets at which learning curves are tabulated: the marks published curves report.
@@ -46,25 +47,19 @@ pub fn held_out_csv(rows: &BTreeMap<String, Vec<BudgetRow>>) -> String {
     csv
 }
 
+/// `commanded,achieved,mean,low,high,falls,episodes` of one controller speed.
+fn speed_point_fields(p: &SpeedPoint) -> String {
+    let i = return_interval(p);
+    format!("{},{},{},{},{},{},{}", p.commanded, p.achieved(), i.estimate, i.low, i.high, p.falls(), p.episodes.len())
+}
+
 pub fn controller_csv(sections: &BTreeMap<String, ControllerSection>) -> String {
     let mut csv =
         String::from("env,commanded,achieved,mean,mean_low,mean_high,falls,episodes,cost_of_transport,works\n");
     for (env, s) in sections {
         for p in &s.grid {
-            let i = return_interval(p);
-            let _ = writeln!(
-                csv,
-                "{env},{},{},{},{},{},{},{},{},{}",
-                p.commanded,
-                p.achieved(),
-                i.estimate,
-                i.low,
-                i.high,
-                p.falls(),
-                p.episodes.len(),
-                mean_cost_of_transport(&p.episodes),
-                p.works()
-            );
+            let _ =
+                writeln!(csv, "{env},{},{},{}", speed_point_fields(p), mean_cost_of_transport(&p.episodes), p.works());
         }
     }
     csv
@@ -74,8 +69,8 @@ pub fn controller_csv(sections: &BTreeMap<String, ControllerSection>) -> String 
 /// std, 95% bootstrap interval over seeds, and the published curve at the same mark if any.
 pub fn curves_csv(envs: &BTreeMap<String, Vec<(&Group, &Vec<&Run>)>>) -> String {
     let mut csv = String::from(
-        "env,policy,algo,step,seeds,evaluation_episodes,mean,sample_std,low,high,published_mean,published_std,\
-         published_seeds\n",
+        "env,policy,algo,step,seeds,seed_values,evaluation_episodes,mean,sample_std,low,high,published_mean,\
+         published_std,published_seeds\n",
     );
     for (env, groups) in envs {
         for (g, runs) in groups {
@@ -100,9 +95,12 @@ pub fn curves_csv(envs: &BTreeMap<String, Vec<(&Group, &Vec<&Run>)>>) -> String 
                 let mut episodes: Vec<usize> = runs.iter().map(|r| r.config.train.eval_episodes).collect();
                 episodes.dedup();
                 let episodes = episodes.iter().map(|e| e.to_string()).collect::<Vec<_>>().join("/");
+                let mut seeds: Vec<u64> = runs.iter().map(|r| r.config.seed).collect();
+                seeds.sort_unstable();
+                let seeds = seeds.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(" ");
                 let _ = writeln!(
                     csv,
-                    "{env},{},{},{mark},{},{episodes},{},{sd},{},{},{pm},{ps},{pn}",
+                    "{env},{},{},{mark},{},{seeds},{episodes},{},{sd},{},{},{pm},{ps},{pn}",
                     g.label().replace(',', ";"),
                     g.algo,
                     values.len(),
@@ -133,22 +131,7 @@ pub fn versus_controller_csv(
             let mean = r.mean_return(BOOTSTRAP_SEED).interval;
             let (falls, n) = r.falls();
             let (controller, note) = match &m.controller {
-                Ok(p) => {
-                    let i = return_interval(p);
-                    (
-                        format!(
-                            "{},{},{},{},{},{},{}",
-                            p.commanded,
-                            p.achieved(),
-                            i.estimate,
-                            i.low,
-                            i.high,
-                            p.falls(),
-                            p.episodes.len()
-                        ),
-                        String::new(),
-                    )
-                }
+                Ok(p) => (speed_point_fields(p), String::new()),
                 Err(why) => (",,,,,,".to_string(), why.replace([',', '"'], " ")),
             };
             let estimate = |e: &Option<super::heldout::Estimate>| match e {

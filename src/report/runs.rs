@@ -84,14 +84,12 @@ impl Run {
         changed.join(",")
     }
 
-    /// The name a person gave the run: its directory's name without a trailing `-seed<N>`
-    /// (sweeps name runs `<algo>-<grid point>-seed<N>`).
+    /// The name a person gave the run: its directory's name without its `-seed<N>` part
+    /// (sweeps name runs `<algo>-<grid point>-seed<N>`; `td3-cleanrl-seed2-300k` reads
+    /// `td3-cleanrl-300k`).
     pub fn variant_name(&self) -> String {
         let name = self.dir.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
-        match name.rfind("-seed") {
-            Some(i) if name[i + 5..].chars().all(|c| c.is_ascii_digit()) && i + 5 < name.len() => name[..i].to_string(),
-            _ => name,
-        }
+        without_seed(&name)
     }
 
     /// Runs that differ only in their seed share a group. Runs with the shipped settings group
@@ -160,6 +158,18 @@ impl Group {
         let settings = if self.settings.is_empty() { "shipped settings".to_string() } else { self.settings.clone() };
         format!("{}, {}, {settings}", self.algo, self.reward)
     }
+}
+
+/// `name` without its last `-seed<digits>` that ends the name or is followed by `-`.
+fn without_seed(name: &str) -> String {
+    for (i, _) in name.rmatch_indices("-seed") {
+        let digits = name[i + 5..].chars().take_while(|c| c.is_ascii_digit()).count();
+        let end = i + 5 + digits;
+        if digits > 0 && (end == name.len() || name[end..].starts_with('-')) {
+            return format!("{}{}", &name[..i], &name[end..]);
+        }
+    }
+    name.to_string()
 }
 
 /// Every run directory in `paths`: each path is a run directory itself or is searched
@@ -247,5 +257,14 @@ mod tests {
         shipped.dir = PathBuf::from("anything-seed2");
         assert_eq!(shipped.group().label(), "sac (drift=0.5)");
         assert_eq!(run("minitaur", Algo::Sac, "", &[]).variant_name(), "r");
+    }
+
+    #[test]
+    fn the_seed_part_of_a_run_name_is_dropped_wherever_it_is() {
+        assert_eq!(without_seed("sac-drift0.5-seed10"), "sac-drift0.5");
+        assert_eq!(without_seed("td3-cleanrl-seed2-300k"), "td3-cleanrl-300k");
+        assert_eq!(without_seed("td3-seedless"), "td3-seedless");
+        assert_eq!(without_seed("a-seed1-b-seed2"), "a-seed1-b");
+        assert_eq!(without_seed("plain"), "plain");
     }
 }
