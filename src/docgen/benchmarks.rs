@@ -28,16 +28,18 @@ fn duration(ns: f64) -> String {
     }
 }
 
-fn relative(path: &Path, results: &Path) -> String {
-    let dir = results.file_name().map_or("results".into(), |d| d.to_string_lossy().to_string());
-    format!("benches/{dir}/{}", path.strip_prefix(results).unwrap_or(path).display())
+/// How a generated section names its source: the newest file of that name in the dated result
+/// directories (the file's own comment line names machine and commit).
+fn source(path: &Path) -> String {
+    let file = path.file_name().map_or(String::new(), |f| f.to_string_lossy().to_string());
+    format!("the newest benches/results/<date>-<machine>/{file}")
 }
 
 /// Every criterion measurement of the newest `speed.csv`, one table per group.
 pub fn speed(results: &Path) -> Result<String> {
     let path = newest(results, "speed.csv")?;
     let rows = read(&path)?;
-    let mut out = format!("From `{}` ({}).\n", relative(&path, results), comments(&path)?.join("; "));
+    let mut out = format!("From {} ({}).\n", source(&path), comments(&path)?.join("; "));
     let mut group = String::new();
     for r in &rows {
         if r.text("group") != group {
@@ -60,7 +62,7 @@ pub fn speed(results: &Path) -> Result<String> {
 pub fn memory(results: &Path) -> Result<String> {
     let path = newest(results, "memory-bench.md")?;
     let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
-    Ok(format!("From `{}`: {}", relative(&path, results), text.trim()))
+    Ok(format!("From {}: {}", source(&path), text.trim()))
 }
 
 /// The newest `python-speed.csv` (`python python/bench_speed.py`).
@@ -68,8 +70,8 @@ pub fn python_speed(results: &Path) -> Result<String> {
     let path = newest(results, "python-speed.csv")?;
     let rows = read(&path)?;
     let mut out = format!(
-        "From `{}` ({}).\n\n| env | locobench through Gymnasium (steps/s) | raw binding (steps/s) | looped in Rust (steps/s) | binding overhead per step | Gymnasium's own env (steps/s) |\n|---|---|---|---|---|---|\n",
-        relative(&path, results),
+        "From {} ({}).\n\n| env | locobench through Gymnasium (steps/s) | raw binding (steps/s) | looped in Rust (steps/s) | binding overhead per step | Gymnasium's own env (steps/s) |\n|---|---|---|---|---|---|\n",
+        source(&path),
         comments(&path)?.join("; ")
     );
     let count = |v: f64| if v.is_finite() { format!("{v:.0}") } else { "–".into() };
