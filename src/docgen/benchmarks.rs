@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 
 use super::csv_rows::{comments, read};
+use crate::report::format::fixed;
 
 /// The newest `benches/results/<date>-<machine>/<file>`: directories sort by their date prefix.
 fn newest(results: &Path, file: &str) -> Result<PathBuf> {
@@ -74,17 +75,16 @@ pub fn python_speed(results: &Path) -> Result<String> {
         source(&path),
         comments(&path)?.join("; ")
     );
-    let count = |v: f64| if v.is_finite() { format!("{v:.0}") } else { "–".into() };
     for r in &rows {
         let _ = writeln!(
             out,
             "| {} | {} | {} | {} | {:.1} µs | {} |",
             r.text("env"),
-            count(r.num("locobench_gym_steps_per_s")),
-            count(r.num("locobench_raw_steps_per_s")),
-            count(r.num("locobench_rust_steps_per_s")),
+            fixed(r.num("locobench_gym_steps_per_s"), 0),
+            fixed(r.num("locobench_raw_steps_per_s"), 0),
+            fixed(r.num("locobench_rust_steps_per_s"), 0),
             r.num("binding_overhead_us"),
-            count(r.num("gymnasium_steps_per_s")),
+            fixed(r.num("gymnasium_steps_per_s"), 0),
         );
     }
     Ok(out)
