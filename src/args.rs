@@ -11,6 +11,7 @@ use crate::envs::EnvConfig;
 /// The seed of a command's random streams (environment resets, exploration, initial weights).
 #[derive(clap::Args, Debug, Clone, Copy, Default, PartialEq, Eq)]
 pub struct SeedArg {
+    /// Seed of the run or of the episodes.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
 }
@@ -70,16 +71,19 @@ pub struct EnvArgs {
     /// Environment name (see `locobench envs`).
     #[arg(long)]
     pub env: String,
+    /// `--option` and `--reward` settings.
     #[command(flatten)]
     pub options: EnvOptionArgs,
 }
 
 impl EnvArgs {
+    /// The environment configuration these arguments describe; fails on a bad option.
     pub fn config(&self) -> Result<crate::envs::EnvConfig> {
         self.options.apply(crate::envs::EnvConfig::new(&self.env))
     }
 }
 
+/// `locobench train`'s arguments, shared with the sweep (which writes them for each job).
 #[derive(clap::Args, Debug, Clone, PartialEq)]
 pub struct TrainArgs {
     /// Environment name (see `locobench envs`).
@@ -88,6 +92,7 @@ pub struct TrainArgs {
     /// td3, sac or ddpg.
     #[arg(long, required_unless_present = "resume")]
     pub algo: Option<String>,
+    /// The run's seed.
     #[command(flatten)]
     pub seed: SeedArg,
     /// Total environment steps (same as --set total_steps=N). With --resume: raise the run's
@@ -97,6 +102,7 @@ pub struct TrainArgs {
     /// Hyperparameter overrides, e.g. `--set batch_size=256,hidden=[64,64]`.
     #[arg(long = "set", value_name = "KEY=VALUE,...")]
     pub set: Vec<String>,
+    /// `--option` and `--reward` settings.
     #[command(flatten)]
     pub env_options: EnvOptionArgs,
     /// Run directory (default runs/<env>-<algo>-seed<seed>).
@@ -158,7 +164,7 @@ impl Default for TrainArgs {
 
 impl TrainArgs {
     /// The command line (`train ...`, without the program) that parses back into `self`.
-    pub fn to_args(&self) -> Vec<String> {
+    pub(crate) fn to_args(&self) -> Vec<String> {
         let mut a: Vec<String> = vec!["train".into()];
         let mut push = |flag: &str, value: String| a.extend([flag.to_string(), value]);
         if let Some(env) = &self.env {
@@ -208,7 +214,8 @@ impl TrainArgs {
     }
 
     /// Parses `train ...` arguments (as `to_args` writes them) without the rest of the CLI.
-    pub fn parse_from(args: &[String]) -> Result<TrainArgs> {
+    #[cfg(test)]
+    pub(crate) fn parse_from(args: &[String]) -> Result<TrainArgs> {
         use clap::{Args, FromArgMatches};
         let command = TrainArgs::augment_args(clap::Command::new("train"));
         let matches = command.try_get_matches_from(args)?;

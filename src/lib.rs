@@ -1,4 +1,6 @@
 //! locobench: legged-locomotion reinforcement learning and classical control on MuJoCo.
+#![warn(missing_docs)]
+#![warn(clippy::undocumented_unsafe_blocks)]
 pub mod agents;
 pub mod args;
 pub mod controller;

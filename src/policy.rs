@@ -9,9 +9,11 @@ use crate::envs::{BoxSpace, Env};
 /// Chooses an action from the environment's current observation (and, for model-based
 /// controllers, its physics state).
 pub trait Policy {
+    /// A label for tables and recordings.
     fn name(&self) -> String;
     /// Called after every reset, with the episode index.
     fn begin_episode(&mut self, _episode: usize) {}
+    /// The action for the current state.
     fn act(&mut self, env: &dyn Env, observation: &[f64]) -> Result<Vec<f64>>;
     /// True when the policy has nothing more to say this episode (a replay ran out of actions).
     fn exhausted(&self) -> bool {
@@ -36,10 +38,13 @@ pub trait Policy {
 /// Internal signals of a controller, named: scalar series and world-frame points.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Telemetry {
+    /// Named scalar signals.
     pub scalars: Vec<(String, f64)>,
+    /// Named points, world coordinates.
     pub points: Vec<(String, [f64; 3])>,
 }
 
+/// Always the zero action.
 pub struct ZeroPolicy;
 
 impl Policy for ZeroPolicy {
@@ -57,9 +62,11 @@ pub struct RandomPolicy {
 }
 
 impl RandomPolicy {
+    /// Uniform random actions from their own seeded stream.
     pub fn new(seed: u64) -> RandomPolicy {
         RandomPolicy { rng: ChaCha8Rng::seed_from_u64(seed) }
     }
+    /// One action drawn uniformly within `space` (its bounds must be finite).
     pub fn sample(&mut self, space: &BoxSpace) -> Vec<f64> {
         space.low.iter().zip(&space.high).map(|(&l, &h)| self.rng.random_range(l..=h)).collect()
     }
@@ -85,6 +92,7 @@ pub struct ReplayPolicy {
 }
 
 impl ReplayPolicy {
+    /// Replays the actions of a CSV written by `locobench rollout` (`a0`, `a1`, ... columns).
     pub fn from_csv(path: &str) -> Result<ReplayPolicy> {
         let text = std::fs::read_to_string(path).with_context(|| format!("reading action file {path}"))?;
         let mut lines = text.lines().filter(|l| !l.trim().is_empty()).peekable();
@@ -170,7 +178,9 @@ impl Policy for ReplayPolicy {
 
 /// A trained agent acting deterministically (its evaluation action), as a [`Policy`].
 pub struct AgentPolicy<'a> {
+    /// The agent.
     pub agent: &'a dyn crate::agents::Agent,
+    /// Its label in tables.
     pub label: String,
 }
 
@@ -186,7 +196,7 @@ impl Policy for AgentPolicy<'_> {
 }
 
 /// Maps a normalised action in [-1, 1] to the environment's bounds.
-pub fn to_env_action(env: &dyn Env, normalised: &[f32]) -> Vec<f64> {
+pub(crate) fn to_env_action(env: &dyn Env, normalised: &[f32]) -> Vec<f64> {
     let s = &env.spec().action_space;
     normalised
         .iter()

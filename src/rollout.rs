@@ -7,11 +7,17 @@ use crate::policy::Policy;
 /// Totals of one episode.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EpisodeSummary {
+    /// Index of the episode, from 0.
     pub episode: usize,
+    /// Sum of rewards.
     pub episode_return: f64,
+    /// Steps taken.
     pub length: usize,
+    /// Ended in a terminal state.
     pub terminated: bool,
+    /// Cut short by the time limit or instability.
     pub truncated: bool,
+    /// Ended because the physics became unstable.
     pub unstable: bool,
     /// Each reward term summed over the episode.
     pub term_totals: Vec<(&'static str, f64)>,
@@ -34,13 +40,17 @@ impl EpisodeSummary {
 
 /// Everything an observer may look at after one step.
 pub struct StepView<'a> {
+    /// Index of the episode, from 0.
     pub episode: usize,
     /// Index of the step within the episode, from 0.
     pub t: usize,
+    /// The action the policy chose.
     pub action: &'a [f64],
+    /// What the environment returned.
     pub step: &'a Step,
     /// The environment after the step.
     pub env: &'a dyn Env,
+    /// The policy that acted.
     pub policy: &'a dyn Policy,
 }
 
@@ -51,7 +61,9 @@ pub trait Observer {
     fn reset(&mut self, _episode: usize, _env: &dyn Env) -> Result<()> {
         Ok(())
     }
+    /// After every step.
     fn step(&mut self, view: &StepView) -> Result<()>;
+    /// After every episode, with its totals.
     fn end(&mut self, _summary: &EpisodeSummary) -> Result<()> {
         Ok(())
     }

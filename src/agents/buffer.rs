@@ -12,6 +12,7 @@ use rand::Rng;
 const TERMINATED: u8 = 1;
 const TRUNCATED: u8 = 2;
 
+/// A fixed-capacity ring of transitions that overwrites the oldest once full.
 pub struct ReplayBuffer {
     capacity: usize,
     obs_dim: usize,
@@ -31,16 +32,22 @@ pub struct ReplayBuffer {
 /// A sampled minibatch, row-major, reused between samples (no per-sample allocation).
 #[derive(Debug, Clone, Default)]
 pub struct Batch {
+    /// Rows in the batch.
     pub size: usize,
+    /// Observations, `size × obs_dim`.
     pub obs: Vec<f32>,
+    /// Actions, `size × act_dim`.
     pub actions: Vec<f32>,
+    /// Rewards as stored (already multiplied by the run's reward scale).
     pub rewards: Vec<f32>,
+    /// Next observations, `size × obs_dim`.
     pub next_obs: Vec<f32>,
     /// 1.0 where the transition terminated (no bootstrap), else 0.0.
     pub terminated: Vec<f32>,
 }
 
 impl Batch {
+    /// A zeroed batch of `size` rows for the given observation and action sizes.
     pub fn new(size: usize, obs_dim: usize, act_dim: usize) -> Batch {
         Batch {
             size,
@@ -54,6 +61,7 @@ impl Batch {
 }
 
 impl ReplayBuffer {
+    /// An empty buffer with room for `capacity` transitions; panics on a zero capacity.
     pub fn new(capacity: usize, obs_dim: usize, act_dim: usize) -> ReplayBuffer {
         assert!(capacity > 0);
         ReplayBuffer {
@@ -71,16 +79,19 @@ impl ReplayBuffer {
         }
     }
 
+    /// Transitions stored (at most the capacity).
     pub fn len(&self) -> usize {
         self.len
     }
+    /// Whether no transition is stored yet.
     pub fn is_empty(&self) -> bool {
         self.len == 0
     }
+    /// The most transitions the buffer holds.
     pub fn capacity(&self) -> usize {
         self.capacity
     }
-    pub fn dims(&self) -> (usize, usize) {
+    pub(crate) fn dims(&self) -> (usize, usize) {
         (self.obs_dim, self.act_dim)
     }
 
@@ -94,6 +105,7 @@ impl ReplayBuffer {
         (self.len > 0).then(|| (self.write + self.capacity - 1) % self.capacity)
     }
 
+    /// Stores one transition, overwriting the oldest when the buffer is full.
     pub fn add(
         &mut self,
         obs: &[f32],
@@ -142,18 +154,23 @@ impl ReplayBuffer {
         &self.obs[j * self.obs_dim..(j + 1) * self.obs_dim]
     }
 
+    /// Whether transition `i` ended its episode in a terminal state.
     pub fn terminated(&self, i: usize) -> bool {
         self.flags[i] & TERMINATED != 0
     }
+    /// Whether transition `i` was cut short (time limit or instability).
     pub fn truncated(&self, i: usize) -> bool {
         self.flags[i] & TRUNCATED != 0
     }
+    /// The observation of transition `i`.
     pub fn obs(&self, i: usize) -> &[f32] {
         &self.obs[i * self.obs_dim..(i + 1) * self.obs_dim]
     }
+    /// The action of transition `i`.
     pub fn action(&self, i: usize) -> &[f32] {
         &self.actions[i * self.act_dim..(i + 1) * self.act_dim]
     }
+    /// The stored reward of transition `i`.
     pub fn reward(&self, i: usize) -> f32 {
         self.rewards[i]
     }
@@ -215,7 +232,7 @@ impl ReplayBuffer {
 
     /// The buffer a snapshot describes. Takes the snapshot's arrays over (a full buffer's are
     /// not copied), growing them to the capacity.
-    pub fn import(s: BufferSnapshot) -> anyhow::Result<ReplayBuffer> {
+    pub(crate) fn import(s: BufferSnapshot) -> anyhow::Result<ReplayBuffer> {
         let ok = s.capacity > 0
             && s.len <= s.capacity
             && s.write < s.capacity
@@ -258,34 +275,58 @@ impl ReplayBuffer {
 /// A replay buffer's stored part, borrowed from it ([`ReplayBuffer::columns`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct BufferColumns<'a> {
+    /// Slots allocated.
     pub capacity: usize,
+    /// Length of one observation.
     pub obs_dim: usize,
+    /// Length of one action.
     pub act_dim: usize,
+    /// The slot the next transition goes to.
     pub write: usize,
+    /// Slots holding a transition.
     pub len: usize,
+    /// Observations, `capacity × obs_dim`.
     pub obs: &'a [f32],
+    /// Actions, `capacity × act_dim`.
     pub actions: &'a [f32],
+    /// Rewards, one per slot.
     pub rewards: &'a [f32],
+    /// Terminated (bit 0) and truncated (bit 1) flags, one byte per slot.
     pub flags: &'a [u8],
+    /// Slots whose next observation lives in the side table, ascending.
     pub side_index: Vec<u32>,
+    /// Those next observations, `side_index.len() × obs_dim`, in `side_index` order.
     pub side_values: Vec<f32>,
+    /// The newest transition's next observation.
     pub newest_next: &'a [f32],
 }
 
 /// A replay buffer's contents as flat arrays (a full buffer's slots are `0..len`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct BufferSnapshot {
+    /// Slots allocated.
     pub capacity: usize,
+    /// Length of one observation.
     pub obs_dim: usize,
+    /// Length of one action.
     pub act_dim: usize,
+    /// The slot the next transition goes to.
     pub write: usize,
+    /// Slots holding a transition.
     pub len: usize,
+    /// Observations, `capacity × obs_dim`.
     pub obs: Vec<f32>,
+    /// Actions, `capacity × act_dim`.
     pub actions: Vec<f32>,
+    /// Rewards, one per slot.
     pub rewards: Vec<f32>,
+    /// Terminated (bit 0) and truncated (bit 1) flags, one byte per slot.
     pub flags: Vec<u8>,
+    /// Slots whose next observation lives in the side table, ascending.
     pub side_index: Vec<u32>,
+    /// Those next observations, `side_index.len() × obs_dim`, in `side_index` order.
     pub side_values: Vec<f32>,
+    /// The newest transition's next observation.
     pub newest_next: Vec<f32>,
 }
 

@@ -3,26 +3,33 @@ use serde::{Deserialize, Serialize};
 
 use super::noise::NoiseKind;
 
+/// A learning algorithm, as named in `--algo` and `config.toml`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Algo {
+    /// Twin Delayed DDPG (Fujimoto et al., 2018).
     Td3,
+    /// Soft Actor-Critic (Haarnoja et al., 2018).
     Sac,
+    /// Deep Deterministic Policy Gradient (Lillicrap et al., 2016).
     Ddpg,
 }
 
 impl Algo {
+    /// The algorithm registered under `name`; the error lists the known names.
     pub fn parse(name: &str) -> anyhow::Result<Algo> {
         super::registry::ALGOS.iter().find(|e| e.name == name).map(|e| e.algo).ok_or_else(|| {
             let known: Vec<&str> = super::registry::ALGOS.iter().map(|e| e.name).collect();
             anyhow::anyhow!("unknown algorithm '{name}'; known algorithms: {}", known.join(", "))
         })
     }
+    /// The registered name (`td3`, `sac`, `ddpg`).
     pub fn name(self) -> &'static str {
         super::registry::entry(self).name
     }
 }
 
+/// Which of the two published SAC variants to train.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
 pub enum SacVersion {
@@ -52,7 +59,8 @@ pub enum WeightInit {
     /// what Stable-Baselines3, CleanRL and the TD3 authors' code start from.
     Uniform,
     /// Orthogonal weights with gain sqrt(2) and zero biases, as jaxrl's `default_init` (the code
-    /// behind the published SAC curves: repository ikostrikov/jaxrl, `learning_curves`); SAC's log-std rows get gain 1, as
+    /// behind the published SAC curves: repository ikostrikov/jaxrl, `learning_curves`); SAC's log-std rows
+    /// get gain 1, as
     /// jaxrl's `log_std_scale`.
     Orthogonal,
 }
@@ -63,6 +71,7 @@ pub enum WeightInit {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct TrainConfig {
+    /// The algorithm whose section (`td3`, `ddpg` or `sac`) must be present.
     pub algo: Algo,
     /// Environment steps in the whole run.
     pub total_steps: u64,
@@ -70,11 +79,15 @@ pub struct TrainConfig {
     pub warmup_steps: u64,
     /// No gradient update before the buffer holds this many transitions.
     pub learning_starts: u64,
+    /// Gradient updates per environment step once learning has started.
     pub updates_per_step: u32,
+    /// Transitions per minibatch.
     pub batch_size: usize,
+    /// Transitions the replay buffer keeps.
     pub buffer_capacity: usize,
     /// Hidden layer sizes of every network.
     pub hidden: Vec<usize>,
+    /// Discount factor.
     pub gamma: f64,
     /// Multiplies every reward the learner stores; returns and evaluations stay the environment's.
     /// 1 unless a preset says otherwise (Haarnoja et al. 2018a tune a reward scale per task; it
@@ -87,15 +100,23 @@ pub struct TrainConfig {
     pub weight_init: WeightInit,
     /// Polyak coefficient of the target networks.
     pub tau: f64,
+    /// Adam learning rate of the actor.
     pub actor_lr: f64,
+    /// Adam learning rate of the critics.
     pub critic_lr: f64,
+    /// Environment steps between in-training evaluations.
     pub eval_every: u64,
+    /// Episodes per in-training evaluation.
     pub eval_episodes: usize,
+    /// Environment steps between checkpoints.
     pub checkpoint_every: u64,
+    /// TD3's own settings (present exactly when `algo` is TD3).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub td3: Option<DpgConfig>,
+    /// DDPG's own settings (present exactly when `algo` is DDPG).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub ddpg: Option<DpgConfig>,
+    /// SAC's own settings (present exactly when `algo` is SAC).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sac: Option<SacConfig>,
 }
@@ -106,21 +127,28 @@ pub struct TrainConfig {
 pub struct DpgConfig {
     /// Exploration noise std in units of the action half-range (OU: its starting std).
     pub exploration_noise: f64,
+    /// Gaussian or Ornstein-Uhlenbeck exploration noise.
     pub noise: NoiseKind,
+    /// OU mean-reversion rate.
     pub ou_theta: f64,
+    /// OU's final std, reached after `ou_decay_steps`.
     pub ou_sigma_min: f64,
+    /// Steps over which the OU std decays linearly to `ou_sigma_min`.
     pub ou_decay_steps: u64,
+    /// OU time step.
     pub ou_dt: f64,
     /// Target policy smoothing noise std and clip (TD3), in units of the action half-range.
     pub policy_noise: f64,
+    /// Clip of the target policy smoothing noise (TD3).
     pub noise_clip: f64,
     /// Actor and target updates happen every this many critic updates.
     pub policy_delay: u32,
+    /// Two critics and the smaller of their targets (TD3), or one (DDPG).
     pub twin_critics: bool,
 }
 
 impl DpgConfig {
-    pub const KEYS: &'static [&'static str] = &[
+    pub(crate) const KEYS: &'static [&'static str] = &[
         "exploration_noise",
         "noise",
         "ou_theta",
@@ -138,20 +166,25 @@ impl DpgConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SacConfig {
+    /// Which SAC variant to train.
     pub sac_version: SacVersion,
+    /// Learn the temperature against `target_entropy`; otherwise keep `initial_alpha`.
     pub autotune_alpha: bool,
+    /// Temperature at the start (and throughout when not tuned).
     pub initial_alpha: f64,
+    /// Adam learning rate of the log-temperature.
     pub alpha_lr: f64,
     /// Target entropy for the temperature; absent means -dim(A).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub target_entropy: Option<f64>,
     /// SAC v1's value network.
     pub value_lr: f64,
+    /// How the log-probability is corrected for the tanh squashing.
     pub tanh_correction: TanhCorrection,
 }
 
 impl SacConfig {
-    pub const KEYS: &'static [&'static str] = &[
+    pub(crate) const KEYS: &'static [&'static str] = &[
         "sac_version",
         "autotune_alpha",
         "initial_alpha",
@@ -176,7 +209,7 @@ impl TrainConfig {
     /// written before a hyperparameter existed still loads); the algorithm's settings may sit in
     /// its section (`[train.td3]`) or, as in formats 1 and 2 and in `--set`, among the shared
     /// keys. An unknown key is an error naming it.
-    pub fn from_table(table: &toml::Table, others: OtherAlgorithmKeys) -> anyhow::Result<TrainConfig> {
+    pub(crate) fn from_table(table: &toml::Table, others: OtherAlgorithmKeys) -> anyhow::Result<TrainConfig> {
         let algo = match table.get("algo") {
             Some(toml::Value::String(name)) => Algo::parse(name)?,
             Some(other) => anyhow::bail!("algo must be a name like \"td3\", got {other}"),
@@ -226,7 +259,7 @@ impl TrainConfig {
 
     /// Every setting by name in one table, the algorithm's section lifted among the shared ones
     /// (what `--set` takes and what reports compare).
-    pub fn to_flat_table(&self) -> toml::Table {
+    pub(crate) fn to_flat_table(&self) -> toml::Table {
         let mut table = toml::Table::try_from(self).expect("config serialises");
         if let Some(toml::Value::Table(section)) = table.remove(self.algo.name()) {
             table.extend(section);
@@ -239,6 +272,7 @@ impl TrainConfig {
         self.td3.as_ref().or(self.ddpg.as_ref()).expect("a TD3 or DDPG config")
     }
 
+    /// The TD3 or DDPG section, mutably; panics for SAC.
     pub fn dpg_mut(&mut self) -> &mut DpgConfig {
         self.td3.as_mut().or(self.ddpg.as_mut()).expect("a TD3 or DDPG config")
     }
@@ -282,7 +316,7 @@ impl TrainConfig {
     }
 
     /// TD3's published settings (Fujimoto et al. 2018).
-    pub fn td3_defaults() -> TrainConfig {
+    pub(crate) fn td3_defaults() -> TrainConfig {
         TrainConfig {
             td3: Some(DpgConfig {
                 exploration_noise: 0.1,
@@ -301,7 +335,7 @@ impl TrainConfig {
     }
 
     /// "Our DDPG" of the TD3 paper: TD3's settings without its three changes.
-    pub fn ddpg_defaults() -> TrainConfig {
+    pub(crate) fn ddpg_defaults() -> TrainConfig {
         let td3 = TrainConfig::td3_defaults().td3.expect("TD3's section");
         TrainConfig {
             ddpg: Some(DpgConfig { policy_noise: 0.0, noise_clip: 0.0, policy_delay: 1, twin_critics: false, ..td3 }),
@@ -310,7 +344,7 @@ impl TrainConfig {
     }
 
     /// SAC v2's (Haarnoja et al. 2018b): 256-256, Adam 3e-4, batch 256.
-    pub fn sac_defaults() -> TrainConfig {
+    pub(crate) fn sac_defaults() -> TrainConfig {
         TrainConfig {
             batch_size: 256,
             hidden: vec![256, 256],
@@ -329,6 +363,7 @@ impl TrainConfig {
         }
     }
 
+    /// Checks every setting's range and that exactly the algorithm's own section is present.
     pub fn validate(&self) -> anyhow::Result<()> {
         let positive = |name: &str, v: f64| -> anyhow::Result<()> {
             anyhow::ensure!(v.is_finite() && v > 0.0, "{name} must be a finite number > 0, got {v}");
@@ -384,7 +419,7 @@ impl TrainConfig {
 }
 
 /// The keys of an algorithm's own section, from its registry entry.
-pub fn section_keys(algo: Algo) -> &'static [&'static str] {
+pub(crate) fn section_keys(algo: Algo) -> &'static [&'static str] {
     super::registry::entry(algo).settings
 }
 

@@ -7,7 +7,7 @@ use rand_chacha::ChaCha8Rng;
 use super::config::WeightInit;
 use super::nets::{run_layers, DenseStack, Mlp, Output};
 
-pub struct Critics {
+pub(crate) struct Critics {
     /// weight `[k, out, in]`, bias `[k, 1, out]` per layer
     body: DenseStack,
 }
@@ -31,7 +31,7 @@ impl Critics {
     }
 
     /// An independent copy with equal weights (for target networks).
-    pub fn deep_copy(&self) -> Result<Critics> {
+    pub(crate) fn deep_copy(&self) -> Result<Critics> {
         Ok(Critics { body: self.body.deep_copy()? })
     }
 
@@ -47,7 +47,7 @@ impl Critics {
 
     /// Member 0 alone (`[n, 1]`) with the weights held constant: gradients reach `x` only.
     /// TD3's and DDPG's actor loss.
-    pub fn first_frozen(&self, x: &Tensor) -> Result<Tensor> {
+    pub(crate) fn first_frozen(&self, x: &Tensor) -> Result<Tensor> {
         let first = self
             .body
             .layers()
@@ -57,7 +57,7 @@ impl Critics {
     }
 
     /// min over members (`[n, 1]`) with the weights held constant. SAC's actor loss.
-    pub fn min_frozen(&self, x: &Tensor) -> Result<Tensor> {
+    pub(crate) fn min_frozen(&self, x: &Tensor) -> Result<Tensor> {
         self.body.forward_frozen(x)?.min(0)
     }
 
@@ -67,7 +67,7 @@ impl Critics {
     }
 
     /// sum over members of the mean squared error against `y` `[n, 1]`.
-    pub fn mse_sum(&self, x: &Tensor, y: &Tensor) -> Result<Tensor> {
+    pub(crate) fn mse_sum(&self, x: &Tensor, y: &Tensor) -> Result<Tensor> {
         let q = self.forward(x)?;
         q.broadcast_sub(y)?.sqr()?.mean_all()? * self.k() as f64
     }
@@ -77,13 +77,13 @@ impl Critics {
     }
 
     /// Parameters named `<prefix>.<layer>.weight` (`[k, out, in]`) / `.bias` (`[k, 1, out]`).
-    pub fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
+    pub(crate) fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
         self.body.named_vars(prefix)
     }
 }
 
 /// target <- tau * online + (1 - tau) * target.
-pub fn polyak_update_critics(online: &Critics, target: &Critics, tau: f64) -> Result<()> {
+pub(crate) fn polyak_update_critics(online: &Critics, target: &Critics, tau: f64) -> Result<()> {
     online.body.polyak_into(&target.body, tau)
 }
 

@@ -13,6 +13,7 @@ use super::noise::{Noise, NoiseKind};
 use super::{layer_sizes, Agent, Losses};
 use crate::numeric::optim::Adam;
 
+/// TD3 and DDPG: a deterministic actor, one or two critics, and target networks.
 pub struct DeterministicAgent {
     algo: Algo,
     act_dim: usize,
@@ -33,6 +34,7 @@ pub struct DeterministicAgent {
 }
 
 impl DeterministicAgent {
+    /// Builds the networks for `obs_dim`/`act_dim`, initialised from `rng`; `cfg.algo` picks TD3 or DDPG.
     pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
         let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), Output::Tanh, cfg.weight_init, rng)?;
         let dpg = cfg.dpg();

@@ -7,7 +7,7 @@ pub mod buffer;
 pub mod config;
 mod critics;
 mod dpg;
-pub mod nets;
+pub(crate) mod nets;
 pub mod noise;
 pub mod normalize;
 pub mod registry;
@@ -31,14 +31,21 @@ use crate::numeric::optim::Adam;
 /// Losses and temperature of one gradient update (None where the update did not touch them).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Losses {
+    /// The critics' temporal-difference loss.
     pub critic: f64,
+    /// The actor's loss, on the updates that trained the actor.
     pub actor: Option<f64>,
+    /// SAC v1's value-network loss.
     pub value: Option<f64>,
+    /// SAC's temperature after the update.
     pub alpha: Option<f64>,
+    /// SAC's temperature loss, when the temperature is tuned.
     pub alpha_loss: Option<f64>,
 }
 
+/// A learner that acts, updates from minibatches and checkpoints its state.
 pub trait Agent: Send {
+    /// Which algorithm this is.
     fn algo(&self) -> Algo;
     /// The deterministic action for one observation (evaluation).
     fn act(&self, obs: &[f32]) -> Result<Vec<f32>>;
@@ -46,6 +53,7 @@ pub trait Agent: Send {
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>>;
     /// Called at the start of every training episode (resets OU noise).
     fn begin_episode(&mut self) {}
+    /// One gradient update from a minibatch; `rng` drives any sampling it needs.
     fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses>;
     /// Called once, when learning starts, with the warm-up transitions (observation
     /// normalisation estimates its statistics here; other agents ignore it).
@@ -54,9 +62,11 @@ pub trait Agent: Send {
     }
     /// Every network parameter, targets included, by checkpoint name.
     fn parameters(&self) -> Vec<(String, Var)>;
+    /// The Adam optimisers by checkpoint name, to save and restore their moments.
     fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)>;
     /// Counters that must survive a resume (updates done, noise steps).
     fn counters(&self) -> Vec<(&'static str, u64)>;
+    /// Restores a counter saved by `counters`; unknown names are ignored.
     fn set_counter(&mut self, name: &str, value: u64);
 }
 

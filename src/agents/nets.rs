@@ -11,14 +11,14 @@ use crate::numeric::inplace::{Activation, Polyak};
 
 /// What follows the last layer.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Output {
+pub(crate) enum Output {
     Linear,
     Tanh,
 }
 
 /// Dense layers given as (weight, bias) variables, ReLU between them and nothing after the last:
 /// the body shared by `Mlp` (weights `out x in`) and `Critics` (k networks stacked, `[k, out, in]`).
-pub struct DenseStack(Vec<(Var, Var)>);
+pub(crate) struct DenseStack(Vec<(Var, Var)>);
 
 impl DenseStack {
     pub fn new(params: Vec<(Var, Var)>) -> DenseStack {
@@ -26,7 +26,7 @@ impl DenseStack {
     }
 
     /// An independent copy with equal weights (for target networks).
-    pub fn deep_copy(&self) -> Result<DenseStack> {
+    pub(crate) fn deep_copy(&self) -> Result<DenseStack> {
         let copy = |v: &Var| Var::from_tensor(&v.as_tensor().copy()?);
         Ok(DenseStack(self.0.iter().map(|(w, b)| Ok((copy(w)?, copy(b)?))).collect::<Result<_>>()?))
     }
@@ -38,7 +38,7 @@ impl DenseStack {
     /// The same function with the weights treated as constants: gradients flow to `x` only.
     /// The actors' losses go through the critics this way, so their backward pass skips the
     /// critics' weight gradients (which the actor's optimiser never uses).
-    pub fn forward_frozen(&self, x: &Tensor) -> Result<Tensor> {
+    pub(crate) fn forward_frozen(&self, x: &Tensor) -> Result<Tensor> {
         run_layers(x, self.0.iter().map(|(w, b)| (w.as_tensor().detach(), b.as_tensor().detach())))
     }
 
@@ -52,7 +52,7 @@ impl DenseStack {
     }
 
     /// Parameters named `<prefix>.<layer>.weight` / `.bias`, for checkpoints.
-    pub fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
+    pub(crate) fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
         self.0
             .iter()
             .enumerate()
@@ -63,7 +63,7 @@ impl DenseStack {
     }
 
     /// target <- tau * self + (1 - tau) * target, parameter by parameter, in place.
-    pub fn polyak_into(&self, target: &DenseStack, tau: f64) -> Result<()> {
+    pub(crate) fn polyak_into(&self, target: &DenseStack, tau: f64) -> Result<()> {
         let kernel = Polyak { tau: tau as f32 };
         for (o, t) in self.vars().iter().zip(target.vars()) {
             t.as_tensor().inplace_op2(o.as_tensor(), &kernel)?;
@@ -73,7 +73,7 @@ impl DenseStack {
 }
 
 /// Applies `(weight, bias)` layers to `x` as dense layers, ReLU after all but the last.
-pub fn run_layers(x: &Tensor, layers: impl ExactSizeIterator<Item = (Tensor, Tensor)>) -> Result<Tensor> {
+pub(crate) fn run_layers(x: &Tensor, layers: impl ExactSizeIterator<Item = (Tensor, Tensor)>) -> Result<Tensor> {
     let n = layers.len();
     let mut h = x.clone();
     for (i, (w, b)) in layers.enumerate() {
@@ -84,7 +84,7 @@ pub fn run_layers(x: &Tensor, layers: impl ExactSizeIterator<Item = (Tensor, Ten
 }
 
 /// Layers `sizes[0] -> sizes[1] -> ... -> sizes[n]` with ReLU between them.
-pub struct Mlp {
+pub(crate) struct Mlp {
     /// weight `out x in`, bias `out` per layer
     body: DenseStack,
     output: Output,
@@ -117,7 +117,7 @@ impl Mlp {
 
     /// Multiplies rows `rows` of the last layer's weights by `factor` (SAC gives its log-std
     /// rows a smaller orthogonal gain than its mean rows).
-    pub fn scale_output_rows(&self, rows: std::ops::Range<usize>, factor: f64) -> Result<()> {
+    pub(crate) fn scale_output_rows(&self, rows: std::ops::Range<usize>, factor: f64) -> Result<()> {
         let (weight, _) = self.body.layers().last().expect("at least one layer");
         let w = weight.as_tensor();
         let scaled = w.narrow(0, rows.start, rows.len())?.affine(factor, 0.0)?;
@@ -125,7 +125,7 @@ impl Mlp {
     }
 
     /// An independent copy with equal weights (for target networks).
-    pub fn deep_copy(&self) -> Result<Mlp> {
+    pub(crate) fn deep_copy(&self) -> Result<Mlp> {
         Ok(Mlp { body: self.body.deep_copy()?, output: self.output })
     }
 
@@ -147,16 +147,8 @@ impl Mlp {
     }
 
     /// Parameters named `<prefix>.<layer>.weight` / `.bias`, for checkpoints.
-    pub fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
+    pub(crate) fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
         self.body.named_vars(prefix)
-    }
-
-    pub fn input_dim(&self) -> usize {
-        self.layer(0).0.dims()[1]
-    }
-
-    pub fn output_dim(&self) -> usize {
-        self.body.layers().last().unwrap().0.dims()[0]
     }
 }
 
@@ -164,7 +156,7 @@ impl Mlp {
 /// times `gain`, uniformly distributed over such matrices: the QR factors of a Gaussian matrix
 /// with R's diagonal made positive (Saxe et al. 2014; the construction of flax's and PyTorch's
 /// `orthogonal` initialisers).
-pub fn orthogonal(rows: usize, cols: usize, gain: f64, rng: &mut ChaCha8Rng) -> Vec<f32> {
+pub(crate) fn orthogonal(rows: usize, cols: usize, gain: f64, rng: &mut ChaCha8Rng) -> Vec<f32> {
     let (tall, narrow) = (rows.max(cols), rows.min(cols));
     let a = DMatrix::<f64>::from_fn(tall, narrow, |_, _| StandardNormal.sample(rng));
     let qr = a.qr();
@@ -179,16 +171,16 @@ pub fn orthogonal(rows: usize, cols: usize, gain: f64, rng: &mut ChaCha8Rng) -> 
 }
 
 /// target <- tau * online + (1 - tau) * target, parameter by parameter.
-pub fn polyak_update(online: &Mlp, target: &Mlp, tau: f64) -> Result<()> {
+pub(crate) fn polyak_update(online: &Mlp, target: &Mlp, tau: f64) -> Result<()> {
     online.body.polyak_into(&target.body, tau)
 }
 
 /// A row-major batch as a tensor.
-pub fn batch_tensor(data: &[f32], rows: usize, cols: usize) -> Result<Tensor> {
+pub(crate) fn batch_tensor(data: &[f32], rows: usize, cols: usize) -> Result<Tensor> {
     Tensor::from_slice(data, (rows, cols), &Device::Cpu)
 }
 
-pub fn scalar_var(value: f32) -> Result<Var> {
+pub(crate) fn scalar_var(value: f32) -> Result<Var> {
     Var::from_tensor(&Tensor::new(&[value], &Device::Cpu)?.to_dtype(DType::F32)?)
 }
 

@@ -4,15 +4,18 @@ use rand::Rng;
 use rand_distr::{Distribution, StandardNormal};
 use serde::{Deserialize, Serialize};
 
+/// Which exploration noise a deterministic policy adds.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
 pub enum NoiseKind {
+    /// Independent N(0, sigma) each step.
     Gaussian,
+    /// Temporally correlated Ornstein-Uhlenbeck noise with a decaying std.
     OrnsteinUhlenbeck,
 }
 
 #[derive(Debug, Clone)]
-pub enum Noise {
+pub(crate) enum Noise {
     /// N(0, sigma), in units of the action half-range.
     Gaussian { sigma: f64 },
     OrnsteinUhlenbeck {
@@ -39,7 +42,7 @@ impl Noise {
     }
 
     /// The current standard deviation of the driving noise.
-    pub fn sigma(&self) -> f64 {
+    pub(crate) fn sigma(&self) -> f64 {
         match self {
             Noise::Gaussian { sigma } => *sigma,
             Noise::OrnsteinUhlenbeck { sigma_max, sigma_min, decay_steps, steps, .. } => {
@@ -85,7 +88,7 @@ impl Noise {
         }
     }
 
-    pub fn set_steps(&mut self, n: u64) {
+    pub(crate) fn set_steps(&mut self, n: u64) {
         if let Noise::OrnsteinUhlenbeck { steps, .. } = self {
             *steps = n;
         }

@@ -18,9 +18,10 @@ use super::{Agent, Algo, Batch, Losses, ReplayBuffer};
 use crate::numeric::optim::Adam;
 
 /// VecNormalize's defaults (Stable-Baselines3 `vec_normalize.py`).
-pub const CLIP: f32 = 10.0;
-pub const EPSILON: f64 = 1e-8;
+pub(crate) const CLIP: f32 = 10.0;
+pub(crate) const EPSILON: f64 = 1e-8;
 
+/// Wraps an agent so its networks see standardised observations (frozen after warm-up).
 pub struct NormalizedAgent {
     inner: Box<dyn Agent>,
     mean: Var,
@@ -54,7 +55,7 @@ impl NormalizedAgent {
 }
 
 /// `(x - mean) * inv_std`, clipped, in place over rows of `mean.len()` values.
-pub fn normalize_rows(values: &mut [f32], mean: &[f32], inv_std: &[f32]) {
+pub(crate) fn normalize_rows(values: &mut [f32], mean: &[f32], inv_std: &[f32]) {
     for row in values.chunks_exact_mut(mean.len()) {
         for ((v, m), s) in row.iter_mut().zip(mean).zip(inv_std) {
             *v = ((*v - m) * s).clamp(-CLIP, CLIP);
@@ -63,7 +64,7 @@ pub fn normalize_rows(values: &mut [f32], mean: &[f32], inv_std: &[f32]) {
 }
 
 /// Per-dimension mean and 1/sqrt(var + eps) of the buffer's stored observations, in f64.
-pub fn observation_stats(buffer: &ReplayBuffer) -> (Vec<f32>, Vec<f32>) {
+pub(crate) fn observation_stats(buffer: &ReplayBuffer) -> (Vec<f32>, Vec<f32>) {
     let (dim, _) = buffer.dims();
     let n = buffer.len().max(1) as f64;
     let mut mean = vec![0.0f64; dim];

@@ -6,7 +6,9 @@ use rand_chacha::ChaCha8Rng;
 
 use super::{Agent, Algo, DeterministicAgent, DpgConfig, SacAgent, SacConfig, TrainConfig};
 
+/// A registered algorithm: its name, published defaults, settings and constructor.
 pub struct AlgoEntry {
+    /// The algorithm this entry builds.
     pub algo: Algo,
     /// The name `--algo` and config files use.
     pub name: &'static str,
@@ -19,9 +21,9 @@ pub struct AlgoEntry {
 }
 
 /// Builds an agent from its config, the observation and action sizes and the initialisation RNG.
-pub type BuildAgent = fn(&TrainConfig, usize, usize, &mut ChaCha8Rng) -> Result<Box<dyn Agent>>;
+pub(crate) type BuildAgent = fn(&TrainConfig, usize, usize, &mut ChaCha8Rng) -> Result<Box<dyn Agent>>;
 
-pub const ALGOS: &[AlgoEntry] = &[
+pub(crate) const ALGOS: &[AlgoEntry] = &[
     AlgoEntry {
         algo: Algo::Td3,
         name: "td3",

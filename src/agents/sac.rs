@@ -21,6 +21,7 @@ struct ValueNet {
     opt: Adam,
 }
 
+/// Soft Actor-Critic, v1 (with a value network) or v2 (twin critics, tuned temperature).
 pub struct SacAgent {
     obs_dim: usize,
     act_dim: usize,
@@ -40,7 +41,7 @@ pub struct SacAgent {
 }
 
 /// log(1 - tanh(u)^2), computed stably as 2 (log 2 - u - softplus(-2u)).
-pub fn log_one_minus_tanh_sq(u: &Tensor) -> Result<Tensor> {
+pub(crate) fn log_one_minus_tanh_sq(u: &Tensor) -> Result<Tensor> {
     let minus_2u = u.affine(-2.0, 0.0)?;
     // softplus(x) = max(x, 0) + log(1 + exp(-|x|))
     let softplus = (minus_2u.relu()? + minus_2u.abs()?.neg()?.exp()?.affine(1.0, 1.0)?.log()?)?;
@@ -48,12 +49,12 @@ pub fn log_one_minus_tanh_sq(u: &Tensor) -> Result<Tensor> {
 }
 
 /// Stable-Baselines3's and CleanRL's log(1 - a^2 + 1e-6), a = tanh(u).
-pub fn log_one_minus_sq_plus_epsilon(a: &Tensor) -> Result<Tensor> {
+pub(crate) fn log_one_minus_sq_plus_epsilon(a: &Tensor) -> Result<Tensor> {
     a.sqr()?.affine(-1.0, 1.0 + 1e-6)?.log()
 }
 
 /// Log-density of a = tanh(u), u = mean + std * eps, summed over action dimensions.
-pub fn squashed_gaussian_log_prob(
+pub(crate) fn squashed_gaussian_log_prob(
     u: &Tensor,
     eps: &Tensor,
     log_std: &Tensor,
@@ -69,6 +70,7 @@ pub fn squashed_gaussian_log_prob(
 }
 
 impl SacAgent {
+    /// Builds the networks for `obs_dim`/`act_dim`, initialised from `rng`.
     pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
         let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 2 * act_dim), Output::Linear, cfg.weight_init, rng)?;
         if cfg.weight_init == WeightInit::Orthogonal {
@@ -108,6 +110,7 @@ impl SacAgent {
         })
     }
 
+    /// The current temperature.
     pub fn alpha(&self) -> Result<f64> {
         Ok(self.log_alpha.as_tensor().exp()?.flatten_all()?.to_vec1::<f32>()?[0] as f64)
     }

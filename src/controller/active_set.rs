@@ -14,10 +14,12 @@ use nalgebra::{DMatrix, DVector};
 
 /// Solution and the constraints active at it (the next solve's warm start).
 #[derive(Debug, Clone)]
-pub struct ActiveSetSolution {
+pub(crate) struct ActiveSetSolution {
     pub x: DVector<f64>,
     pub active: Vec<usize>,
-    pub iterations: usize,
+    /// Iterations the solve took; the warm-start test bounds it.
+    #[cfg_attr(not(test), allow(dead_code))]
+    pub(crate) iterations: usize,
 }
 
 /// Solves the QP from `x0`, which must satisfy `A x0 <= b`, with `working` the constraints

@@ -23,24 +23,24 @@ use crate::policy::{Policy, Telemetry};
 const ANT_LEGS: [usize; LEGS] = [1, 2, 4, 3];
 
 #[derive(Debug, Clone)]
-pub struct AntGaitParams {
+pub(crate) struct AntGaitParams {
     /// Forward speed profile and yaw rate.
     pub command: Command,
-    pub stance_duration: f64,
-    pub duty_factor: f64,
-    pub body_height: f64,
-    pub foothold_gain: f64,
-    pub kp_height: f64,
-    pub kd_height: f64,
-    pub kd_speed: f64,
+    pub(crate) stance_duration: f64,
+    pub(crate) duty_factor: f64,
+    pub(crate) body_height: f64,
+    pub(crate) foothold_gain: f64,
+    pub(crate) kp_height: f64,
+    pub(crate) kd_height: f64,
+    pub(crate) kd_speed: f64,
     /// Integral gain on the forward-speed error (1/s^2).
-    pub ki_speed: f64,
-    pub kp_attitude: f64,
-    pub kd_attitude: f64,
+    pub(crate) ki_speed: f64,
+    pub(crate) kp_attitude: f64,
+    pub(crate) kd_attitude: f64,
     /// Ankle angle magnitude while in swing (rad; the range is 30-70 degrees).
-    pub swing_ankle: f64,
-    pub joint_kp: f64,
-    pub joint_kd: f64,
+    pub(crate) swing_ankle: f64,
+    pub(crate) joint_kp: f64,
+    pub(crate) joint_kd: f64,
     pub friction: f64,
 }
 
@@ -78,7 +78,7 @@ struct Leg {
     ankle_sign: f64,
 }
 
-pub struct AntController {
+pub(crate) struct AntController {
     pub params: AntGaitParams,
     gait: GaitScheduler,
     qp: ForceQp,
@@ -140,7 +140,7 @@ impl AntController {
         Vector3::new(s[3 * i], s[3 * i + 1], s[3 * i + 2])
     }
 
-    pub fn controls(&mut self, env: &dyn Env) -> Result<Vec<f64>> {
+    pub(crate) fn controls(&mut self, env: &dyn Env) -> Result<Vec<f64>> {
         let spec = env.spec();
         if spec.name != "ant" {
             bail!("the Ant controller drives the ant environment only");

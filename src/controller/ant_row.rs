@@ -27,6 +27,7 @@ const HIP_LIMIT: f64 = 0.52;
 /// Ant's actuator gear: ctrl = torque / 150.
 const GEAR: f64 = 150.0;
 
+/// Settings of Ant's rowing gait; the defaults are the tuned ones.
 #[derive(Debug, Clone)]
 pub struct AntRowParams {
     /// Forward speed profile (along the travel direction) and yaw rate.
@@ -36,20 +37,26 @@ pub struct AntRowParams {
     /// the swing PD cannot follow; above 0.7 s the skids' rise and fall (`skid_stance_ankle`)
     /// carries the body further than the stroke model predicts, and the feed-forward overshoots.
     pub min_period: f64,
+    /// Longest rowing cycle (s).
     pub max_period: f64,
+    /// Hip stroke (rad) the cycle length is chosen for.
     pub design_stroke: f64,
     /// The share of the cycle the side feet push.
     pub duty_factor: f64,
     /// Ankle magnitude of a pushing side leg, of a side leg at the top of its swing, and of
     /// the skids (rad).
     pub stance_ankle: f64,
+    /// Ankle magnitude of a side leg at the top of its swing (rad).
     pub swing_ankle: f64,
+    /// Ankle magnitude of the skids (rad).
     pub skid_ankle: f64,
     /// Joint PD of hips and side ankles, and the skids' ankle stiffness. Skids as stiff as the
     /// other joints (80) carry the body at 1.0 m/s where softer ones (30) sag into the ground
     /// and stop it at 0.78; above about 100 the body bounces on them.
     pub joint_kp: f64,
+    /// Joint PD damping of hips and side ankles.
     pub joint_kd: f64,
+    /// Stiffness of the skids' ankles.
     pub skid_kp: f64,
     /// Skids' ankle magnitude while the side legs push: lower than `skid_ankle`, so the skids
     /// rise a little and the side feet carry the weight instead of slipping as they drag it.
@@ -69,6 +76,7 @@ pub struct AntRowParams {
     /// back to the line is sideways travel too: the steady posture holds the yaw and damps the
     /// sideways speed only (`lateral_gain` 0), and its net offset stays as small.
     pub lateral_gain: f64,
+    /// Yaw goal change per m/s of sideways speed (see `lateral_gain`).
     pub lateral_damping: f64,
     /// Difference of the two side strokes per rad/s of yaw rate (relative, like `yaw_gain`):
     /// damps the yaw swings that carry the body sideways after the turn into the pose.
@@ -76,7 +84,9 @@ pub struct AntRowParams {
     /// Turning on the spot into the rowing pose: cycle, hip stroke, and the yaw error at which
     /// rowing starts.
     pub turn_period: f64,
+    /// Hip stroke while turning on the spot (rad).
     pub turn_stroke: f64,
+    /// Yaw error (rad) below which the turn ends and rowing starts.
     pub turn_tolerance: f64,
     /// Yaw error below which the turning stroke shrinks in proportion (rad).
     pub turn_slowdown: f64,
@@ -85,8 +95,11 @@ pub struct AntRowParams {
     /// that step as they touch down tipped the body into a sideways slide (reset seed 219: 0.5 m
     /// in 0.3 s).
     pub land_time: f64,
+    /// Ankle magnitude held while landing (rad).
     pub land_ankle: f64,
+    /// Joint stiffness while landing.
     pub land_kp: f64,
+    /// Joint damping while landing.
     pub land_kd: f64,
     /// Rowing cycles at the start whose speed error is not integrated: they start from standing
     /// and are slow whatever the stroke, and winding the stroke up on them makes the next cycles
@@ -97,7 +110,7 @@ pub struct AntRowParams {
 
 /// Commands whose peak speed is at most this (m/s) row in the steady posture, faster ones in
 /// the fast posture.
-pub const STEADY_SPEED_LIMIT: f64 = 0.7;
+pub(crate) const STEADY_SPEED_LIMIT: f64 = 0.7;
 
 impl AntRowParams {
     /// The posture for a command: steady up to [`STEADY_SPEED_LIMIT`], fast above.
@@ -203,7 +216,9 @@ enum Mode {
     Rowing,
 }
 
+/// Ant's rowing gait: a feed-forward stroke with speed, yaw and sideways feedback per cycle.
 pub struct AntRowController {
+    /// Its settings.
     pub params: AntRowParams,
     joints: Option<Vec<Joints>>,
     turn_gait: GaitScheduler,
@@ -234,6 +249,7 @@ pub struct AntRowController {
 }
 
 impl AntRowController {
+    /// A controller with these settings; fails on settings out of range.
     pub fn new(params: AntRowParams) -> Result<AntRowController> {
         params.command.validate()?;
         anyhow::ensure!(
@@ -293,7 +309,7 @@ impl AntRowController {
         chord.clamp(-1.0, 1.0).asin()
     }
 
-    pub fn controls(&mut self, env: &dyn Env) -> Result<Vec<f64>> {
+    pub(crate) fn controls(&mut self, env: &dyn Env) -> Result<Vec<f64>> {
         if env.spec().name != "ant" {
             bail!("the Ant controller drives the ant environment only");
         }

@@ -21,7 +21,7 @@ pub fn baseline_env(env: &str) -> Result<EnvConfig> {
 
 /// The env a trained policy ran in, switched to what the baseline needs (Minitaur's torque
 /// action mode), keeping its reward, episode length and randomisation.
-pub fn baseline_env_like(cfg: &EnvConfig) -> Result<EnvConfig> {
+pub(crate) fn baseline_env_like(cfg: &EnvConfig) -> Result<EnvConfig> {
     let mut out = cfg.clone();
     for (k, v) in baseline_env(&cfg.name)?.options {
         out.options.insert(k, v);
@@ -60,6 +60,7 @@ pub fn baseline_controller_for(env: &str, command: Command, gait: Option<GaitKin
     })
 }
 
+/// The gait named `trot`, `bound`, `pace` or `row`; the error lists them.
 pub fn parse_gait(name: &str) -> Result<GaitKind> {
     match name {
         "trot" => Ok(GaitKind::Trot),

@@ -39,6 +39,7 @@ impl SpeedProfile {
         Ok(SpeedProfile { knots })
     }
 
+    /// The commanded speed at time `t` (s): linear between knots, constant outside them.
     pub fn at(&self, t: f64) -> f64 {
         let k = &self.knots;
         if t <= k[0].0 {
@@ -54,7 +55,7 @@ impl SpeedProfile {
     }
 
     /// The largest |speed| the profile asks for (its extremes are at knots).
-    pub fn peak_speed(&self) -> f64 {
+    pub(crate) fn peak_speed(&self) -> f64 {
         self.knots.iter().map(|&(_, v)| v.abs()).fold(0.0, f64::max)
     }
 
@@ -67,6 +68,7 @@ impl SpeedProfile {
 /// A speed profile plus a yaw-rate command.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Command {
+    /// Forward speed over time (m/s).
     pub speed: SpeedProfile,
     /// rad/s about the vertical, positive turning left (counter-clockwise seen from above).
     pub yaw_rate: f64,
@@ -74,7 +76,7 @@ pub struct Command {
 
 impl Command {
     /// A controller's name for this command: `raibert-GAIT@Vm/s`, plus `,Wrad/s` when turning.
-    pub fn controller_name(&self, gait: &str) -> String {
+    pub(crate) fn controller_name(&self, gait: &str) -> String {
         let mut name = format!("raibert-{gait}@{}m/s", self.speed.final_speed());
         if self.yaw_rate != 0.0 {
             name += &format!(",{}rad/s", self.yaw_rate);
@@ -87,6 +89,7 @@ impl Command {
         Command { speed: SpeedProfile::ramp(speed, ramp_time), yaw_rate: 0.0 }
     }
 
+    /// Checks that the yaw rate is finite.
     pub fn validate(&self) -> Result<()> {
         ensure!(self.yaw_rate.is_finite(), "yaw rate must be finite");
         Ok(())
@@ -96,7 +99,7 @@ impl Command {
 /// The integral of the forward-speed error after one more tick, bounded so that the integral
 /// force (ki x integral) never exceeds half the damping gain's worth (0.5 kd): a stumble cannot
 /// wind it up. Unchanged when ki is 0.
-pub fn integrate_speed_error(integral: f64, error: f64, dt: f64, kd: f64, ki: f64) -> f64 {
+pub(crate) fn integrate_speed_error(integral: f64, error: f64, dt: f64, kd: f64, ki: f64) -> f64 {
     if ki <= 0.0 {
         return integral;
     }
@@ -105,7 +108,7 @@ pub fn integrate_speed_error(integral: f64, error: f64, dt: f64, kd: f64, ki: f6
 }
 
 /// An angle wrapped to (-pi, pi].
-pub fn wrap_angle(a: f64) -> f64 {
+pub(crate) fn wrap_angle(a: f64) -> f64 {
     let two_pi = 2.0 * std::f64::consts::PI;
     let w = a.rem_euclid(two_pi);
     if w > std::f64::consts::PI {
@@ -117,7 +120,7 @@ pub fn wrap_angle(a: f64) -> f64 {
 
 /// A floating base seen in its heading frame (yaw removed): what both controllers set their
 /// speeds, wrenches and footholds in, so the same laws hold whichever way the robot faces.
-pub struct HeadingFrame {
+pub(crate) struct HeadingFrame {
     /// Yaw of the base (rad).
     pub yaw: f64,
     /// Rotation from the heading frame to the world.
@@ -126,7 +129,7 @@ pub struct HeadingFrame {
     pub body: nalgebra::Matrix3<f64>,
     /// Linear and angular velocity in the heading frame.
     pub velocity: nalgebra::Vector3<f64>,
-    pub angular_velocity: nalgebra::Vector3<f64>,
+    pub(crate) angular_velocity: nalgebra::Vector3<f64>,
 }
 
 impl HeadingFrame {

@@ -30,6 +30,7 @@ pub enum QpMethod {
     ClarabelReference,
 }
 
+/// Whether feet push in 3D or in the sagittal plane.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Dimension {
     /// Forces (f_x, f_y, f_z) per foot; wrench (F_x, F_y, F_z, M_x, M_y, M_z).
@@ -38,15 +39,22 @@ pub enum Dimension {
     Planar,
 }
 
+/// The stance-force QP: foot forces that best produce a desired body wrench within friction cones and force
+/// limits.
 pub struct ForceQp {
+    /// 3D or planar forces.
     pub dimension: Dimension,
+    /// Friction coefficient of the linearised cone.
     pub friction: f64,
+    /// Least normal force per stance foot (N).
     pub f_min: f64,
+    /// Largest normal force per stance foot (N).
     pub f_max: f64,
     /// Weight of each wrench row (S diagonal).
     pub wrench_weights: Vec<f64>,
     /// Regularisation alpha on |f|^2.
     pub regularisation: f64,
+    /// Which solver solves it.
     pub method: QpMethod,
     /// Cached clarabel solvers by number of stance feet (see `solve_clarabel`).
     solvers: HashMap<usize, DefaultSolver<f64>>,
@@ -63,6 +71,7 @@ struct Problem {
 }
 
 impl ForceQp {
+    /// A QP with these limits and weights, solved by the active-set method.
     pub fn new(
         dimension: Dimension,
         friction: f64,
@@ -122,7 +131,8 @@ impl ForceQp {
     }
 
     /// The cost the QP minimises, for forces `forces`.
-    pub fn objective(&self, feet: &[Vector3<f64>], wrench: &[f64], forces: &[f64]) -> f64 {
+    #[cfg(test)]
+    pub(crate) fn objective(&self, feet: &[Vector3<f64>], wrench: &[f64], forces: &[f64]) -> f64 {
         let err = self.wrench(feet, forces) - DVector::from_column_slice(wrench);
         let weighted: f64 = err.iter().zip(&self.wrench_weights).map(|(e, w)| w * e * e).sum();
         weighted + self.regularisation * forces.iter().map(|f| f * f).sum::<f64>()
@@ -159,7 +169,8 @@ impl ForceQp {
     }
 
     /// The active-set method alone (no fallback), for tests and benches.
-    pub fn solve_with_active_set(&mut self, feet: &[Vector3<f64>], wrench: &[f64]) -> Result<Vec<f64>> {
+    #[cfg(test)]
+    pub(crate) fn solve_with_active_set(&mut self, feet: &[Vector3<f64>], wrench: &[f64]) -> Result<Vec<f64>> {
         let problem = self.problem(feet, wrench)?;
         self.solve_active_set(feet.len(), &problem)
     }

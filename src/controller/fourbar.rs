@@ -6,9 +6,9 @@
 //! motor's to the back), so a symmetric leg has equal angles and pi points it straight down.
 
 /// Motor axis to knee (m), as in `models/minitaur.xml`.
-pub const UPPER: f64 = 0.1177;
+pub(crate) const UPPER: f64 = 0.1177;
 /// Knee to foot (m).
-pub const LOWER: f64 = 0.2;
+pub(crate) const LOWER: f64 = 0.2;
 
 fn knees(outer: f64, inner: f64) -> ([f64; 2], [f64; 2]) {
     ([UPPER * outer.sin(), UPPER * outer.cos()], [-UPPER * inner.sin(), UPPER * inner.cos()])
@@ -31,7 +31,7 @@ pub fn forward(outer: f64, inner: f64) -> Option<[f64; 2]> {
 }
 
 /// Motor angles (outer, inner) that put the foot at `foot`; None when out of reach.
-pub fn inverse(foot: [f64; 2]) -> Option<[f64; 2]> {
+pub(crate) fn inverse(foot: [f64; 2]) -> Option<[f64; 2]> {
     let r = (foot[0] * foot[0] + foot[1] * foot[1]).sqrt();
     if r <= LOWER - UPPER || r >= LOWER + UPPER {
         return None;
@@ -45,7 +45,7 @@ pub fn inverse(foot: [f64; 2]) -> Option<[f64; 2]> {
 }
 
 /// d(foot) / d(motor angles): rows x, z; columns outer, inner.
-pub fn jacobian(outer: f64, inner: f64) -> Option<[[f64; 2]; 2]> {
+pub(crate) fn jacobian(outer: f64, inner: f64) -> Option<[[f64; 2]; 2]> {
     let h = 1e-6;
     let d_outer = (forward(outer + h, inner)?, forward(outer - h, inner)?);
     let d_inner = (forward(outer, inner + h)?, forward(outer, inner - h)?);
@@ -55,7 +55,7 @@ pub fn jacobian(outer: f64, inner: f64) -> Option<[[f64; 2]; 2]> {
 
 /// Motor torques (outer, inner) that make the ground push on the foot with `force` (x, z):
 /// tau = -J^T f.
-pub fn torques_for_ground_force(outer: f64, inner: f64, force: [f64; 2]) -> Option<[f64; 2]> {
+pub(crate) fn torques_for_ground_force(outer: f64, inner: f64, force: [f64; 2]) -> Option<[f64; 2]> {
     let j = jacobian(outer, inner)?;
     Some([-(j[0][0] * force[0] + j[1][0] * force[1]), -(j[0][1] * force[0] + j[1][1] * force[1])])
 }

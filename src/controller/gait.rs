@@ -4,10 +4,11 @@
 use crate::policy::Telemetry;
 
 /// Legs in the Minitaur order: front-left, back-left, front-right, back-right.
-pub const LEGS: usize = 4;
+pub(crate) const LEGS: usize = 4;
 /// Leg names in the scheduler's order.
-pub const LEG_NAMES: [&str; LEGS] = ["fl", "bl", "fr", "br"];
+pub(crate) const LEG_NAMES: [&str; LEGS] = ["fl", "bl", "fr", "br"];
 
+/// Which legs swing together.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum GaitKind {
     /// Diagonal pairs together (FL+BR, FR+BL).
@@ -23,7 +24,7 @@ pub enum GaitKind {
 
 impl GaitKind {
     /// Phase offset of each leg (FL, BL, FR, BR) as a fraction of the cycle.
-    pub fn offsets(self) -> [f64; LEGS] {
+    pub(crate) fn offsets(self) -> [f64; LEGS] {
         match self {
             GaitKind::Trot | GaitKind::Row => [0.0, 0.5, 0.5, 0.0],
             GaitKind::Bound => [0.0, 0.5, 0.0, 0.5],
@@ -33,19 +34,19 @@ impl GaitKind {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct LegPhase {
-    pub in_stance: bool,
+pub(crate) struct LegPhase {
+    pub(crate) in_stance: bool,
     /// Progress through the current stance or swing, in [0, 1).
     pub progress: f64,
 }
 
 #[derive(Debug, Clone)]
-pub struct GaitScheduler {
+pub(crate) struct GaitScheduler {
     pub kind: GaitKind,
     /// Seconds of stance per cycle.
-    pub stance_duration: f64,
+    pub(crate) stance_duration: f64,
     /// Fraction of the cycle in stance, in (0, 1).
-    pub duty_factor: f64,
+    pub(crate) duty_factor: f64,
     time: f64,
 }
 
@@ -60,11 +61,11 @@ impl GaitScheduler {
         self.stance_duration / self.duty_factor
     }
 
-    pub fn swing_duration(&self) -> f64 {
+    pub(crate) fn swing_duration(&self) -> f64 {
         self.period() - self.stance_duration
     }
 
-    pub fn advance(&mut self, dt: f64) {
+    pub(crate) fn advance(&mut self, dt: f64) {
         self.time += dt;
     }
 
@@ -86,7 +87,7 @@ impl GaitScheduler {
 }
 
 /// Stance (1) or swing (0) and phase progress per leg; the foot target of each swing leg.
-pub fn gait_telemetry(phases: &[(bool, f64); LEGS], target: impl Fn(usize) -> [f64; 3]) -> Telemetry {
+pub(crate) fn gait_telemetry(phases: &[(bool, f64); LEGS], target: impl Fn(usize) -> [f64; 3]) -> Telemetry {
     let mut t = Telemetry::default();
     for (leg, &(stance, progress)) in phases.iter().enumerate() {
         let name = LEG_NAMES[leg];

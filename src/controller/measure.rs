@@ -10,8 +10,11 @@ use crate::rollout::{run_episode, Observer, StepView};
 /// Locomotion measures of one episode.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct GaitEpisode {
+    /// Sum of rewards.
     pub episode_return: f64,
+    /// Steps taken.
     pub length: usize,
+    /// The episode terminated because the robot fell.
     pub fell: bool,
     /// Mean forward speed (m/s): distance travelled along the robot's heading over episode time.
     pub mean_speed: f64,
@@ -43,7 +46,7 @@ pub struct GaitEpisode {
 /// Cost of transport of a set of episodes: their energy over their weight times distance, both
 /// summed over the episodes that moved forward (a ratio of totals, so an episode that barely
 /// moved does not dominate as a mean of ratios would); infinite if none did.
-pub fn mean_cost_of_transport(episodes: &[GaitEpisode]) -> f64 {
+pub(crate) fn mean_cost_of_transport(episodes: &[GaitEpisode]) -> f64 {
     let forward = episodes.iter().filter(|e| e.weight_times_distance > 0.0);
     let (energy, work): (f64, f64) = forward.fold((0.0, 0.0), |(a, b), e| (a + e.energy, b + e.weight_times_distance));
     if work > 0.0 {
@@ -118,7 +121,7 @@ pub fn measure(
 /// Runs and measures one episode, reset with `reset_seed` (None continues the environment's
 /// random stream); `profile` is the set-point speed errors are measured against, if the policy
 /// has one.
-pub fn measure_episode(
+pub(crate) fn measure_episode(
     env: &mut dyn Env,
     policy: &mut dyn Policy,
     episode: usize,

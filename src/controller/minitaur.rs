@@ -27,37 +27,38 @@ use crate::mujoco::Data;
 use crate::policy::{Policy, Telemetry};
 
 #[derive(Debug, Clone)]
-pub struct MinitaurGaitParams {
+pub(crate) struct MinitaurGaitParams {
     /// Forward speed profile and yaw rate.
     pub command: Command,
     pub gait: GaitKind,
-    pub stance_duration: f64,
-    pub duty_factor: f64,
-    pub body_height: f64,
+    pub(crate) stance_duration: f64,
+    pub(crate) duty_factor: f64,
+    pub(crate) body_height: f64,
     /// Raibert speed-correction gain k.
-    pub foothold_gain: f64,
-    pub swing_clearance: f64,
-    pub kp_height: f64,
-    pub kd_height: f64,
-    pub kd_speed: f64,
+    pub(crate) foothold_gain: f64,
+    pub(crate) swing_clearance: f64,
+    pub(crate) kp_height: f64,
+    pub(crate) kd_height: f64,
+    pub(crate) kd_speed: f64,
     /// Integral gain on the speed error (1/s^2): removes the steady lag of the pure damping term.
-    pub ki_speed: f64,
-    pub kp_yaw: f64,
-    pub kd_yaw: f64,
+    pub(crate) ki_speed: f64,
+    pub(crate) kp_yaw: f64,
+    pub(crate) kd_yaw: f64,
     /// Integral gain on the heading error (1/s^3) while a turn is commanded: removes the turn's
     /// steady lag. Straight walking has no such lag and keeps the plain PD, because the integral
     /// of heading noise costs balance at speed (measured at 1.5 m/s: 2 falls in 10 with it, none
     /// without).
-    pub ki_yaw: f64,
-    pub kp_pitch: f64,
-    pub kd_pitch: f64,
-    pub swing_kp: f64,
-    pub swing_kd: f64,
+    pub(crate) ki_yaw: f64,
+    pub(crate) kp_pitch: f64,
+    pub(crate) kd_pitch: f64,
+    pub(crate) swing_kp: f64,
+    pub(crate) swing_kd: f64,
     /// The swing gain grows with the commanded speed, swing_kp x clamp(|v| / this, 1, 2): a
     /// swing lasts about 43 ms whatever the speed while the stride grows with it, and with the
     /// low-speed gain the feet landed 10-11 cm short of their footholds at 1.1-1.2 m/s and the
-    /// robot fell (`baseline --limits`; benches/results/2026-11-23-amd-epyc-controller/NOTES.md). A stiffer swing at low speed only costs energy.
-    pub swing_gain_speed: f64,
+    /// robot fell (`baseline --limits`; benches/results/2026-11-23-amd-epyc-controller/NOTES.md). A stiffer
+    /// swing at low speed only costs energy.
+    pub(crate) swing_gain_speed: f64,
     /// Friction coefficient the force QP assumes: the lowest foot friction PyBullet's
     /// randomisation draws (0.8).
     pub friction: f64,
@@ -93,24 +94,24 @@ impl Default for MinitaurGaitParams {
 /// What the controller counted over an episode, including where it ran into the robot's limits
 /// (`MinitaurController::limits`).
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
-pub struct ControllerStats {
-    pub ticks: u64,
+pub(crate) struct ControllerStats {
+    pub(crate) ticks: u64,
     pub qp_failures: u64,
     /// Motor commands, and those the 3.5 N m limit clipped (stance and swing legs).
-    pub motor_commands: u64,
+    pub(crate) motor_commands: u64,
     pub stance_torque_clipped: u64,
     pub swing_torque_clipped: u64,
     /// Stance foot-ticks, those whose QP force lies on the friction cone, and those whose foot
     /// slid more than 5 mm over the tick (0.5 m/s).
-    pub stance_ticks: u64,
+    pub(crate) stance_ticks: u64,
     pub on_friction_cone: u64,
     pub slipping: u64,
     /// Swing foot-ticks, and those whose target lay outside the four-bar's reach.
-    pub swing_ticks: u64,
-    pub out_of_reach: u64,
+    pub(crate) swing_ticks: u64,
+    pub(crate) out_of_reach: u64,
     /// Touchdowns, and the summed horizontal distance from foot to target at touchdown (m).
-    pub touchdowns: u64,
-    pub touchdown_miss: f64,
+    pub(crate) touchdowns: u64,
+    pub(crate) touchdown_miss: f64,
 }
 
 /// Where each leg's motors sit in the action vector: (outer, inner).
@@ -122,7 +123,7 @@ fn motor_slots(leg: usize) -> (usize, usize) {
     }
 }
 
-pub struct MinitaurController {
+pub(crate) struct MinitaurController {
     pub params: MinitaurGaitParams,
     gait: GaitScheduler,
     qp: ForceQp,
@@ -165,10 +166,6 @@ impl MinitaurController {
             foot_targets: [Vector3::zeros(); LEGS],
             last_phase: [(true, 0.0); LEGS],
         })
-    }
-
-    pub fn stance_flags(&self) -> [bool; LEGS] {
-        self.gait.legs().map(|l| l.in_stance)
     }
 
     fn site(d: &Data, name: &str) -> Result<Vector3<f64>> {

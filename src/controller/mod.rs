@@ -2,7 +2,7 @@
 //! Gait scheduling, Raibert foot placement, Minitaur four-bar leg kinematics, the stance-force
 //! QP (clarabel), and the Minitaur and Ant controllers, which implement the same `Policy`
 //! interface as every other policy and run through the same `Env`, scored by the same reward.
-pub mod active_set;
+pub(crate) mod active_set;
 pub mod ant;
 pub mod ant_row;
 pub mod baseline;
@@ -15,7 +15,7 @@ pub mod minitaur;
 
 /// Raibert's foothold relative to the hip: p_f = (T_st / 2) v + k (v - v_des), per horizontal
 /// axis; add the hip position for a world target.
-pub fn raibert_foothold(stance_duration: f64, velocity: [f64; 2], desired: [f64; 2], gain: f64) -> [f64; 2] {
+pub(crate) fn raibert_foothold(stance_duration: f64, velocity: [f64; 2], desired: [f64; 2], gain: f64) -> [f64; 2] {
     std::array::from_fn(|i| 0.5 * stance_duration * velocity[i] + gain * (velocity[i] - desired[i]))
 }
 

@@ -67,7 +67,7 @@ pub fn memory(results: &Path) -> Result<String> {
 }
 
 /// The newest `python-speed.csv` (`python python/bench_speed.py`).
-pub fn python_speed(results: &Path) -> Result<String> {
+pub(crate) fn python_speed(results: &Path) -> Result<String> {
     let path = newest(results, "python-speed.csv")?;
     let rows = read(&path)?;
     let mut out = format!(

@@ -14,7 +14,7 @@ impl Row {
     }
 
     /// The column as a number; empty, missing or unparsable reads as NaN.
-    pub fn num(&self, column: &str) -> f64 {
+    pub(crate) fn num(&self, column: &str) -> f64 {
         self.text(column).parse().unwrap_or(f64::NAN)
     }
 
@@ -45,7 +45,7 @@ pub fn read(path: &Path) -> Result<Vec<Row>> {
 }
 
 /// The comment lines (`# ...`) at the top of a file, without the `# `.
-pub fn comments(path: &Path) -> Result<Vec<String>> {
+pub(crate) fn comments(path: &Path) -> Result<Vec<String>> {
     let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
     Ok(text.lines().take_while(|l| l.starts_with('#')).map(|l| l.trim_start_matches('#').trim().to_string()).collect())
 }

@@ -22,14 +22,17 @@ use crate::io::write_bytes_atomic;
 /// One generated section: the file it lives in, its marker name and its text.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Section {
+    /// The file, relative to the repository root.
     pub file: &'static str,
+    /// The marker name.
     pub name: &'static str,
+    /// The generated text between the markers.
     pub text: String,
 }
 
 /// Where every generated section's data comes from, relative to the repository root.
-pub const REPORT_DIR: &str = "benches/results/report";
-pub const BENCH_RESULTS_DIR: &str = "benches/results";
+pub(crate) const REPORT_DIR: &str = "benches/results/report";
+pub(crate) const BENCH_RESULTS_DIR: &str = "benches/results";
 
 /// Every generated section, computed from the files under `root`.
 pub fn sections(root: &Path) -> Result<Vec<Section>> {
@@ -67,7 +70,7 @@ fn end_marker(name: &str) -> String {
 }
 
 /// `doc` with the text between `name`'s markers replaced by `text`.
-pub fn splice(doc: &str, name: &str, text: &str) -> Result<String> {
+pub(crate) fn splice(doc: &str, name: &str, text: &str) -> Result<String> {
     let (begin, end) = (begin_marker(name), end_marker(name));
     let Some(start) = doc.find(&begin) else { bail!("no '{begin}' marker") };
     let body = start + begin.len();

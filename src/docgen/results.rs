@@ -41,7 +41,7 @@ fn controller_best(rows: &[Row]) -> Vec<(String, &Row)> {
 }
 
 /// README's results at a glance: every budget row with a policy, beside the controller.
-pub fn glance(report: &Path) -> Result<String> {
+pub(crate) fn glance(report: &Path) -> Result<String> {
     let held_out = read(&report.join(HELD_OUT_CSV))?;
     let versus = read(&report.join(VERSUS_CONTROLLER_CSV))?;
     let controller = read(&report.join(CONTROLLER_CSV))?;

@@ -9,15 +9,21 @@ use super::task::{legged_step, locomotion_metrics, planar_position, LeggedWeight
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
-pub const MODEL_XML: &str = include_str!("../../models/ant.xml");
+pub(crate) const MODEL_XML: &str = include_str!("../../models/ant.xml");
 
+/// Gymnasium Ant-v5's options, with its defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct AntOptions {
+    /// Weight of the forward-velocity reward.
     pub forward_reward_weight: f64,
+    /// Weight of the squared-action cost.
     pub ctrl_cost_weight: f64,
+    /// Weight of the squared clipped contact-force cost.
     pub contact_cost_weight: f64,
+    /// Reward per step while healthy.
     pub healthy_reward: f64,
+    /// End the episode when the torso leaves `healthy_z_range`.
     pub terminate_when_unhealthy: bool,
     /// Healthy while the torso height lies in this closed interval (and the state is finite).
     pub healthy_z_range: [f64; 2],
@@ -25,7 +31,9 @@ pub struct AntOptions {
     pub contact_force_range: [f64; 2],
     /// qpos += U(-s, s), qvel = s * N(0, 1) at reset.
     pub reset_noise_scale: f64,
+    /// Steps before the episode is truncated.
     pub max_episode_steps: usize,
+    /// Physics steps per `step`.
     pub frame_skip: usize,
 }
 
@@ -52,6 +60,7 @@ pub struct AntTask {
     torso: usize,
 }
 
+/// Gymnasium's Ant-v5 on MuJoCo: a four-legged robot rewarded for running along x.
 pub type Ant = MujocoEnv<AntTask>;
 
 /// The torso's x and y (of its body frame, as Gymnasium's `get_body_com("torso")`) and z.

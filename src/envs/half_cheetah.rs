@@ -8,16 +8,21 @@ use super::task::{quadratic_cost, Task, TaskStep};
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
-pub const MODEL_XML: &str = include_str!("../../models/half_cheetah.xml");
+pub(crate) const MODEL_XML: &str = include_str!("../../models/half_cheetah.xml");
 
+/// Gymnasium HalfCheetah-v5's options, with its defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct HalfCheetahOptions {
+    /// Weight of the forward-velocity reward.
     pub forward_reward_weight: f64,
+    /// Weight of the squared-action cost.
     pub ctrl_cost_weight: f64,
     /// qpos += U(-s, s), qvel = s * N(0, 1) at reset.
     pub reset_noise_scale: f64,
+    /// Steps before the episode is truncated.
     pub max_episode_steps: usize,
+    /// Physics steps per `step`.
     pub frame_skip: usize,
 }
 
@@ -37,6 +42,7 @@ pub struct HalfCheetahTask {
     opts: HalfCheetahOptions,
 }
 
+/// Gymnasium's HalfCheetah-v5: a planar cheetah rewarded for running along x; it never terminates.
 pub type HalfCheetah = MujocoEnv<HalfCheetahTask>;
 
 impl Task for HalfCheetahTask {

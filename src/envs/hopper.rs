@@ -7,14 +7,19 @@ use super::mujoco_env::MujocoEnv;
 use super::planar_walker::{inside, PlanarWalkerTask, WalkerRule};
 use super::simulation::Simulation;
 
-pub const MODEL_XML: &str = include_str!("../../models/hopper.xml");
+pub(crate) const MODEL_XML: &str = include_str!("../../models/hopper.xml");
 
+/// Gymnasium Hopper-v5's options, with its defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct HopperOptions {
+    /// Weight of the forward-velocity reward.
     pub forward_reward_weight: f64,
+    /// Weight of the squared-action cost.
     pub ctrl_cost_weight: f64,
+    /// Reward per step while healthy.
     pub healthy_reward: f64,
+    /// End the episode when the hopper becomes unhealthy.
     pub terminate_when_unhealthy: bool,
     /// Healthy while every entry of qpos[2:] and qvel lies strictly inside this interval.
     pub healthy_state_range: [f64; 2],
@@ -24,7 +29,9 @@ pub struct HopperOptions {
     pub healthy_angle_range: [f64; 2],
     /// qpos and qvel += U(-s, s) at reset.
     pub reset_noise_scale: f64,
+    /// Steps before the episode is truncated.
     pub max_episode_steps: usize,
+    /// Physics steps per `step`.
     pub frame_skip: usize,
 }
 
@@ -48,7 +55,8 @@ impl Default for HopperOptions {
 /// Hopper's health rule; the rest of the task is every planar walker's.
 pub struct HopperRule;
 
-pub type HopperTask = PlanarWalkerTask<HopperRule>;
+pub(crate) type HopperTask = PlanarWalkerTask<HopperRule>;
+/// Gymnasium's Hopper-v5: a planar one-legged hopper rewarded for moving along x.
 pub type Hopper = MujocoEnv<HopperTask>;
 
 impl WalkerRule for HopperRule {

@@ -10,30 +10,41 @@ use super::task::{legged_step, locomotion_metrics, planar_position, quadratic_co
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
-pub const MODEL_XML: &str = include_str!("../../models/humanoid.xml");
+pub(crate) const MODEL_XML: &str = include_str!("../../models/humanoid.xml");
 
+/// Gymnasium Humanoid-v5's options, with its defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct HumanoidOptions {
+    /// Weight of the forward-velocity reward (of the centre of mass).
     pub forward_reward_weight: f64,
+    /// Weight of the squared-action cost.
     pub ctrl_cost_weight: f64,
+    /// Weight of the squared external contact-force cost.
     pub contact_cost_weight: f64,
     /// The contact cost is clipped above at this value.
     pub contact_cost_max: f64,
+    /// Reward per step while healthy.
     pub healthy_reward: f64,
+    /// End the episode when the torso leaves `healthy_z_range`.
     pub terminate_when_unhealthy: bool,
     /// Healthy while the torso height lies strictly inside this interval.
     pub healthy_z_range: [f64; 2],
     /// qpos and qvel += U(-s, s) at reset.
     pub reset_noise_scale: f64,
+    /// Steps before the episode is truncated.
     pub max_episode_steps: usize,
+    /// Physics steps per `step`.
     pub frame_skip: usize,
     /// Gymnasium v5's switches for the observation's parts after qpos[2:] and qvel. Gymnasium
     /// v4, on which most published Humanoid results ran, read `cfrc_ext` as zeros (a bug fixed
     /// in v5); `include_cfrc_ext_in_observation = false` drops what v4 could not see.
     pub include_cinert_in_observation: bool,
+    /// Include the bodies' centre-of-mass velocities (`cvel`).
     pub include_cvel_in_observation: bool,
+    /// Include the actuator forces in joint space (`qfrc_actuator`).
     pub include_qfrc_actuator_in_observation: bool,
+    /// Include the external contact forces (`cfrc_ext`).
     pub include_cfrc_ext_in_observation: bool,
 }
 
@@ -63,6 +74,7 @@ pub struct HumanoidTask {
     opts: HumanoidOptions,
 }
 
+/// Gymnasium's Humanoid-v5: a 3D biped rewarded for walking along x without falling.
 pub type Humanoid = MujocoEnv<HumanoidTask>;
 
 impl HumanoidTask {

@@ -9,8 +9,9 @@ use super::task::{Task, TaskStep};
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
-pub const MODEL_XML: &str = include_str!("../../models/inverted_pendulum.xml");
+pub(crate) const MODEL_XML: &str = include_str!("../../models/inverted_pendulum.xml");
 
+/// Gymnasium InvertedPendulum-v5's options, with its defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct InvertedPendulumOptions {
@@ -18,7 +19,9 @@ pub struct InvertedPendulumOptions {
     pub max_pole_angle: f64,
     /// qpos and qvel += U(-s, s) at reset.
     pub reset_noise_scale: f64,
+    /// Steps before the episode is truncated.
     pub max_episode_steps: usize,
+    /// Physics steps per `step`.
     pub frame_skip: usize,
 }
 
@@ -44,6 +47,7 @@ pub struct InvertedPendulumTask {
     opts: InvertedPendulumOptions,
 }
 
+/// Gymnasium's InvertedPendulum-v5: keep a pole upright on a cart; +1 per step while it stands.
 pub type InvertedPendulum = MujocoEnv<InvertedPendulumTask>;
 
 impl Task for InvertedPendulumTask {

@@ -44,24 +44,30 @@ use crate::mujoco::Data;
 /// A box-shaped space: one `[low, high]` interval per dimension (bounds may be infinite).
 #[derive(Debug, Clone, PartialEq)]
 pub struct BoxSpace {
+    /// Lower bound of each dimension.
     pub low: Vec<f64>,
+    /// Upper bound of each dimension.
     pub high: Vec<f64>,
 }
 
 impl BoxSpace {
+    /// A space from its bounds; panics when their lengths differ.
     pub fn new(low: Vec<f64>, high: Vec<f64>) -> BoxSpace {
         assert_eq!(low.len(), high.len());
         BoxSpace { low, high }
     }
+    /// A space of `dim` dimensions, each `[low, high]`.
     pub fn uniform(dim: usize, low: f64, high: f64) -> BoxSpace {
         BoxSpace { low: vec![low; dim], high: vec![high; dim] }
     }
-    pub fn unbounded(dim: usize) -> BoxSpace {
+    pub(crate) fn unbounded(dim: usize) -> BoxSpace {
         Self::uniform(dim, f64::NEG_INFINITY, f64::INFINITY)
     }
+    /// Number of dimensions.
     pub fn dim(&self) -> usize {
         self.low.len()
     }
+    /// Whether `x` has the right length and lies within the bounds.
     pub fn contains(&self, x: &[f64]) -> bool {
         x.len() == self.dim() && x.iter().zip(&self.low).zip(&self.high).all(|((v, l), h)| v >= l && v <= h)
     }
@@ -70,11 +76,15 @@ impl BoxSpace {
 /// What an environment is: its name, spaces, control period and episode length.
 #[derive(Debug, Clone)]
 pub struct EnvSpec {
+    /// The registered name (`minitaur`, `ant`, ...).
     pub name: &'static str,
+    /// Observation bounds (unbounded for the MuJoCo tasks).
     pub observation_space: BoxSpace,
+    /// Action bounds; actions outside them are clipped.
     pub action_space: BoxSpace,
     /// Seconds of simulated time per `step`.
     pub dt: f64,
+    /// Steps before an episode is truncated.
     pub max_episode_steps: usize,
     /// Names of the reward terms, in the order `Info::reward_terms` lists them.
     pub reward_terms: Vec<&'static str>,
@@ -96,9 +106,11 @@ pub struct Info {
 }
 
 impl Info {
+    /// The value of reward term `name` in this step, if the env has it.
     pub fn term(&self, name: &str) -> Option<f64> {
         self.reward_terms.iter().find(|(n, _)| *n == name).map(|(_, v)| *v)
     }
+    /// The value of metric `name` in this step, if the env reports it.
     pub fn metric(&self, name: &str) -> Option<f64> {
         self.metrics.iter().find(|(n, _)| *n == name).map(|(_, v)| *v)
     }
@@ -107,26 +119,33 @@ impl Info {
 /// The result of one `step`.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Step {
+    /// The observation after the step.
     pub observation: Vec<f64>,
+    /// The reward: the sum of `info.reward_terms`.
     pub reward: f64,
     /// The episode reached a terminal state (e.g. the robot fell); do not bootstrap from it.
     pub terminated: bool,
     /// The episode was cut short (time limit, instability); the state is not terminal.
     pub truncated: bool,
+    /// Reward terms and diagnostics.
     pub info: Info,
 }
 
 impl Step {
+    /// Whether the episode ended (terminated or truncated).
     pub fn done(&self) -> bool {
         self.terminated || self.truncated
     }
 }
 
+/// An environment with Gymnasium's reset/step semantics.
 pub trait Env: Send {
+    /// Its name, spaces, control period and episode length.
     fn spec(&self) -> &EnvSpec;
     /// Starts an episode. `Some(seed)` reseeds the environment's random stream; `None` continues
     /// it (an environment never seeded behaves as if seeded with 0).
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError>;
+    /// Advances one control step; errors on a wrong length, a non-finite entry or a finished episode.
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError>;
     /// The simulation state, for recorders and model-based controllers.
     fn data(&self) -> &Data;
@@ -171,7 +190,7 @@ impl EpisodeClock {
     pub fn start(&mut self) {
         *self = EpisodeClock { steps: 0, started: true, finished: false };
     }
-    pub fn check_can_step(&self) -> Result<(), EnvError> {
+    pub(crate) fn check_can_step(&self) -> Result<(), EnvError> {
         if !self.started {
             Err(EnvError::NotReset)
         } else if self.finished {
@@ -185,7 +204,7 @@ impl EpisodeClock {
         self.steps += 1;
         self.steps >= max_steps
     }
-    pub fn finish_if(&mut self, done: bool) {
+    pub(crate) fn finish_if(&mut self, done: bool) {
         self.finished |= done;
     }
 }

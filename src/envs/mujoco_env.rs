@@ -5,6 +5,8 @@ use super::task::{Task, Timing};
 use super::{Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
+/// An environment made of a [`Task`] on a MuJoCo [`Simulation`]: clipping, reset noise, time limit and
+/// instability handling are shared here.
 pub struct MujocoEnv<T: Task> {
     task: T,
     timing: Timing,
@@ -12,6 +14,7 @@ pub struct MujocoEnv<T: Task> {
 }
 
 impl<T: Task> MujocoEnv<T> {
+    /// Builds the task's model and checks its options.
     pub fn new(options: T::Options) -> Result<Self, EnvError> {
         check_by_name(T::NAME, &options)?;
         let sim = Simulation::from_xml(T::MODEL_XML)?;

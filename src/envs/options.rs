@@ -9,7 +9,7 @@ impl Check<'_> {
     fn fail(&self, message: String) -> EnvError {
         EnvError::InvalidOption { env: self.env.to_string(), message }
     }
-    pub fn non_negative(&self, name: &str, v: f64) -> Result<(), EnvError> {
+    pub(crate) fn non_negative(&self, name: &str, v: f64) -> Result<(), EnvError> {
         if v.is_finite() && v >= 0.0 {
             Ok(())
         } else {
@@ -23,7 +23,7 @@ impl Check<'_> {
             Ok(())
         }
     }
-    pub fn positive_count(&self, name: &str, v: usize) -> Result<(), EnvError> {
+    pub(crate) fn positive_count(&self, name: &str, v: usize) -> Result<(), EnvError> {
         if v > 0 {
             Ok(())
         } else {

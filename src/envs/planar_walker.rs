@@ -12,9 +12,9 @@ use crate::mujoco::Model;
 
 /// The reward weights and settings every planar walker's options carry, read from them by name.
 #[derive(Debug, Clone, serde::Deserialize)]
-pub struct WalkerSettings {
-    pub forward_reward_weight: f64,
-    pub healthy_reward: f64,
+pub(crate) struct WalkerSettings {
+    pub(crate) forward_reward_weight: f64,
+    pub(crate) healthy_reward: f64,
     pub ctrl_cost_weight: f64,
     pub terminate_when_unhealthy: bool,
 }

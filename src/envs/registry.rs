@@ -13,7 +13,7 @@ use super::walker2d::Walker2dTask;
 use super::{minitaur, Env, EnvError, Minitaur, MinitaurOptions, MujocoEnv, Task};
 
 /// An environment type the registry can build from its options.
-pub trait Registered: Env + Sized + 'static {
+pub(crate) trait Registered: Env + Sized + 'static {
     /// Its options, every field defaulted (`#[serde(default, deny_unknown_fields)]`).
     type Options: DeserializeOwned + Serialize;
     fn build(options: Self::Options) -> Result<Self, EnvError>;
@@ -35,6 +35,7 @@ impl Registered for Minitaur {
 
 /// One environment's declaration.
 pub struct EnvEntry {
+    /// The registered name (`--env`).
     pub name: &'static str,
     /// The MJCF model it loads.
     pub model_xml: &'static str,
@@ -112,6 +113,7 @@ pub fn lookup(name: &str) -> Result<&'static EnvEntry, EnvError> {
         .ok_or_else(|| EnvError::UnknownEnv { name: name.to_string(), known: env_names().join(", ") })
 }
 
+/// Every registered environment name, in registration order.
 pub fn env_names() -> Vec<&'static str> {
     ENVS.iter().map(|e| e.name).collect()
 }
@@ -120,12 +122,15 @@ pub fn env_names() -> Vec<&'static str> {
 /// This is what run directories store, so a run can rebuild exactly the environment it used.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct EnvConfig {
+    /// The registered environment name.
     pub name: String,
+    /// Options that differ from the defaults.
     #[serde(default)]
     pub options: toml::Table,
 }
 
 impl EnvConfig {
+    /// The named environment with default options.
     pub fn new(name: &str) -> EnvConfig {
         EnvConfig { name: name.to_string(), options: toml::Table::new() }
     }

@@ -16,7 +16,7 @@ impl EnvRng {
     pub fn new() -> EnvRng {
         EnvRng(ChaCha8Rng::seed_from_u64(0))
     }
-    pub fn reseed(&mut self, seed: Option<u64>) {
+    pub(crate) fn reseed(&mut self, seed: Option<u64>) {
         if let Some(s) = seed {
             self.0 = ChaCha8Rng::seed_from_u64(s);
         }
@@ -33,7 +33,7 @@ impl EnvRng {
         (0..n).map(|_| dist.sample(&mut self.0)).collect()
     }
     /// `n` samples of scale * N(0, 1).
-    pub fn normal(&mut self, n: usize, scale: f64) -> Vec<f64> {
+    pub(crate) fn normal(&mut self, n: usize, scale: f64) -> Vec<f64> {
         (0..n)
             .map(|_| {
                 let z: f64 = StandardNormal.sample(&mut self.0);
@@ -45,13 +45,16 @@ impl EnvRng {
 
 /// Outcome of advancing the physics.
 #[derive(Debug, Default)]
-pub struct Advance {
+pub(crate) struct Advance {
     pub unstable: bool,
     pub warnings: Vec<String>,
 }
 
+/// A model and its state, stepped by `advance` with energy accounting and instability checks.
 pub struct Simulation {
+    /// The compiled model.
     pub model: Arc<Model>,
+    /// The simulation state.
     pub data: Data,
     /// Mechanical energy the actuators delivered during the latest `advance` (J): sum over
     /// physics steps of |actuator force . joint velocity| * timestep, the force and velocity
@@ -61,19 +64,19 @@ pub struct Simulation {
 }
 
 impl Simulation {
-    pub fn from_xml(xml: &str) -> Result<Simulation, EnvError> {
+    pub(crate) fn from_xml(xml: &str) -> Result<Simulation, EnvError> {
         let model = Arc::new(Model::from_xml_str(xml)?);
         Self::from_model(model)
     }
 
-    pub fn from_model(model: Arc<Model>) -> Result<Simulation, EnvError> {
+    pub(crate) fn from_model(model: Arc<Model>) -> Result<Simulation, EnvError> {
         let data = Data::new(&model)?;
         Ok(Simulation { model, data, last_mechanical_energy: 0.0, velocity_before: Vec::new() })
     }
 
     /// Resets to `qpos0 + qpos_noise`, `qvel_noise`, then computes derived quantities (as
     /// Gymnasium's `set_state` does; `cfrc_ext` stays zero until the first step).
-    pub fn reset_to(&mut self, qpos_noise: &[f64], qvel_noise: &[f64]) -> Result<(), EnvError> {
+    pub(crate) fn reset_to(&mut self, qpos_noise: &[f64], qvel_noise: &[f64]) -> Result<(), EnvError> {
         self.data.reset()?;
         let qpos: Vec<f64> = self.model.qpos0().iter().zip(qpos_noise).map(|(a, b)| a + b).collect();
         self.data.set_state(&qpos, qvel_noise)?;
@@ -82,7 +85,7 @@ impl Simulation {
     }
 
     /// Sets `ctrl` and runs `frames` MuJoCo steps, stopping at the first sign of instability.
-    pub fn advance(&mut self, ctrl: &[f64], frames: usize) -> Result<Advance, EnvError> {
+    pub(crate) fn advance(&mut self, ctrl: &[f64], frames: usize) -> Result<Advance, EnvError> {
         self.data.set_ctrl(ctrl)?;
         let mut out = Advance::default();
         let timestep = self.model.timestep();
@@ -104,7 +107,7 @@ impl Simulation {
     }
 
     /// One `mj_step`; returns true when MuJoCo reported or hid an instability.
-    pub fn step_once(&mut self) -> Result<bool, EnvError> {
+    pub(crate) fn step_once(&mut self) -> Result<bool, EnvError> {
         let (before, time_before) = (self.data.instability_counts(), self.data.time());
         self.data.step()?;
         let after = self.data.instability_counts();
@@ -143,11 +146,11 @@ pub enum VelocityNoise {
 
 /// The state every MuJoCo environment keeps, and the parts of reset/step they all share.
 pub(crate) struct EnvCore {
-    pub sim: Simulation,
+    pub(crate) sim: Simulation,
     pub spec: EnvSpec,
     pub rng: EnvRng,
-    pub clock: EpisodeClock,
-    pub last_obs: Vec<f64>,
+    pub(crate) clock: EpisodeClock,
+    pub(crate) last_obs: Vec<f64>,
 }
 
 /// How a control step's physics went.
@@ -170,7 +173,12 @@ impl EnvCore {
     }
 
     /// Reseeds (if asked), resets to qpos0 plus noise of scale `scale`, starts the clock.
-    pub fn reset_with_noise(&mut self, seed: Option<u64>, scale: f64, velocity: VelocityNoise) -> Result<(), EnvError> {
+    pub(crate) fn reset_with_noise(
+        &mut self,
+        seed: Option<u64>,
+        scale: f64,
+        velocity: VelocityNoise,
+    ) -> Result<(), EnvError> {
         self.rng.reseed(seed);
         let qpos_noise = self.rng.uniform(self.sim.model.nq(), scale);
         let nv = self.sim.model.nv();
@@ -184,14 +192,14 @@ impl EnvCore {
     }
 
     /// Refuses a step outside an episode and validates/clips the action.
-    pub fn begin_step(&self, action: &[f64]) -> Result<StepStart, EnvError> {
+    pub(crate) fn begin_step(&self, action: &[f64]) -> Result<StepStart, EnvError> {
         self.clock.check_can_step()?;
         let (action, clipped) = clip_action(&self.spec.action_space, action)?;
         Ok(StepStart { action, clipped })
     }
 
     /// Runs the physics for one control step.
-    pub fn advance(&mut self, start: &StepStart, frames: usize) -> Result<StepOutcome, EnvError> {
+    pub(crate) fn advance(&mut self, start: &StepStart, frames: usize) -> Result<StepOutcome, EnvError> {
         let adv = self.sim.advance(&start.action, frames)?;
         if adv.unstable {
             self.clock.finish_if(true);
@@ -201,7 +209,7 @@ impl EnvCore {
     }
 
     /// Counts the step, applies the time limit and assembles the result.
-    pub fn finish_step(&mut self, observation: Vec<f64>, terminated: bool, info: Info) -> Step {
+    pub(crate) fn finish_step(&mut self, observation: Vec<f64>, terminated: bool, info: Info) -> Step {
         let truncated = self.clock.tick(self.spec.max_episode_steps);
         self.clock.finish_if(terminated || truncated);
         self.last_obs.clone_from(&observation);

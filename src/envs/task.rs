@@ -11,6 +11,7 @@ use crate::mujoco::Model;
 pub struct Timing {
     /// Physics steps per `step`.
     pub frame_skip: usize,
+    /// Steps before an episode is truncated.
     pub max_episode_steps: usize,
     /// qpos += U(-s, s) at reset; qvel gets the task's `VELOCITY_NOISE` of the same scale.
     pub reset_noise_scale: f64,
@@ -21,17 +22,23 @@ pub struct Timing {
 pub struct TaskStep {
     /// Signed contributions (costs negative), in the order of [`Task::REWARD_TERMS`].
     pub reward_terms: Vec<(&'static str, f64)>,
+    /// Diagnostics (positions, velocities) reported in `Info::metrics`.
     pub metrics: Vec<(&'static str, f64)>,
+    /// The episode reached a terminal state.
     pub terminated: bool,
 }
 
+/// What one MuJoCo environment adds to [`MujocoEnv`]: model, observation, action space and reward.
 pub trait Task: Send + Sized + 'static {
     /// Its options (every field defaulted, `#[serde(default, deny_unknown_fields)]`).
     type Options: serde::de::DeserializeOwned + serde::Serialize;
     /// What the task measures before the physics runs (e.g. the x position), to compare after.
     type Before;
+    /// The registered name.
     const NAME: &'static str;
+    /// The MJCF model, as text.
     const MODEL_XML: &'static str;
+    /// The reward terms' names, in the order `TaskStep::reward_terms` lists them.
     const REWARD_TERMS: &'static [&'static str];
     /// How reset noise is drawn for velocities.
     const VELOCITY_NOISE: VelocityNoise;
@@ -39,14 +46,19 @@ pub trait Task: Send + Sized + 'static {
     /// Looks up what the task needs in the model (body ids, ...) and checks what is its own in
     /// the options (the checks every task shares ran by name before: `options::check_by_name`).
     fn new(options: Self::Options, model: &Model) -> Result<Self, EnvError>;
+    /// The options it was built with.
     fn options(&self) -> &Self::Options;
+    /// Length of the observation.
     fn observation_dim(&self, model: &Model) -> usize;
+    /// The action bounds.
     fn action_space(&self, model: &Model) -> BoxSpace;
+    /// Appends the current observation to `out`.
     fn observe(&self, sim: &Simulation, out: &mut Vec<f64>);
     /// Diagnostics at reset (positions).
     fn reset_metrics(&self, _sim: &Simulation) -> Vec<(&'static str, f64)> {
         Vec::new()
     }
+    /// What the reward needs from the state before the physics runs (e.g. the x position).
     fn before(&self, sim: &Simulation) -> Self::Before;
     /// Reward terms, metrics and termination once the physics ran with `action` (clipped to the
     /// action space). May compute derived quantities first (e.g. contact forces).

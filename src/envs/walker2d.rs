@@ -7,14 +7,19 @@ use super::mujoco_env::MujocoEnv;
 use super::planar_walker::{inside, PlanarWalkerTask, WalkerRule};
 use super::simulation::Simulation;
 
-pub const MODEL_XML: &str = include_str!("../../models/walker2d.xml");
+pub(crate) const MODEL_XML: &str = include_str!("../../models/walker2d.xml");
 
+/// Gymnasium Walker2d-v5's options, with its defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct Walker2dOptions {
+    /// Weight of the forward-velocity reward.
     pub forward_reward_weight: f64,
+    /// Weight of the squared-action cost.
     pub ctrl_cost_weight: f64,
+    /// Reward per step while healthy.
     pub healthy_reward: f64,
+    /// End the episode when the walker becomes unhealthy.
     pub terminate_when_unhealthy: bool,
     /// Healthy while the torso height (qpos[1]) lies strictly inside this interval.
     pub healthy_z_range: [f64; 2],
@@ -22,7 +27,9 @@ pub struct Walker2dOptions {
     pub healthy_angle_range: [f64; 2],
     /// qpos and qvel += U(-s, s) at reset.
     pub reset_noise_scale: f64,
+    /// Steps before the episode is truncated.
     pub max_episode_steps: usize,
+    /// Physics steps per `step`.
     pub frame_skip: usize,
 }
 
@@ -45,7 +52,8 @@ impl Default for Walker2dOptions {
 /// Walker2d's health rule; the rest of the task is every planar walker's.
 pub struct Walker2dRule;
 
-pub type Walker2dTask = PlanarWalkerTask<Walker2dRule>;
+pub(crate) type Walker2dTask = PlanarWalkerTask<Walker2dRule>;
+/// Gymnasium's Walker2d-v5: a planar biped rewarded for walking along x.
 pub type Walker2d = MujocoEnv<Walker2dTask>;
 
 impl WalkerRule for Walker2dRule {

@@ -11,7 +11,7 @@ pub fn default_threads() -> usize {
 
 /// `f` over `items` on up to `threads` threads, results in the items' order. The first error
 /// (in item order) is returned.
-pub fn map_in_order<T: Sync, R: Send, E: Send>(
+pub(crate) fn map_in_order<T: Sync, R: Send, E: Send>(
     items: &[T],
     threads: usize,
     f: impl Fn(&T) -> Result<R, E> + Sync,

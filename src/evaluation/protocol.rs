@@ -15,8 +15,10 @@ use crate::train::seeds::{eval_episode_seed, held_out_episode_seed, train_episod
 /// Episodes per policy and seed unless asked otherwise.
 pub const DEFAULT_EPISODES: usize = 50;
 
+/// The held-out episodes every policy is evaluated on: how many, and the seed that picks their reset seeds.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct Protocol {
+    /// Episodes per policy and seed.
     pub episodes: usize,
     /// Picks the held-out reset seeds (`train::seeds::held_out_episode_seed`).
     pub seed: u64,
@@ -29,7 +31,7 @@ impl Default for Protocol {
 }
 
 impl Protocol {
-    pub fn reset_seeds(&self) -> Vec<u64> {
+    pub(crate) fn reset_seeds(&self) -> Vec<u64> {
         (0..self.episodes as u64).map(|i| held_out_episode_seed(self.seed, i)).collect()
     }
 

@@ -10,8 +10,9 @@ use crate::envs::{Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
 /// Seconds the force acts for.
-pub const PUSH_DURATION: f64 = 0.1;
+pub(crate) const PUSH_DURATION: f64 = 0.1;
 
+/// One lateral push per episode, at a time drawn from the episode's own stream.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Push {
     /// Velocity change (m/s) the impulse would give the whole robot as one free body.
@@ -19,7 +20,7 @@ pub struct Push {
 }
 
 /// An environment whose base is pushed once per episode.
-pub struct Pushed<'a> {
+pub(crate) struct Pushed<'a> {
     inner: &'a mut dyn Env,
     /// Control steps the force acts for, and the force (N, along world y) while it does.
     steps: usize,

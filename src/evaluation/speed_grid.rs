@@ -13,28 +13,33 @@ use crate::controller::measure::GaitEpisode;
 use crate::envs::{make, EnvConfig};
 
 /// A speed works when no episode falls and the mean speed is within this share of the command.
-pub const TRACKING_TOLERANCE: f64 = 0.10;
+pub(crate) const TRACKING_TOLERANCE: f64 = 0.10;
 
 /// The controller commanded one speed, over the protocol's episodes.
 #[derive(Debug, Clone)]
 pub struct SpeedPoint {
+    /// The commanded speed (m/s).
     pub commanded: f64,
+    /// The protocol's episodes at that speed.
     pub episodes: Vec<GaitEpisode>,
 }
 
 impl SpeedPoint {
-    pub fn achieved(&self) -> f64 {
+    pub(crate) fn achieved(&self) -> f64 {
         super::stats::mean(&self.episodes.iter().map(|e| e.mean_speed).collect::<Vec<_>>())
     }
+    /// Episodes that ended in a fall.
     pub fn falls(&self) -> usize {
         self.episodes.iter().filter(|e| e.fell).count()
     }
-    pub fn tracking_error(&self) -> f64 {
+    pub(crate) fn tracking_error(&self) -> f64 {
         (self.achieved() - self.commanded).abs() / self.commanded.abs().max(1e-9)
     }
+    /// No fall, and the achieved speed within the tracking tolerance of the command.
     pub fn works(&self) -> bool {
         self.falls() == 0 && self.tracking_error() <= TRACKING_TOLERANCE
     }
+    /// Each episode's return.
     pub fn returns(&self) -> Vec<f64> {
         self.episodes.iter().map(|e| e.episode_return).collect()
     }
@@ -70,6 +75,7 @@ impl ControllerFamily {
         })
     }
 
+    /// The env's registered name.
     pub fn env(&self) -> &str {
         &self.env_config.name
     }
@@ -81,7 +87,7 @@ impl ControllerFamily {
     }
 
     /// Evaluates the (speed, push) pairs not yet evaluated, several at once.
-    pub fn prefetch(&mut self, jobs: &[(f64, Option<Push>)]) -> Result<()> {
+    pub(crate) fn prefetch(&mut self, jobs: &[(f64, Option<Push>)]) -> Result<()> {
         let mut missing: Vec<(f64, Option<Push>)> = jobs
             .iter()
             .filter(|(s, p)| !self.cache.contains_key(&key(*s, *p)))
@@ -142,7 +148,7 @@ impl ControllerFamily {
     /// the grid interpolates to `speed` (over the working points below the first failing one),
     /// evaluated. None, with the reason, when the grid shows
     /// the controller cannot walk that fast, or the policy did not move forward.
-    pub fn matched(&mut self, grid: &[SpeedPoint], speed: f64) -> Result<Result<SpeedPoint, String>> {
+    pub(crate) fn matched(&mut self, grid: &[SpeedPoint], speed: f64) -> Result<Result<SpeedPoint, String>> {
         match command_for(grid, speed) {
             Ok(c) => Ok(Ok(self.at(c, None)?.clone())),
             Err(why) => Ok(Err(why)),
@@ -152,7 +158,7 @@ impl ControllerFamily {
 
 /// The command that achieves `speed`, by linear interpolation of (achieved, commanded) over the
 /// grid's working points (the ramp from standing makes the achieved speed trail the command).
-pub fn command_for(grid: &[SpeedPoint], speed: f64) -> Result<f64, String> {
+pub(crate) fn command_for(grid: &[SpeedPoint], speed: f64) -> Result<f64, String> {
     let working: Vec<(f64, f64)> = grid.iter().take_while(|p| p.works()).map(|p| (p.achieved(), p.commanded)).collect();
     let Some(&(top, top_cmd)) = working.last() else {
         return Err("the controller works at no speed of the grid".into());

@@ -9,10 +9,11 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 /// Confidence level of every interval in the report.
-pub const LEVEL: f64 = 0.95;
+pub(crate) const LEVEL: f64 = 0.95;
 /// Bootstrap resamples (rliable's default is 50,000; the statistics here are cheap).
-pub const BOOTSTRAP_REPS: usize = 20_000;
+pub(crate) const BOOTSTRAP_REPS: usize = 20_000;
 
+/// The arithmetic mean; NaN for no values.
 pub fn mean(xs: &[f64]) -> f64 {
     if xs.is_empty() {
         return f64::NAN;
@@ -43,7 +44,7 @@ pub fn iqm(xs: &[f64]) -> f64 {
 
 /// The q-quantile (0..=1) of sorted values with linear interpolation between order statistics
 /// (numpy's default).
-pub fn quantile(sorted: &[f64], q: f64) -> f64 {
+pub(crate) fn quantile(sorted: &[f64], q: f64) -> f64 {
     if sorted.is_empty() {
         return f64::NAN;
     }
@@ -59,12 +60,16 @@ pub fn quantile(sorted: &[f64], q: f64) -> f64 {
 /// An estimate with its interval.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Interval {
+    /// The point estimate.
     pub estimate: f64,
+    /// Lower end of the interval.
     pub low: f64,
+    /// Upper end of the interval.
     pub high: f64,
 }
 
 impl Interval {
+    /// An interval of zero width at `v`.
     pub fn point(v: f64) -> Interval {
         Interval { estimate: v, low: v, high: v }
     }
@@ -73,7 +78,7 @@ impl Interval {
 /// Percentile bootstrap interval of `statistic`, resampling each stratum (e.g. the seeds of one
 /// task) with replacement on its own, as rliable's `StratifiedBootstrap` does. Seeded: the same
 /// inputs give the same interval.
-pub fn stratified_bootstrap(
+pub(crate) fn stratified_bootstrap(
     strata: &[Vec<f64>],
     statistic: impl Fn(&[Vec<f64>]) -> f64,
     reps: usize,
@@ -115,7 +120,7 @@ pub fn wilson(k: usize, n: usize) -> Interval {
 
 /// P(X > Y) + P(X = Y) / 2 over paired outcomes (the Mann-Whitney form rliable's probability of
 /// improvement uses), here for pairs that share a reset seed.
-pub fn probability_of_improvement(pairs: &[(f64, f64)]) -> f64 {
+pub(crate) fn probability_of_improvement(pairs: &[(f64, f64)]) -> f64 {
     if pairs.is_empty() {
         return f64::NAN;
     }
@@ -136,7 +141,7 @@ pub fn probability_of_improvement(pairs: &[(f64, f64)]) -> f64 {
 
 /// Where an estimate sits against a published interval.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Verdict {
+pub(crate) enum Verdict {
     Below,
     Inside,
     Above,
@@ -154,7 +159,7 @@ impl Verdict {
             Verdict::Inside
         }
     }
-    pub fn word(self) -> &'static str {
+    pub(crate) fn word(self) -> &'static str {
         match self {
             Verdict::Below => "below",
             Verdict::Inside => "inside",

@@ -10,12 +10,16 @@ use super::sys;
 /// state silently when these fire; comparing counts before and after a step reveals it.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
 pub struct InstabilityCounts {
+    /// Times MuJoCo found a non-finite or huge position.
     pub bad_qpos: i32,
+    /// Times MuJoCo found a non-finite or huge velocity.
     pub bad_qvel: i32,
+    /// Times MuJoCo found a non-finite or huge acceleration.
     pub bad_qacc: i32,
 }
 
 impl InstabilityCounts {
+    /// All three counters summed.
     pub fn total(&self) -> i64 {
         self.bad_qpos as i64 + self.bad_qvel as i64 + self.bad_qacc as i64
     }
@@ -24,16 +28,21 @@ impl InstabilityCounts {
 /// One active contact, as MuJoCo reports it.
 #[derive(Debug, Clone, Copy)]
 pub struct Contact {
+    /// The first geom in contact.
     pub geom1: usize,
+    /// The second geom in contact.
     pub geom2: usize,
+    /// The contact point, world coordinates.
     pub pos: [f64; 3],
     /// Contact frame, rows: normal, tangent 1, tangent 2 (world coordinates).
     pub frame: [f64; 9],
+    /// Signed distance between the geoms (negative when they penetrate).
     pub dist: f64,
     /// Force in the contact frame (normal, tangent 1, tangent 2).
     pub force: [f64; 3],
 }
 
+/// A simulation state (`mjData`) of one model: positions, velocities, controls and everything derived.
 pub struct Data {
     ptr: NonNull<sys::mjData>,
     model: Arc<Model>,
@@ -49,12 +58,16 @@ macro_rules! field_slices {
             pub fn $name(&self) -> &[f64] {
                 let n = { let m: &Model = &self.model; $len(m) };
                 if n == 0 { return &[]; }
+                // SAFETY: MuJoCo allocated this field with `n` entries for this state's model (n > 0 here);
+                // the slice borrows `self`, so the state outlives it.
                 unsafe { std::slice::from_raw_parts(self.raw().$field, n) }
             }
             $(#[$doc])*
             pub fn $name_mut(&mut self) -> &mut [f64] {
                 let n = { let m: &Model = &self.model; $len(m) };
                 if n == 0 { return &mut []; }
+                // SAFETY: MuJoCo allocated this field with `n` entries for this state's model (n > 0 here);
+                // `&mut self` makes the slice the only access.
                 unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().$field, n) }
             }
         )*
@@ -62,14 +75,18 @@ macro_rules! field_slices {
 }
 
 impl Data {
+    /// A fresh state of `model` at its initial configuration.
     pub fn new(model: &Arc<Model>) -> MjResult<Data> {
         install_handlers();
         let mut out: *mut sys::mjData = std::ptr::null_mut();
+        // SAFETY: `model` is a live compiled model and `out` a valid place for the shim to write the new
+        // state's pointer.
         check(unsafe { sys::lb_make_data(model.as_ptr(), &mut out) })?;
         let ptr = NonNull::new(out).ok_or_else(|| MjError::Engine("mj_makeData returned NULL".into()))?;
         Ok(Data { ptr, model: Arc::clone(model) })
     }
 
+    /// The model this state belongs to.
     pub fn model(&self) -> &Arc<Model> {
         &self.model
     }
@@ -81,33 +98,45 @@ impl Data {
     }
 
     fn raw(&self) -> &sys::mjData {
+        // SAFETY: `ptr` came from mj_makeData, is non-null and stays valid until `drop`; a shared borrow only
+        // reads.
         unsafe { self.ptr.as_ref() }
     }
 
     /// Advances the simulation by one timestep (`mj_step`).
     pub fn step(&mut self) -> MjResult<()> {
+        // SAFETY: both pointers are live (the `Arc` keeps the model alive as long as this state) and `&mut
+        // self` makes this the only access to the state.
         check(unsafe { sys::lb_step(self.model.as_ptr(), self.ptr.as_ptr()) })
     }
 
     /// Recomputes every derived quantity for the current state without integrating.
     pub fn forward(&mut self) -> MjResult<()> {
+        // SAFETY: both pointers are live (the `Arc` keeps the model alive as long as this state) and `&mut
+        // self` makes this the only access to the state.
         check(unsafe { sys::lb_forward(self.model.as_ptr(), self.ptr.as_ptr()) })
     }
 
     /// Fills `cfrc_ext`, `cacc` and `cfrc_int`; call after `step` when contact forces are needed.
     pub fn rne_post_constraint(&mut self) -> MjResult<()> {
+        // SAFETY: both pointers are live (the `Arc` keeps the model alive as long as this state) and `&mut
+        // self` makes this the only access to the state.
         check(unsafe { sys::lb_rne_post_constraint(self.model.as_ptr(), self.ptr.as_ptr()) })
     }
 
     /// Resets to the model's initial state (qpos0, zero velocity, time 0, warnings cleared).
     pub fn reset(&mut self) -> MjResult<()> {
+        // SAFETY: both pointers are live (the `Arc` keeps the model alive as long as this state) and `&mut
+        // self` makes this the only access to the state.
         check(unsafe { sys::lb_reset_data(self.model.as_ptr(), self.ptr.as_ptr()) })
     }
 
+    /// Simulated time in seconds.
     pub fn time(&self) -> f64 {
         self.raw().time
     }
 
+    /// MuJoCo's instability warning counters so far.
     pub fn instability_counts(&self) -> InstabilityCounts {
         let w = &self.raw().warning;
         InstabilityCounts {
@@ -203,6 +232,8 @@ impl Data {
         }
         let nv = self.model.nv();
         let (mut jacp, mut jacr) = (vec![0.0; 3 * nv], vec![0.0; 3 * nv]);
+        // SAFETY: `jacp` and `jacr` hold the 3 x nv doubles mj_jacSite writes, and `site` was checked against
+        // the model above.
         check(unsafe {
             sys::lb_jac_site(self.model.as_ptr(), self.ptr.as_ptr(), jacp.as_mut_ptr(), jacr.as_mut_ptr(), site as i32)
         })?;
@@ -217,6 +248,8 @@ impl Data {
         }
         let nv = self.model.nv();
         let (mut jacp, mut jacr) = (vec![0.0; 3 * nv], vec![0.0; 3 * nv]);
+        // SAFETY: `jacp` and `jacr` hold the 3 x nv doubles mj_jacBody writes, and `body` was checked against
+        // the model above.
         check(unsafe {
             sys::lb_jac_body(self.model.as_ptr(), self.ptr.as_ptr(), jacp.as_mut_ptr(), jacr.as_mut_ptr(), body as i32)
         })?;
@@ -226,11 +259,14 @@ impl Data {
     /// The active contacts with their forces in the contact frame.
     pub fn contacts(&self) -> Vec<Contact> {
         let n = self.raw().ncon.max(0) as usize;
+        // SAFETY: `contact` holds `ncon` entries (n > 0 here), valid until the next step, which needs `&mut
+        // self`.
         let list = if n == 0 { &[][..] } else { unsafe { std::slice::from_raw_parts(self.raw().contact, n) } };
         list.iter()
             .enumerate()
             .map(|(i, c)| {
                 let mut f = [0.0f64; 6];
+                // SAFETY: `i < ncon` and `f` has the six doubles mj_contactForce writes.
                 unsafe { sys::mj_contactForce(self.model.as_ptr(), self.ptr.as_ptr(), i as i32, f.as_mut_ptr()) };
                 Contact {
                     geom1: c.geom1 as usize,
@@ -247,6 +283,7 @@ impl Data {
 
 impl Drop for Data {
     fn drop(&mut self) {
+        // SAFETY: `ptr` came from mj_makeData and is freed exactly once, here.
         unsafe { sys::mj_deleteData(self.ptr.as_ptr()) };
     }
 }
@@ -268,6 +305,7 @@ mod tests {
         let mut model = Model::from_xml_str(xml).unwrap();
         // An integrator id MuJoCo does not know: mj_step calls mju_error("Invalid integrator"),
         // whose default handler would wait on stdin and then exit the process.
+        // SAFETY: nothing else holds the model yet, and `opt` is plain data MuJoCo reads per step.
         unsafe { (*(model.as_ptr() as *mut sys::mjModel)).opt.integrator = 77 };
         let _ = &mut model;
         let model = Arc::new(model);

@@ -11,20 +11,46 @@ use std::sync::Once;
 
 use super::sys;
 
+/// What can go wrong in the MuJoCo layer.
 #[derive(Debug, thiserror::Error, Clone, PartialEq)]
 pub enum MjError {
+    /// The MJCF did not compile; MuJoCo's message says where.
     #[error("MuJoCo could not load the model: {0}")]
     Load(String),
+    /// MuJoCo raised a fatal error during simulation.
     #[error("MuJoCo error: {0}")]
     Engine(String),
+    /// No element of this kind has this name.
     #[error("unknown {kind} name '{name}'")]
-    UnknownName { kind: &'static str, name: String },
+    UnknownName {
+        /// The element kind (`body`, `site`, ...).
+        kind: &'static str,
+        /// The name asked for.
+        name: String,
+    },
+    /// An element index past the model's count.
     #[error("{kind} index {index} out of range (model has {count})")]
-    BadIndex { kind: &'static str, index: usize, count: usize },
+    BadIndex {
+        /// The element kind.
+        kind: &'static str,
+        /// The index asked for.
+        index: usize,
+        /// How many the model has.
+        count: usize,
+    },
+    /// An array of the wrong length was passed in.
     #[error("{what}: expected length {expected}, got {got}")]
-    BadLength { what: &'static str, expected: usize, got: usize },
+    BadLength {
+        /// Which array.
+        what: &'static str,
+        /// The length the model needs.
+        expected: usize,
+        /// The length given.
+        got: usize,
+    },
 }
 
+/// A result whose error is [`MjError`].
 pub type MjResult<T> = Result<T, MjError>;
 
 const MAX_PENDING_WARNINGS: usize = 64;
@@ -39,6 +65,7 @@ unsafe extern "C" fn on_warning(msg: *const c_char) {
         let text = if msg.is_null() {
             String::from("unknown MuJoCo warning")
         } else {
+            // SAFETY: MuJoCo passes a NUL-terminated message, checked non-null above.
             unsafe { CStr::from_ptr(msg) }.to_string_lossy().into_owned()
         };
         WARNINGS.with(|w| {
@@ -53,6 +80,8 @@ unsafe extern "C" fn on_warning(msg: *const c_char) {
 /// Installs the handlers once per process. Every safe entry point calls this first.
 pub fn install_handlers() {
     static ONCE: Once = Once::new();
+    // SAFETY: `on_warning` has the signature the shim stores, never unwinds into C, and lives for the whole
+    // program; `Once` installs it before any model exists.
     ONCE.call_once(|| unsafe { sys::lb_install_handlers(Some(on_warning)) });
 }
 
@@ -62,6 +91,7 @@ pub fn take_warnings() -> Vec<String> {
 }
 
 pub(crate) fn last_engine_error() -> MjError {
+    // SAFETY: the shim returns its thread-local, NUL-terminated buffer, never NULL.
     let msg = unsafe { CStr::from_ptr(sys::lb_last_error()) }.to_string_lossy().into_owned();
     MjError::Engine(if msg.is_empty() { "unknown error".into() } else { msg })
 }

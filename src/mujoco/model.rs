@@ -10,11 +10,17 @@ use super::sys;
 /// The kinds of named model elements that can be looked up.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum ObjKind {
+    /// A body.
     Body,
+    /// A joint.
     Joint,
+    /// A geom (collision or visual shape).
     Geom,
+    /// A site (a named frame on a body).
     Site,
+    /// An actuator.
     Actuator,
+    /// A sensor.
     Sensor,
 }
 
@@ -30,6 +36,7 @@ impl ObjKind {
         }) as i32
     }
 
+    /// The kind's name in messages (`body`, `joint`, ...).
     pub fn label(self) -> &'static str {
         match self {
             ObjKind::Body => "body",
@@ -45,6 +52,7 @@ impl ObjKind {
 /// A mesh's vertices (x y z each) and triangles (three vertex indices each).
 pub type MeshData = (Vec<[f32; 3]>, Vec<[u32; 3]>);
 
+/// A compiled MuJoCo model (`mjModel`), shared read-only between states.
 pub struct Model {
     ptr: NonNull<sys::mjModel>,
 }
@@ -52,6 +60,7 @@ pub struct Model {
 // SAFETY: after compilation an mjModel is plain memory that MuJoCo only reads during simulation;
 // MuJoCo documents sharing one model between threads that each own an mjData.
 unsafe impl Send for Model {}
+// SAFETY: as for `Send`: a shared `Model` is only read.
 unsafe impl Sync for Model {}
 
 const ERR_LEN: usize = 1000;
@@ -70,6 +79,8 @@ impl Model {
             .map_err(|_| MjError::Load(format!("path {} contains a NUL byte", path.display())))?;
         let mut err = [0 as c_char; ERR_LEN];
         let mut out: *mut sys::mjModel = std::ptr::null_mut();
+        // SAFETY: both strings are NUL-terminated, `err` has the ERR_LEN bytes passed, and `out` is a valid
+        // place for the model's pointer.
         let rc = unsafe { sys::lb_load_xml_file(c_path.as_ptr(), err.as_mut_ptr(), ERR_LEN as i32, &mut out) };
         Self::finish_load(rc, out, &err, &path.display().to_string())
     }
@@ -84,6 +95,8 @@ impl Model {
         let name = CString::new("locobench_model.xml").unwrap();
         let mut err = [0 as c_char; ERR_LEN];
         let mut out: *mut sys::mjModel = std::ptr::null_mut();
+        // SAFETY: both strings are NUL-terminated (checked above), `len` is the text's length, `err` has the
+        // ERR_LEN bytes passed, and `out` is a valid place for the model's pointer.
         let rc = unsafe {
             sys::lb_load_xml_string(
                 name.as_ptr(),
@@ -113,11 +126,14 @@ impl Model {
     /// A deep copy whose parameters (masses, friction) may then be changed.
     pub fn try_clone(&self) -> MjResult<Model> {
         let mut out: *mut sys::mjModel = std::ptr::null_mut();
+        // SAFETY: `self.ptr` is a live model and `out` a valid place for the copy's pointer.
         check(unsafe { sys::lb_copy_model(self.ptr.as_ptr(), &mut out) })?;
         NonNull::new(out).map(|ptr| Model { ptr }).ok_or_else(|| MjError::Engine("mj_copyModel returned NULL".into()))
     }
 
     pub(crate) fn raw(&self) -> &sys::mjModel {
+        // SAFETY: `ptr` came from MuJoCo's compiler, is non-null and stays valid until `drop`; a shared
+        // borrow only reads.
         unsafe { self.ptr.as_ref() }
     }
 
@@ -131,36 +147,47 @@ impl Model {
         self.ptr.as_ptr()
     }
 
+    /// Number of position coordinates (`nq`).
     pub fn nq(&self) -> usize {
         self.raw().nq as usize
     }
+    /// Number of degrees of freedom (`nv`).
     pub fn nv(&self) -> usize {
         self.raw().nv as usize
     }
+    /// Number of actuators (`nu`).
     pub fn nu(&self) -> usize {
         self.raw().nu as usize
     }
+    /// Number of bodies, the world body included.
     pub fn nbody(&self) -> usize {
         self.raw().nbody as usize
     }
+    /// Number of joints.
     pub fn njnt(&self) -> usize {
         self.raw().njnt as usize
     }
+    /// Number of geoms.
     pub fn ngeom(&self) -> usize {
         self.raw().ngeom as usize
     }
+    /// Number of sites.
     pub fn nsite(&self) -> usize {
         self.raw().nsite as usize
     }
+    /// Length of the sensor data array.
     pub fn nsensordata(&self) -> usize {
         self.raw().nsensordata as usize
     }
+    /// Number of equality constraints.
     pub fn neq(&self) -> usize {
         self.raw().neq as usize
     }
+    /// Simulation time step in seconds.
     pub fn timestep(&self) -> f64 {
         self.raw().opt.timestep
     }
+    /// Gravity vector, world coordinates.
     pub fn gravity(&self) -> [f64; 3] {
         self.raw().opt.gravity
     }
@@ -180,6 +207,7 @@ impl Model {
     pub fn id(&self, kind: ObjKind, name: &str) -> MjResult<usize> {
         let unknown = || MjError::UnknownName { kind: kind.label(), name: name.to_string() };
         let c_name = CString::new(name).map_err(|_| unknown())?;
+        // SAFETY: `c_name` is NUL-terminated and the model is live.
         let id = unsafe { sys::mj_name2id(self.as_ptr(), kind.raw(), c_name.as_ptr()) };
         if id < 0 {
             Err(unknown())
@@ -194,26 +222,34 @@ impl Model {
         if index >= count {
             return Err(MjError::BadIndex { kind: kind.label(), index, count });
         }
+        // SAFETY: `index` is below the model's count of that kind (checked above).
         let p = unsafe { sys::mj_id2name(self.as_ptr(), kind.raw(), index as i32) };
         if p.is_null() {
             return Ok(None);
         }
+        // SAFETY: mj_id2name returned a non-null, NUL-terminated name stored in the model, which outlives
+        // this call.
         let s = unsafe { CStr::from_ptr(p) }.to_string_lossy().into_owned();
         Ok(if s.is_empty() { None } else { Some(s) })
     }
 
+    /// The index of the body named `name`.
     pub fn body_id(&self, name: &str) -> MjResult<usize> {
         self.id(ObjKind::Body, name)
     }
+    /// The index of the joint named `name`.
     pub fn joint_id(&self, name: &str) -> MjResult<usize> {
         self.id(ObjKind::Joint, name)
     }
+    /// The index of the geom named `name`.
     pub fn geom_id(&self, name: &str) -> MjResult<usize> {
         self.id(ObjKind::Geom, name)
     }
+    /// The index of the site named `name`.
     pub fn site_id(&self, name: &str) -> MjResult<usize> {
         self.id(ObjKind::Site, name)
     }
+    /// The index of the actuator named `name`.
     pub fn actuator_id(&self, name: &str) -> MjResult<usize> {
         self.id(ObjKind::Actuator, name)
     }
@@ -227,12 +263,15 @@ impl Model {
         self.slice_i32(self.raw().jnt_dofadr, self.njnt())[joint] as usize
     }
 
+    /// Initial positions (`qpos0`), length `nq`.
     pub fn qpos0(&self) -> &[f64] {
         self.slice_f64(self.raw().qpos0, self.nq())
     }
+    /// Mass of each body.
     pub fn body_mass(&self) -> &[f64] {
         self.slice_f64(self.raw().body_mass, self.nbody())
     }
+    /// Parent body of each body (the world body is its own parent).
     pub fn body_parent(&self) -> &[i32] {
         self.slice_i32(self.raw().body_parentid, self.nbody())
     }
@@ -240,29 +279,39 @@ impl Model {
     pub fn actuator_ctrlrange(&self) -> &[f64] {
         self.slice_f64(self.raw().actuator_ctrlrange, 2 * self.nu())
     }
+    /// Whether each actuator's control is clamped to its range.
     pub fn actuator_ctrllimited(&self) -> Vec<bool> {
         let r = self.raw();
+        // SAFETY: MuJoCo allocates `nu` entries for this array.
         unsafe { std::slice::from_raw_parts(r.actuator_ctrllimited, self.nu()) }.iter().map(|&b| b != 0).collect()
     }
+    /// What each actuator drives (`nu x 2`: object id, and a second id for some transmissions).
     pub fn actuator_trnid(&self) -> &[i32] {
         self.slice_i32(self.raw().actuator_trnid, 2 * self.nu())
     }
+    /// Shape type of each geom (`mjtGeom`).
     pub fn geom_type(&self) -> &[i32] {
         self.slice_i32(self.raw().geom_type, self.ngeom())
     }
+    /// Size parameters of each geom (`ngeom x 3`, meaning depends on the type).
     pub fn geom_size(&self) -> &[f64] {
         self.slice_f64(self.raw().geom_size, 3 * self.ngeom())
     }
+    /// Colour of each geom, RGBA (`ngeom x 4`).
     pub fn geom_rgba(&self) -> &[f32] {
         let r = self.raw();
+        // SAFETY: MuJoCo allocates `4 * ngeom` entries for this array.
         unsafe { std::slice::from_raw_parts(r.geom_rgba, 4 * self.ngeom()) }
     }
+    /// The body each geom is attached to.
     pub fn geom_body(&self) -> &[i32] {
         self.slice_i32(self.raw().geom_bodyid, self.ngeom())
     }
+    /// Sliding, torsional and rolling friction of each geom (`ngeom x 3`).
     pub fn geom_friction(&self) -> &[f64] {
         self.slice_f64(self.raw().geom_friction, 3 * self.ngeom())
     }
+    /// Joint limits as (low, high) pairs (`njnt x 2`).
     pub fn jnt_range(&self) -> &[f64] {
         self.slice_f64(self.raw().jnt_range, 2 * self.njnt())
     }
@@ -283,11 +332,13 @@ impl Model {
     pub fn geom_dataid(&self) -> &[i32] {
         self.slice_i32(self.raw().geom_dataid, self.ngeom())
     }
+    /// Colour of each material, RGBA (`nmat x 4`).
     pub fn mat_rgba(&self) -> &[f32] {
         let n = 4 * self.raw().nmat.max(0) as usize;
         if n == 0 {
             return &[];
         }
+        // SAFETY: `mat_rgba` holds `4 * nmat` floats (n > 0 here).
         unsafe { std::slice::from_raw_parts(self.raw().mat_rgba, n) }
     }
     /// The colour a geom is drawn with: its material's when it has one, else its own.
@@ -296,6 +347,7 @@ impl Model {
         let rgba = if mat >= 0 { &self.mat_rgba()[4 * mat as usize..] } else { &self.geom_rgba()[4 * geom..] };
         [rgba[0], rgba[1], rgba[2], rgba[3]]
     }
+    /// Number of meshes.
     pub fn nmesh(&self) -> usize {
         self.raw().nmesh.max(0) as usize
     }
@@ -306,17 +358,22 @@ impl Model {
             return Err(MjError::BadIndex { kind: "mesh", index: mesh, count });
         }
         let r = self.raw();
+        // SAFETY: `mesh < nmesh` (checked above) and both arrays have `nmesh` entries.
         let at = |p: *const i32| unsafe { *p.add(mesh) }.max(0) as usize;
         let (vadr, vnum) = (at(r.mesh_vertadr), at(r.mesh_vertnum));
         let (fadr, fnum) = (at(r.mesh_faceadr), at(r.mesh_facenum));
         let verts = if vnum == 0 {
             &[][..]
         } else {
+            // SAFETY: MuJoCo's own addresses: vertices `vadr..vadr + vnum` lie inside its vertex array (non-
+            // empty here).
             unsafe { std::slice::from_raw_parts(r.mesh_vert.add(3 * vadr), 3 * vnum) }
         };
         let faces = if fnum == 0 {
             &[][..]
         } else {
+            // SAFETY: MuJoCo's own addresses: faces `fadr..fadr + fnum` lie inside its face array (non-empty
+            // here).
             unsafe { std::slice::from_raw_parts(r.mesh_face.add(3 * fadr), 3 * fnum) }
         };
         Ok((
@@ -329,13 +386,18 @@ impl Model {
     /// [`Model::try_clone`]), so shared models can never change under a running simulation.
     pub fn body_mass_mut(&mut self) -> &mut [f64] {
         let n = self.nbody();
+        // SAFETY: `body_mass` has `nbody` entries and `&mut self` makes the slice the only access.
         unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().body_mass, n) }
     }
+    /// Friction of each geom, writable (e.g. to randomise it).
     pub fn geom_friction_mut(&mut self) -> &mut [f64] {
         let n = 3 * self.ngeom();
+        // SAFETY: `geom_friction` has `3 * ngeom` entries and `&mut self` makes the slice the only access.
         unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().geom_friction, n) }
     }
+    /// Sets the simulation time step in seconds.
     pub fn set_timestep(&mut self, dt: f64) {
+        // SAFETY: `&mut self` makes this the only access to the model.
         unsafe { self.ptr.as_mut().opt.timestep = dt };
     }
 
@@ -343,6 +405,8 @@ impl Model {
         if n == 0 {
             &[]
         } else {
+            // SAFETY: callers pass a model array with at least `n` entries (n > 0 here), which lives as long
+            // as `self`.
             unsafe { std::slice::from_raw_parts(p, n) }
         }
     }
@@ -350,6 +414,8 @@ impl Model {
         if n == 0 {
             &[]
         } else {
+            // SAFETY: callers pass a model array with at least `n` entries (n > 0 here), which lives as long
+            // as `self`.
             unsafe { std::slice::from_raw_parts(p, n) }
         }
     }
@@ -357,6 +423,8 @@ impl Model {
 
 impl Drop for Model {
     fn drop(&mut self) {
+        // SAFETY: `ptr` came from MuJoCo and is freed exactly once, here; every state holds an `Arc` to its
+        // model, so none outlives it.
         unsafe { sys::mj_deleteModel(self.ptr.as_ptr()) };
     }
 }
@@ -369,5 +437,6 @@ impl std::fmt::Debug for Model {
 
 /// MuJoCo's library version (222 for 2.2.2).
 pub fn version() -> i32 {
+    // SAFETY: mj_version takes no arguments and touches no state.
     unsafe { sys::mj_version() }
 }

@@ -27,14 +27,14 @@ pub(super) fn contiguous<'a>(storage: &'a CpuStorage, layout: &Layout, what: &st
 /// One Adam step on one parameter, PyTorch's formula in f32:
 /// m <- b1 m + (1-b1) g; v <- b2 v + (1-b2) g^2; theta <- theta - (lr/bc1) m / (sqrt(v)/sqrt(bc2) + eps)
 /// with bc_i = 1 - b_i^t.
-pub struct AdamStep<'a> {
-    pub lr: f32,
-    pub beta1: f32,
-    pub beta2: f32,
+pub(crate) struct AdamStep<'a> {
+    pub(crate) lr: f32,
+    pub(crate) beta1: f32,
+    pub(crate) beta2: f32,
     pub eps: f32,
     /// 1 - beta1^t and 1 - beta2^t for the current step t.
-    pub bias_correction1: f32,
-    pub bias_correction2: f32,
+    pub(crate) bias_correction1: f32,
+    pub(crate) bias_correction2: f32,
     pub m: RefCell<&'a mut [f32]>,
     pub v: RefCell<&'a mut [f32]>,
 }
@@ -64,7 +64,7 @@ impl InplaceOp2 for AdamStep<'_> {
 }
 
 /// target <- tau * online + (1 - tau) * target.
-pub struct Polyak {
+pub(crate) struct Polyak {
     pub tau: f32,
 }
 

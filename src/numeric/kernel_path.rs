@@ -14,7 +14,7 @@ use std::fmt;
 use std::sync::OnceLock;
 
 /// The environment variable that forces a path.
-pub const ENV_VAR: &str = "LOCOBENCH_KERNELS";
+pub(crate) const ENV_VAR: &str = "LOCOBENCH_KERNELS";
 
 /// A family of matrix-multiply kernels.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
@@ -95,8 +95,10 @@ impl fmt::Display for KernelPath {
 /// A bad value of the switch.
 #[derive(Debug, Clone, PartialEq, Eq, thiserror::Error)]
 pub enum KernelPathError {
+    /// Not one of the path names.
     #[error("{ENV_VAR}={0:?} is not a kernel path (auto, avx512, avx2, portable or library)")]
     Unknown(String),
+    /// A path the CPU cannot run.
     #[error("{ENV_VAR}={0} needs CPU features this machine lacks (it has: {best})", best = KernelPath::best_exact())]
     Unsupported(KernelPath),
 }

@@ -22,8 +22,11 @@ use super::kernel_path::KernelPath;
 /// A matrix read through strides: element (i, j) is `data[i * row_stride + j * col_stride]`.
 #[derive(Clone, Copy)]
 pub struct Strided<'a> {
+    /// The elements.
     pub data: &'a [f32],
+    /// Distance between consecutive rows.
     pub row_stride: usize,
+    /// Distance between consecutive columns.
     pub col_stride: usize,
 }
 
@@ -314,7 +317,7 @@ macro_rules! vector_kernels {
                 load_c: bool,
                 mask: $mask,
             ) {
-                // SAFETY (whole body): a and b are packed (TILE_ROWS and PANEL floats per term,
+                // SAFETY: (whole body) a and b are packed (TILE_ROWS and PANEL floats per term,
                 // kc terms); C is read and written in rows < R and lanes inside the mask.
                 unsafe {
                     let mut acc: [[$vec; V]; R] = [[$zero; V]; R];

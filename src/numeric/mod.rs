@@ -9,7 +9,7 @@
 pub(crate) mod allocator;
 pub(crate) mod denormals;
 pub mod dense;
-pub mod inplace;
+pub(crate) mod inplace;
 pub mod kernel_path;
 pub mod matmul;
 pub mod optim;

@@ -9,10 +9,15 @@ use candle_core::{Device, Result, Tensor, Var};
 
 use super::inplace::AdamStep;
 
+/// Adam (Kingma and Ba, 2015) over candle variables, updated in place with fixed-order arithmetic.
 pub struct Adam {
+    /// Learning rate.
     pub lr: f64,
+    /// Decay of the first-moment estimate.
     pub beta1: f64,
+    /// Decay of the second-moment estimate.
     pub beta2: f64,
+    /// Added to the root of the second moment.
     pub eps: f64,
     step: u64,
     params: Vec<Var>,
@@ -21,16 +26,19 @@ pub struct Adam {
 }
 
 impl Adam {
+    /// Adam over `params` with the usual betas (0.9, 0.999) and eps 1e-8.
     pub fn new(params: Vec<Var>, lr: f64) -> Adam {
         let m = params.iter().map(|p| vec![0.0; p.elem_count()]).collect();
         let v = params.iter().map(|p| vec![0.0; p.elem_count()]).collect();
         Adam { lr, beta1: 0.9, beta2: 0.999, eps: 1e-8, step: 0, params, m, v }
     }
 
+    /// Updates done so far.
     pub fn steps(&self) -> u64 {
         self.step
     }
 
+    /// One update from the gradients of the parameters; parameters without a gradient are left alone.
     pub fn step(&mut self, grads: &GradStore) -> Result<()> {
         self.step += 1;
         let bias_correction1 = (1.0 - self.beta1.powi(self.step as i32)) as f32;
@@ -64,6 +72,7 @@ impl Adam {
         Ok((out, self.step))
     }
 
+    /// Restores the moments and step count saved under `prefix`.
     pub fn load_state(
         &mut self,
         prefix: &str,

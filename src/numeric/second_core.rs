@@ -56,6 +56,7 @@ struct Shared {
 // acquire/release transitions of `state` (owner writes job -> POSTED -> helper runs it, writes
 // panic -> DONE -> owner reads both).
 unsafe impl Sync for Shared {}
+// SAFETY: as for `Sync`: the hand-over through `state` orders every access.
 unsafe impl Send for Shared {}
 
 struct Helper {
@@ -70,7 +71,7 @@ thread_local! {
 /// Starts a helper thread for the calling thread (once; later calls do nothing). From then on
 /// the dense layers this thread runs use both cores. Use it on one training thread per machine
 /// of two cores; parallel runs (sweeps) should leave it off.
-pub fn enable_on_this_thread() {
+pub(crate) fn enable_on_this_thread() {
     HELPER.with(|h| {
         let mut h = h.borrow_mut();
         if h.is_none() {
@@ -80,12 +81,12 @@ pub fn enable_on_this_thread() {
 }
 
 /// Stops this thread's helper, if any.
-pub fn disable_on_this_thread() {
+pub(crate) fn disable_on_this_thread() {
     HELPER.with(|h| h.borrow_mut().take());
 }
 
 /// Enables this thread's helper until dropped (stopping it only if it was off before).
-pub struct HelperGuard {
+pub(crate) struct HelperGuard {
     was_on: bool,
 }
 
@@ -199,6 +200,7 @@ impl Helper {
             // SAFETY: POSTED hands `job` to this thread; the owner keeps the closure alive until
             // it sees DONE.
             let job = unsafe { (*shared.job.get()).take() }.expect("posted without a job");
+            // SAFETY: the closure behind `job` stays alive until the owner sees DONE, set below.
             let outcome = catch_unwind(AssertUnwindSafe(|| unsafe { (*job)() }));
             if let Err(p) = outcome {
                 // SAFETY: the owner reads `panic` only after DONE.

@@ -22,7 +22,7 @@ pub use rollout::RolloutRecorder;
 pub use scene::{body_entity, log_scene};
 
 /// Where the application id shows in the viewer.
-pub const APPLICATION_ID: &str = "locobench";
+pub(crate) const APPLICATION_ID: &str = "locobench";
 
 /// A recording being written to a file.
 pub struct Recording {
@@ -33,6 +33,7 @@ pub struct Recording {
 }
 
 impl Recording {
+    /// Starts a recording that becomes `path` when finished (written atomically).
     pub fn create(path: &Path) -> Result<Recording> {
         let dir = match path.parent() {
             Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
@@ -47,6 +48,7 @@ impl Recording {
         Ok(Recording { stream, partial, target: path.to_path_buf(), finished: false })
     }
 
+    /// The rerun stream to log to.
     pub fn stream(&self) -> &rerun::RecordingStream {
         &self.stream
     }
@@ -91,4 +93,4 @@ pub fn spawn_viewer(file: &Path) -> Result<()> {
 }
 
 /// The rerun crate version this build writes (the viewer must match it).
-pub const RERUN_VERSION: &str = "0.36.3";
+pub(crate) const RERUN_VERSION: &str = "0.36.3";

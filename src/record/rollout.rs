@@ -55,7 +55,7 @@ impl<'a> RolloutRecorder<'a> {
     }
 
     /// Tags the following frames with a training step (None to stop).
-    pub fn set_train_step(&mut self, step: Option<u64>) {
+    pub(crate) fn set_train_step(&mut self, step: Option<u64>) {
         self.train_step = step;
     }
 
@@ -115,7 +115,7 @@ impl<'a> RolloutRecorder<'a> {
     }
 
     /// Frame of a freshly reset environment.
-    pub fn log_reset(&mut self, episode: usize, env: &dyn Env) -> Result<()> {
+    pub(crate) fn log_reset(&mut self, episode: usize, env: &dyn Env) -> Result<()> {
         self.episode_start_time = env.data().time();
         if self.frame > 0 {
             // Episodes follow each other on `sim_time`, one control period apart.
@@ -128,7 +128,7 @@ impl<'a> RolloutRecorder<'a> {
     }
 
     /// Frame after one step.
-    pub fn log_step(&mut self, view: &StepView) -> Result<()> {
+    pub(crate) fn log_step(&mut self, view: &StepView) -> Result<()> {
         let env = view.env;
         self.set_frame_time(env);
         self.log_state(env)?;
@@ -182,7 +182,7 @@ impl<'a> RolloutRecorder<'a> {
         Ok(())
     }
 
-    pub fn log_end(&mut self, summary: &EpisodeSummary) -> Result<()> {
+    pub(crate) fn log_end(&mut self, summary: &EpisodeSummary) -> Result<()> {
         let end = summary.end_reason();
         self.rec.log(
             "events",

@@ -40,7 +40,7 @@ fn sanitize(name: &str) -> String {
 }
 
 /// MuJoCo stores quaternions w, x, y, z; rerun takes x, y, z, w.
-pub fn rerun_quat(wxyz: &[f64]) -> Quaternion {
+pub(crate) fn rerun_quat(wxyz: &[f64]) -> Quaternion {
     Quaternion::from_xyzw([wxyz[1] as f32, wxyz[2] as f32, wxyz[3] as f32, wxyz[0] as f32])
 }
 

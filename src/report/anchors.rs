@@ -1,12 +1,9 @@
 //! Published returns kept as data in `baselines/published_returns.toml`, with their sources.
-use std::path::Path;
-
-use anyhow::{Context, Result};
 use serde::Deserialize;
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct Anchor {
+pub(crate) struct Anchor {
     pub env: String,
     pub algo: String,
     #[serde(rename = "return")]
@@ -16,7 +13,7 @@ pub struct Anchor {
     /// Training seeds behind the value, when the source says.
     pub seeds: Option<usize>,
     /// What the ± is taken over, when it is not seeds.
-    pub spread: Option<String>,
+    pub(crate) spread: Option<String>,
     pub source: String,
 }
 
@@ -25,13 +22,8 @@ struct File {
     anchor: Vec<Anchor>,
 }
 
-pub fn load_anchors(path: &Path) -> Result<Vec<Anchor>> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
-    Ok(toml::from_str::<File>(&text).with_context(|| format!("parsing {}", path.display()))?.anchor)
-}
-
 /// The anchors bundled with the crate.
-pub fn bundled_anchors() -> Vec<Anchor> {
+pub(crate) fn bundled_anchors() -> Vec<Anchor> {
     toml::from_str::<File>(include_str!("../../baselines/published_returns.toml"))
         .expect("baselines/published_returns.toml parses")
         .anchor
@@ -40,7 +32,7 @@ pub fn bundled_anchors() -> Vec<Anchor> {
 /// A published learning curve: mean ± std over seeds at a few step marks.
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct PublishedCurve {
+pub(crate) struct PublishedCurve {
     pub env: String,
     pub algo: String,
     pub source: String,
@@ -63,7 +55,7 @@ struct CurveFile {
 }
 
 /// The published learning curves bundled with the crate (`baselines/published_curves.toml`).
-pub fn bundled_curves() -> Vec<PublishedCurve> {
+pub(crate) fn bundled_curves() -> Vec<PublishedCurve> {
     let curves = toml::from_str::<CurveFile>(include_str!("../../baselines/published_curves.toml"))
         .expect("baselines/published_curves.toml parses")
         .curve;
@@ -74,7 +66,7 @@ pub fn bundled_curves() -> Vec<PublishedCurve> {
 }
 
 /// The published curve for an env and algorithm, if there is one.
-pub fn published_curve(env: &str, algo: &str) -> Option<PublishedCurve> {
+pub(crate) fn published_curve(env: &str, algo: &str) -> Option<PublishedCurve> {
     bundled_curves().into_iter().find(|c| c.env == env && c.algo == algo)
 }
 

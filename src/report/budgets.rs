@@ -12,7 +12,7 @@ use crate::train::{budget_policy_path, load_budget_policy, load_policy, RunConfi
 
 /// Where a run's policy at a budget comes from.
 #[derive(Debug, Clone, PartialEq)]
-pub enum PolicySource {
+pub(crate) enum PolicySource {
     /// `policies/step-<budget>.safetensors`, written by training.
     BudgetFile(PathBuf),
     /// An exported `policy.safetensors` whose `source.toml` says it is the actor at this step.
@@ -29,7 +29,7 @@ impl PolicySource {
 }
 
 /// The step of an exported policy, from the `step = N` line of its `source.toml`.
-pub fn shipped_step(run_dir: &Path) -> Option<u64> {
+pub(crate) fn shipped_step(run_dir: &Path) -> Option<u64> {
     if !run_dir.join(crate::train::checkpoint::POLICY_FILE).is_file() {
         return None;
     }
@@ -43,7 +43,7 @@ pub fn reached(run: &Run) -> u64 {
 }
 
 /// The run's policy at `budget`, or why there is none (the run must have reached the budget).
-pub fn policy_at(run: &Run, budget: u64) -> Result<PolicySource, String> {
+pub(crate) fn policy_at(run: &Run, budget: u64) -> Result<PolicySource, String> {
     let file = budget_policy_path(&run.dir, budget);
     if file.is_file() {
         return Ok(PolicySource::BudgetFile(file));

@@ -9,38 +9,46 @@ use crate::evaluation::stats;
 use crate::evaluation::{ControllerFamily, Protocol, Push, SpeedPoint};
 
 /// Grid of commanded speeds: multiples of `GRID_STEP` up to the first that fails, or `GRID_MAX`.
-pub const GRID_STEP: f64 = 0.25;
-pub const GRID_MAX: f64 = 4.0;
+pub(crate) const GRID_STEP: f64 = 0.25;
+pub(crate) const GRID_MAX: f64 = 4.0;
 
 /// Pushes of the robustness table (velocity change, m/s).
-pub const PUSH_LEVELS: [f64; 4] = [0.25, 0.5, 1.0, 1.5];
+pub(crate) const PUSH_LEVELS: [f64; 4] = [0.25, 0.5, 1.0, 1.5];
 
+/// An RL row next to the controller at that row's speed.
 #[derive(Debug, Clone)]
 pub struct MatchedRow {
     /// Index into the env's budget rows.
     pub row: usize,
-    pub rl_speed: f64,
+    pub(crate) rl_speed: f64,
     /// The controller at the RL row's speed, or why there is none.
     pub controller: Result<SpeedPoint, String>,
     /// P(RL return > controller return) on the same episodes: at the matched speed, and against
     /// the controller's best speed.
-    pub beats_matched: Option<Estimate>,
-    pub beats_best: Option<Estimate>,
+    pub(crate) beats_matched: Option<Estimate>,
+    pub(crate) beats_best: Option<Estimate>,
 }
 
 /// Survival (episodes without a fall) of one policy under each push level.
 #[derive(Debug, Clone)]
 pub struct PushRow {
+    /// The policy's label.
     pub policy: String,
+    /// Its mean speed, which the controller is commanded to match (m/s).
     pub speed: f64,
-    pub survived: Vec<(usize, usize)>,
+    pub(crate) survived: Vec<(usize, usize)>,
 }
 
+/// The controller in one env: its speed grid, best speed, matched rows and pushes.
 #[derive(Debug, Clone)]
 pub struct ControllerSection {
+    /// Every speed tried.
     pub grid: Vec<SpeedPoint>,
+    /// The working speed with the highest mean return.
     pub best: Option<SpeedPoint>,
+    /// One per RL row.
     pub matched: Vec<MatchedRow>,
+    /// Push survival of each policy and of the controller at its speed.
     pub pushes: Vec<PushRow>,
 }
 
@@ -62,7 +70,7 @@ fn improvement(row: &BudgetRow, controller: &SpeedPoint, seed: u64) -> Estimate 
 
 /// A grid point's mean return with its 95% bootstrap interval over episodes (the controller has
 /// no seeds to resample).
-pub fn return_interval(point: &SpeedPoint) -> stats::Interval {
+pub(crate) fn return_interval(point: &SpeedPoint) -> stats::Interval {
     stats::stratified_bootstrap(
         &[point.returns()],
         |v| stats::mean(&v[0]),
@@ -72,7 +80,7 @@ pub fn return_interval(point: &SpeedPoint) -> stats::Interval {
 }
 
 /// The best working grid point by mean return.
-pub fn best_point(grid: &[SpeedPoint]) -> Option<SpeedPoint> {
+pub(crate) fn best_point(grid: &[SpeedPoint]) -> Option<SpeedPoint> {
     grid.iter()
         .filter(|p| p.works())
         .max_by(|a, b| stats::mean(&a.returns()).total_cmp(&stats::mean(&b.returns())))
@@ -82,7 +90,7 @@ pub fn best_point(grid: &[SpeedPoint]) -> Option<SpeedPoint> {
 /// Everything about the controller on one env. `rows`: the env's held-out rows (all under one
 /// env config, `env_config`); `push_rows`: for each RL row to push, its index and its episodes
 /// under each push level (computed by the caller, which holds the policies).
-pub fn controller_section(
+pub(crate) fn controller_section(
     env_config: &EnvConfig,
     rows: &[BudgetRow],
     protocol: &Protocol,
@@ -112,7 +120,7 @@ pub fn controller_section(
 }
 
 /// Survival of the controller commanded `speed` under each push level.
-pub fn controller_pushes(family: &mut ControllerFamily, speed: f64, label: String) -> Result<PushRow> {
+pub(crate) fn controller_pushes(family: &mut ControllerFamily, speed: f64, label: String) -> Result<PushRow> {
     let mut survived = Vec::new();
     for &dv in &PUSH_LEVELS {
         let p = family.at(speed, Some(Push { delta_v: dv }))?;

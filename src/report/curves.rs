@@ -4,15 +4,17 @@
 /// Evaluation returns of a group of seeds at the steps all of them evaluated.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct EvalCurve {
+    /// Steps at which every seed evaluated.
     pub steps: Vec<u64>,
     /// Mean over seeds of each seed's evaluation mean.
     pub mean: Vec<f64>,
     /// Standard deviation over seeds (population, as numpy's default).
     pub std: Vec<f64>,
+    /// Seeds in the curve.
     pub seeds: usize,
 }
 
-pub fn mean_std(xs: &[f64]) -> (f64, f64) {
+pub(crate) fn mean_std(xs: &[f64]) -> (f64, f64) {
     if xs.is_empty() {
         return (f64::NAN, f64::NAN);
     }
@@ -22,7 +24,7 @@ pub fn mean_std(xs: &[f64]) -> (f64, f64) {
 
 /// Combines per-seed evaluation series `(step, mean return)`; steps missing from any seed are
 /// left out so every point averages the same seeds.
-pub fn eval_curve(per_seed: &[Vec<(u64, f64)>]) -> EvalCurve {
+pub(crate) fn eval_curve(per_seed: &[Vec<(u64, f64)>]) -> EvalCurve {
     let Some(first) = per_seed.first() else { return EvalCurve::default() };
     let mut curve = EvalCurve { seeds: per_seed.len(), ..Default::default() };
     for &(step, _) in first {
@@ -46,13 +48,14 @@ impl EvalCurve {
     }
 
     /// The mean return at the last evaluation at or before `step`.
-    pub fn at(&self, step: u64) -> Option<f64> {
+    #[cfg(test)]
+    pub(crate) fn at(&self, step: u64) -> Option<f64> {
         self.steps.iter().rposition(|&s| s <= step).map(|i| self.mean[i])
     }
 
     /// Area under the mean curve divided by its step span (trapezoids): the average return over
     /// training, which rewards learning early as well as learning well.
-    pub fn normalised_auc(&self) -> Option<f64> {
+    pub(crate) fn normalised_auc(&self) -> Option<f64> {
         if self.steps.len() < 2 {
             return self.mean.first().copied();
         }
@@ -67,7 +70,7 @@ impl EvalCurve {
 }
 
 /// Trailing rolling mean and standard deviation over up to `window` values (fewer at the start).
-pub fn rolling(values: &[f64], window: usize) -> (Vec<f64>, Vec<f64>) {
+pub(crate) fn rolling(values: &[f64], window: usize) -> (Vec<f64>, Vec<f64>) {
     let window = window.max(1);
     (0..values.len()).map(|i| mean_std(&values[(i + 1).saturating_sub(window)..=i])).unzip()
 }

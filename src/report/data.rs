@@ -12,9 +12,9 @@ use crate::evaluation::speed_grid::SpeedPoint;
 use crate::evaluation::stats;
 
 /// Budgets at which learning curves are tabulated: the marks published curves report.
-pub const CURVE_MARKS: [u64; 5] = [100_000, 200_000, 300_000, 500_000, 1_000_000];
+pub(crate) const CURVE_MARKS: [u64; 5] = [100_000, 200_000, 300_000, 500_000, 1_000_000];
 
-pub fn held_out_csv(rows: &BTreeMap<String, Vec<BudgetRow>>) -> String {
+pub(crate) fn held_out_csv(rows: &BTreeMap<String, Vec<BudgetRow>>) -> String {
     let mut csv = String::from(
         "env,policy,budget,seeds,seeds_without_policy,episodes_per_seed,mean,mean_low,mean_high,iqm,iqm_low,iqm_high,\
          interval_over,falls,episodes,speed,cost_of_transport,machine\n",
@@ -53,7 +53,7 @@ fn speed_point_fields(p: &SpeedPoint) -> String {
     format!("{},{},{},{},{},{},{}", p.commanded, p.achieved(), i.estimate, i.low, i.high, p.falls(), p.episodes.len())
 }
 
-pub fn controller_csv(sections: &BTreeMap<String, ControllerSection>) -> String {
+pub(crate) fn controller_csv(sections: &BTreeMap<String, ControllerSection>) -> String {
     let mut csv =
         String::from("env,commanded,achieved,mean,mean_low,mean_high,falls,episodes,cost_of_transport,works\n");
     for (env, s) in sections {
@@ -67,7 +67,7 @@ pub fn controller_csv(sections: &BTreeMap<String, ControllerSection>) -> String 
 
 /// Evaluation during training at each mark every seed of a group reached: mean over seeds, sample
 /// std, 95% bootstrap interval over seeds, and the published curve at the same mark if any.
-pub fn curves_csv(envs: &BTreeMap<String, Vec<(&Group, &Vec<&Run>)>>) -> String {
+pub(crate) fn curves_csv(envs: &BTreeMap<String, Vec<(&Group, &Vec<&Run>)>>) -> String {
     let mut csv = String::from(
         "env,policy,algo,step,seeds,seed_values,evaluation_episodes,mean,sample_std,low,high,published_mean,\
          published_std,published_seeds\n",
@@ -115,7 +115,7 @@ pub fn curves_csv(envs: &BTreeMap<String, Vec<(&Group, &Vec<&Run>)>>) -> String 
 }
 
 /// Each learned budget row beside the controller commanded to its speed, on the same episodes.
-pub fn versus_controller_csv(
+pub(crate) fn versus_controller_csv(
     rows: &BTreeMap<String, Vec<BudgetRow>>,
     sections: &BTreeMap<String, ControllerSection>,
 ) -> String {

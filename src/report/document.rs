@@ -26,8 +26,8 @@ pub enum Block {
 }
 
 #[derive(Debug, Clone, Default, PartialEq)]
-pub struct Document {
-    pub title: String,
+pub(crate) struct Document {
+    pub(crate) title: String,
     pub blocks: Vec<Block>,
 }
 
@@ -40,7 +40,7 @@ impl Document {
         self.blocks.push(Block::Heading { level, text: text.into() });
     }
 
-    pub fn paragraph(&mut self, text: impl Into<String>) {
+    pub(crate) fn paragraph(&mut self, text: impl Into<String>) {
         self.blocks.push(Block::Paragraph(text.into()));
     }
 
@@ -49,7 +49,7 @@ impl Document {
     }
 
     /// A chart written beside the page and linked from it, not embedded.
-    pub fn linked_figure(&mut self, file: impl Into<String>, caption: impl Into<String>) {
+    pub(crate) fn linked_figure(&mut self, file: impl Into<String>, caption: impl Into<String>) {
         self.blocks.push(Block::Figure {
             file: file.into(),
             svg: String::new(),
@@ -66,7 +66,7 @@ impl Document {
         self.blocks.push(Block::Lines(lines));
     }
 
-    pub fn to_markdown(&self) -> String {
+    pub(crate) fn to_markdown(&self) -> String {
         let mut md = format!("# {}\n\n", self.title);
         for block in &self.blocks {
             match block {
@@ -97,7 +97,7 @@ impl Document {
         md
     }
 
-    pub fn to_html(&self) -> String {
+    pub(crate) fn to_html(&self) -> String {
         let mut body = format!("<h1>{}</h1>\n", escape(&self.title));
         for block in &self.blocks {
             match block {

@@ -12,6 +12,7 @@ pub fn fmt_return(v: f64) -> String {
     }
 }
 
+/// `v` with `digits` decimals, or `–` when not finite.
 pub fn fixed(v: f64, digits: usize) -> String {
     if v.is_finite() {
         format!("{v:.digits$}")

@@ -16,20 +16,27 @@ use crate::policy::AgentPolicy;
 use crate::train::provenance;
 
 /// Rows with fewer seeds than this say so: intervals over so few seeds are rough.
-pub const FEW_SEEDS: usize = 3;
+pub(crate) const FEW_SEEDS: usize = 3;
 
 /// One run's episodes at a budget.
 #[derive(Debug, Clone)]
 pub struct SeedResult {
+    /// The run the policy came from.
     pub run_dir: PathBuf,
+    /// Its training seed.
     pub seed: u64,
+    /// The held-out episodes it played.
     pub episodes: Vec<GaitEpisode>,
 }
 
+/// One table row: a group of runs at one step budget, each played on the held-out episodes.
 #[derive(Debug, Clone)]
 pub struct BudgetRow {
+    /// The runs' env, algorithm, reward and settings.
     pub group: Group,
+    /// Environment steps the policies were trained for.
     pub budget: u64,
+    /// One result per run that has a policy at the budget.
     pub evaluated: Vec<SeedResult>,
     /// Runs that reached the budget without a policy there, with the reason.
     pub missing: Vec<(PathBuf, String)>,
@@ -37,6 +44,7 @@ pub struct BudgetRow {
     pub env_config: Option<EnvConfig>,
     /// What computed the runs up to the budget, and whether they differ.
     pub provenance: String,
+    /// Whether the runs' provenance differs (another CPU path, commit or MuJoCo).
     pub mixed_provenance: bool,
     /// Mean over seeds of the wall time to reach the budget (s), where recorded.
     pub wall_time: Option<f64>,
@@ -47,6 +55,7 @@ pub struct BudgetRow {
 /// An interval and what it was resampled over.
 #[derive(Debug, Clone, Copy)]
 pub struct Estimate {
+    /// The statistic and its 95% interval.
     pub interval: Interval,
     /// "seeds", or "episodes" for a single seed.
     pub over: &'static str,
@@ -67,38 +76,42 @@ pub fn estimate(per_seed: &[Vec<f64>], statistic: fn(&[f64]) -> f64, seed: u64) 
 }
 
 impl BudgetRow {
+    /// Number of runs evaluated.
     pub fn seeds(&self) -> usize {
         self.evaluated.len()
     }
-    pub fn episodes_per_seed(&self) -> usize {
+    pub(crate) fn episodes_per_seed(&self) -> usize {
         self.evaluated.first().map_or(0, |s| s.episodes.len())
     }
-    pub fn all_episodes(&self) -> impl Iterator<Item = &GaitEpisode> {
+    pub(crate) fn all_episodes(&self) -> impl Iterator<Item = &GaitEpisode> {
         self.evaluated.iter().flat_map(|s| s.episodes.iter())
     }
-    pub fn returns_per_seed(&self) -> Vec<Vec<f64>> {
+    pub(crate) fn returns_per_seed(&self) -> Vec<Vec<f64>> {
         self.evaluated.iter().map(|s| s.episodes.iter().map(|e| e.episode_return).collect()).collect()
     }
+    /// The mean return over seeds, with a bootstrap interval seeded by `seed`.
     pub fn mean_return(&self, seed: u64) -> Estimate {
         estimate(&self.returns_per_seed(), stats::mean, seed)
     }
-    pub fn iqm_return(&self, seed: u64) -> Estimate {
+    pub(crate) fn iqm_return(&self, seed: u64) -> Estimate {
         estimate(&self.returns_per_seed(), stats::iqm, seed ^ 0x1)
     }
+    /// Falls and episodes, over every seed.
     pub fn falls(&self) -> (usize, usize) {
         (self.all_episodes().filter(|e| e.fell).count(), self.all_episodes().count())
     }
+    /// Mean forward speed over every episode (m/s).
     pub fn speed(&self) -> f64 {
         stats::mean(&self.all_episodes().map(|e| e.mean_speed).collect::<Vec<_>>())
     }
-    pub fn cost_of_transport(&self) -> f64 {
+    pub(crate) fn cost_of_transport(&self) -> f64 {
         mean_cost_of_transport(&self.all_episodes().cloned().collect::<Vec<_>>())
     }
 }
 
 /// Evaluates `runs` (one group) at `budget`.
 /// Evaluates `runs` (one group) at `budget`, optionally under a push.
-pub fn evaluate_row(
+pub(crate) fn evaluate_row(
     group: &Group,
     runs: &[&Run],
     budget: u64,
@@ -156,7 +169,7 @@ pub fn evaluate_row(
 }
 
 /// What computed `run` up to `budget`: CPU, SIMD level, kernels and commit of each stretch.
-pub fn machine_of(run: &Run, budget: u64) -> String {
+pub(crate) fn machine_of(run: &Run, budget: u64) -> String {
     match provenance::read(&run.dir) {
         Ok(stretches) if !stretches.is_empty() => {
             let mut parts: Vec<String> = stretches

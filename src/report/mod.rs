@@ -2,12 +2,12 @@
 //! (`evaluation`), at fixed step budgets, beside published results and, on Minitaur and Ant,
 //! beside the controller across its speeds and under pushes; as `index.html` (self-contained, no
 //! network) and `README.md`, with SVG charts beside them.
-pub mod anchors;
+pub(crate) mod anchors;
 pub mod budgets;
 pub mod controller;
 pub mod curves;
 mod data;
-pub mod document;
+pub(crate) mod document;
 pub mod format;
 pub mod heldout;
 pub mod plots;
@@ -30,16 +30,17 @@ pub use format::fmt_return;
 
 /// The held-out rows and the controller grids as data, beside the report (what docs quote).
 pub const HELD_OUT_CSV: &str = "held_out.csv";
-pub const CONTROLLER_CSV: &str = "controller.csv";
-pub const CURVES_CSV: &str = "curves.csv";
-pub const VERSUS_CONTROLLER_CSV: &str = "versus_controller.csv";
+pub(crate) const CONTROLLER_CSV: &str = "controller.csv";
+pub(crate) const CURVES_CSV: &str = "curves.csv";
+pub(crate) const VERSUS_CONTROLLER_CSV: &str = "versus_controller.csv";
 
 /// Seed of every bootstrap in the report.
 pub const BOOTSTRAP_SEED: u64 = 2021;
 
 /// Episodes per seed of the training-return rolling statistics.
-pub const ROLLING_WINDOW: usize = 50;
+pub(crate) const ROLLING_WINDOW: usize = 50;
 
+/// What `write_report` evaluates and how.
 #[derive(Debug, Clone)]
 pub struct ReportOptions {
     /// The held-out episodes every policy plays (`--episodes`, `--seed`).
@@ -63,27 +64,36 @@ impl Default for ReportOptions {
 /// One group of seeds' learning-curve summary.
 #[derive(Debug, Clone)]
 pub struct GroupSummary {
+    /// The runs' env, algorithm, reward and settings.
     pub group: Group,
+    /// The in-training evaluation returns over seeds, per step.
     pub curve: EvalCurve,
+    /// Runs in the group.
     pub seeds: usize,
-    pub final_mean: f64,
-    pub final_std: f64,
+    /// Area under the mean evaluation curve, normalised by the steps.
     pub auc: f64,
+    /// Mean wall time per run (s).
     pub wall_time: f64,
+    /// The longest run's steps.
     pub steps: u64,
 }
 
+/// What `write_report` wrote, and the tables behind it.
 pub struct Report {
+    /// The HTML page.
     pub index: PathBuf,
+    /// The Markdown page.
     pub readme: PathBuf,
+    /// One learning-curve summary per group.
     pub groups: Vec<GroupSummary>,
     /// Held-out rows per env.
     pub rows: BTreeMap<String, Vec<BudgetRow>>,
+    /// The controller's speed grid and matched rows, per env.
     pub controllers: BTreeMap<String, controller::ControllerSection>,
 }
 
 /// Groups runs by (env, algorithm, reward, settings), sorted.
-pub fn group_runs(runs: &[Run]) -> BTreeMap<Group, Vec<&Run>> {
+pub(crate) fn group_runs(runs: &[Run]) -> BTreeMap<Group, Vec<&Run>> {
     let mut groups: BTreeMap<Group, Vec<&Run>> = BTreeMap::new();
     for r in runs {
         groups.entry(r.group()).or_default().push(r);
@@ -91,14 +101,11 @@ pub fn group_runs(runs: &[Run]) -> BTreeMap<Group, Vec<&Run>> {
     groups
 }
 
-pub fn summarise(group: &Group, runs: &[&Run]) -> GroupSummary {
+pub(crate) fn summarise(group: &Group, runs: &[&Run]) -> GroupSummary {
     let curve = eval_curve(&runs.iter().map(|r| r.evals().collect()).collect::<Vec<_>>());
-    let (_, final_mean, final_std) = curve.last().unwrap_or((0, f64::NAN, f64::NAN));
     GroupSummary {
         group: group.clone(),
         seeds: runs.len(),
-        final_mean,
-        final_std,
         auc: curve.normalised_auc().unwrap_or(f64::NAN),
         wall_time: mean_std(&runs.iter().map(|r| r.wall_time()).collect::<Vec<_>>()).0,
         steps: runs.iter().map(|r| r.steps()).max().unwrap_or(0),

@@ -6,7 +6,7 @@ use plotters::prelude::*;
 /// One series: a line through `mean` and a shaded band from `low` to `high` (no band where
 /// they equal the mean).
 #[derive(Debug, Clone, Default)]
-pub struct Band {
+pub(crate) struct Band {
     pub label: String,
     pub x: Vec<f64>,
     pub mean: Vec<f64>,
@@ -16,14 +16,15 @@ pub struct Band {
 
 impl Band {
     /// A band of mean ± `half` at every point.
-    pub fn symmetric(label: String, x: Vec<f64>, mean: Vec<f64>, half: &[f64]) -> Band {
+    #[cfg(test)]
+    pub(crate) fn symmetric(label: String, x: Vec<f64>, mean: Vec<f64>, half: &[f64]) -> Band {
         let low = mean.iter().zip(half).map(|(m, h)| m - h).collect();
         let high = mean.iter().zip(half).map(|(m, h)| m + h).collect();
         Band { label, x, mean, low, high }
     }
 
     /// At most `max_points` points, evenly spaced in index, keeping the last.
-    pub fn thinned(self, max_points: usize) -> Band {
+    pub(crate) fn thinned(self, max_points: usize) -> Band {
         let n = self.x.len();
         if n <= max_points || max_points < 2 {
             return self;
@@ -43,7 +44,7 @@ impl Band {
 /// A point drawn over the curves (a published result, a policy's outcome) with an error bar
 /// from `low` to `high`.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Marker {
+pub(crate) struct Marker {
     /// Legend entry; markers with the same label share one.
     pub label: String,
     pub x: f64,
@@ -51,11 +52,11 @@ pub struct Marker {
     pub low: f64,
     pub high: f64,
     /// Index of the colour it takes (a band's, to match it).
-    pub color_of: usize,
+    pub(crate) color_of: usize,
 }
 
 /// Tick label for a step count: `250k`, `1M`, or the plain number below 1000.
-pub fn step_label(x: f64) -> String {
+pub(crate) fn step_label(x: f64) -> String {
     let a = x.abs();
     if a >= 1e6 {
         format!("{}M", trim(x / 1e6))
@@ -67,7 +68,7 @@ pub fn step_label(x: f64) -> String {
 }
 
 /// Tick label for a return: no trailing zeros, at most 3 significant decimals.
-pub fn value_label(y: f64) -> String {
+pub(crate) fn value_label(y: f64) -> String {
     let a = y.abs();
     if a >= 100.0 || a == 0.0 {
         format!("{y:.0}")
@@ -107,7 +108,13 @@ fn err<E: std::fmt::Debug>(e: E) -> anyhow::Error {
 }
 
 /// Renders `bands` (x: environment steps) and published `markers` into an SVG document.
-pub fn bands_svg(title: &str, x_label: &str, y_label: &str, bands: &[Band], markers: &[Marker]) -> Result<String> {
+pub(crate) fn bands_svg(
+    title: &str,
+    x_label: &str,
+    y_label: &str,
+    bands: &[Band],
+    markers: &[Marker],
+) -> Result<String> {
     let mut svg = String::new();
     {
         let root = SVGBackend::with_string(&mut svg, (760, 420)).into_drawing_area();

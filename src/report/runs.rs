@@ -12,14 +12,19 @@ pub(crate) fn is_reward_weight(key: &str) -> bool {
     key.ends_with("_weight") || key == "healthy_reward"
 }
 
+/// A run directory, loaded: its configuration and metrics.
 #[derive(Debug, Clone)]
 pub struct Run {
+    /// The run directory.
     pub dir: PathBuf,
+    /// Its `config.toml`.
     pub config: RunConfig,
+    /// Its `metrics.csv` rows (empty when absent).
     pub metrics: Vec<MetricsRow>,
 }
 
 impl Run {
+    /// Reads `config.toml` and `metrics.csv` from `dir`.
     pub fn load(dir: &Path) -> Result<Run> {
         let config = read_run_config(dir)?;
         let path = dir.join("metrics.csv");
@@ -31,17 +36,19 @@ impl Run {
         Ok(Run { dir: dir.to_path_buf(), config, metrics })
     }
 
+    /// The env's registered name.
     pub fn env(&self) -> &str {
         &self.config.env.name
     }
 
+    /// The algorithm's registered name.
     pub fn algo(&self) -> &'static str {
         self.config.train.algo.name()
     }
 
     /// Reward weights that differ from the environment's defaults, e.g. `drift=0.25`, or
     /// `default reward`.
-    pub fn reward_label(&self) -> String {
+    pub(crate) fn reward_label(&self) -> String {
         let defaults = EnvConfig::new(self.env()).resolved_options().unwrap_or_default();
         let mut changed: Vec<String> = self
             .config
@@ -63,7 +70,7 @@ impl Run {
     /// `locobench train --env E --algo A` would use today (the algorithm's defaults and the
     /// shipped presets), e.g. `reward_scale=100`; empty when none. Budget and bookkeeping keys
     /// (steps, evaluation and checkpoint cadence) do not count.
-    pub fn settings_label(&self) -> String {
+    pub(crate) fn settings_label(&self) -> String {
         const BOOKKEEPING: [&str; 4] = ["total_steps", "eval_every", "eval_episodes", "checkpoint_every"];
         let mut changed = Vec::new();
         if let Ok(preset) = crate::train::config::build_config(self.env(), self.config.train.algo, &[]) {
@@ -87,7 +94,7 @@ impl Run {
     /// The name a person gave the run: its directory's name without its `-seed<N>` part
     /// (sweeps name runs `<algo>-<grid point>-seed<N>`; `td3-cleanrl-seed2-300k` reads
     /// `td3-cleanrl-300k`).
-    pub fn variant_name(&self) -> String {
+    pub(crate) fn variant_name(&self) -> String {
         let name = self.dir.file_name().map(|n| n.to_string_lossy().to_string()).unwrap_or_default();
         without_seed(&name)
     }
@@ -106,27 +113,34 @@ impl Run {
         }
     }
 
-    pub fn evals(&self) -> impl Iterator<Item = (u64, f64)> + '_ {
+    pub(crate) fn evals(&self) -> impl Iterator<Item = (u64, f64)> + '_ {
         self.metrics.iter().filter(|r| r.kind == "eval").filter_map(|r| r.eval_mean.map(|m| (r.step, m)))
     }
 
+    /// (step, return) of every training episode.
     pub fn episodes(&self) -> impl Iterator<Item = (u64, f64)> + '_ {
         self.metrics.iter().filter(|r| r.kind == "episode").filter_map(|r| r.episode_return.map(|m| (r.step, m)))
     }
 
+    /// Wall time at the last metrics row (s).
     pub fn wall_time(&self) -> f64 {
         self.metrics.last().map_or(0.0, |r| r.wall_time)
     }
 
+    /// Steps at the last metrics row.
     pub fn steps(&self) -> u64 {
         self.metrics.last().map_or(0, |r| r.step)
     }
 }
 
+/// What runs must share to be pooled as seeds of one row.
 #[derive(Debug, Clone, PartialEq, Eq, PartialOrd, Ord, Hash)]
 pub struct Group {
+    /// Env name.
     pub env: String,
+    /// Algorithm name.
     pub algo: String,
+    /// Reward weights that differ from the env's defaults, as a label.
     pub reward: String,
     /// `Run::settings_label`: empty for the shipped settings.
     pub settings: String,
@@ -149,12 +163,12 @@ impl Group {
     }
 
     /// Shipped settings and the env's default reward: what published curves are comparable with.
-    pub fn is_default_setting(&self) -> bool {
+    pub(crate) fn is_default_setting(&self) -> bool {
         self.settings.is_empty() && self.reward == "default reward"
     }
 
     /// Algorithm, reward and settings in full.
-    pub fn description(&self) -> String {
+    pub(crate) fn description(&self) -> String {
         let settings = if self.settings.is_empty() { "shipped settings".to_string() } else { self.settings.clone() };
         format!("{}, {}, {settings}", self.algo, self.reward)
     }
@@ -174,7 +188,7 @@ fn without_seed(name: &str) -> String {
 
 /// Every run directory in `paths`: each path is a run directory itself or is searched
 /// (a few levels deep) for them, e.g. a sweep directory.
-pub fn find_runs(paths: &[PathBuf]) -> Result<Vec<Run>> {
+pub(crate) fn find_runs(paths: &[PathBuf]) -> Result<Vec<Run>> {
     fn walk(dir: &Path, depth: usize, out: &mut Vec<PathBuf>) -> Result<()> {
         // Results kept without checkpoints (config.toml + metrics.csv) count too.
         if dir.join("config.toml").is_file() && (dir.join("checkpoints").exists() || dir.join("metrics.csv").is_file())

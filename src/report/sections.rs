@@ -58,7 +58,7 @@ pub fn protocol(doc: &mut Document, opts: &ReportOptions) {
 }
 
 /// Evaluation curves during training and their summary table.
-pub fn learning_curves(
+pub(crate) fn learning_curves(
     doc: &mut Document,
     out: &Path,
     env: &str,
@@ -596,7 +596,12 @@ fn speed_charts(
 }
 
 /// Training returns per group: each seed's rolling mean, thinned; linked, not embedded.
-pub fn training_returns(doc: &mut Document, out: &Path, env: &str, groups: &[(&Group, &Vec<&Run>)]) -> Result<()> {
+pub(crate) fn training_returns(
+    doc: &mut Document,
+    out: &Path,
+    env: &str,
+    groups: &[(&Group, &Vec<&Run>)],
+) -> Result<()> {
     doc.heading(2, "Training returns");
     for (g, rs) in groups {
         let bands: Vec<Band> = rs

@@ -25,7 +25,9 @@ use crate::io::write_bytes_atomic;
 /// `option.<env option>`, with its values.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Axis {
+    /// The reward term, `set.<hyperparameter>` or `option.<env option>`.
     pub key: String,
+    /// The values it takes.
     pub values: Vec<f64>,
 }
 
@@ -60,20 +62,28 @@ pub fn parse_axis(spec: &str) -> Result<Axis> {
 /// What a sweep runs.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct SweepSpec {
+    /// The env every job trains on.
     pub env: String,
+    /// Algorithms, by registered name.
     pub algos: Vec<String>,
+    /// The grid's axes; jobs cover their product.
     pub grid: Vec<Axis>,
+    /// Training seeds per grid point and algorithm.
     pub seeds: Vec<u64>,
     /// Total steps per run (None: the preset's).
     pub steps: Option<u64>,
     /// Extra `--set` and `--option` arguments given to every job.
     pub set: Vec<String>,
+    /// Extra `--option` arguments given to every job.
     pub options: Vec<String>,
 }
 
+/// One training run of a sweep.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Job {
+    /// Unique name, also its run directory's name.
     pub name: String,
+    /// Where the run writes.
     pub run_dir: PathBuf,
     /// Arguments after the program name, for a new run.
     pub args: Vec<String>,
@@ -81,7 +91,7 @@ pub struct Job {
 
 impl Job {
     /// The command line as a shell would take it (program `locobench`).
-    pub fn command_line(&self) -> String {
+    pub(crate) fn command_line(&self) -> String {
         std::iter::once("locobench".to_string())
             .chain(self.args.iter().map(|a| shell_quote(a)))
             .collect::<Vec<_>>()
@@ -173,7 +183,7 @@ pub fn write_plan(spec: &SweepSpec, sweep_dir: &Path, jobs: &[Job]) -> Result<()
 }
 
 /// The `sweep.toml` of a sweep directory.
-pub fn read_spec(sweep_dir: &Path) -> Result<SweepSpec> {
+pub(crate) fn read_spec(sweep_dir: &Path) -> Result<SweepSpec> {
     let path = sweep_dir.join("sweep.toml");
     let text = std::fs::read_to_string(&path)
         .with_context(|| format!("{} is not a sweep directory (no sweep.toml)", sweep_dir.display()))?;
@@ -181,26 +191,31 @@ pub fn read_spec(sweep_dir: &Path) -> Result<SweepSpec> {
 }
 
 /// The plan of an existing sweep directory: its spec and jobs, in jobs.txt order.
-pub fn read_plan(sweep_dir: &Path) -> Result<(SweepSpec, Vec<Job>)> {
+pub(crate) fn read_plan(sweep_dir: &Path) -> Result<(SweepSpec, Vec<Job>)> {
     let spec = read_spec(sweep_dir)?;
     let jobs = jobs(&spec, sweep_dir)?;
     Ok((spec, jobs))
 }
 
 /// Where a job writes its output and, once its process ended, its exit status.
-pub fn log_path(sweep_dir: &Path, job: &Job) -> PathBuf {
+pub(crate) fn log_path(sweep_dir: &Path, job: &Job) -> PathBuf {
     sweep_dir.join("logs").join(format!("{}.log", job.name))
 }
 
-pub fn exit_path(sweep_dir: &Path, job: &Job) -> PathBuf {
+pub(crate) fn exit_path(sweep_dir: &Path, job: &Job) -> PathBuf {
     sweep_dir.join("logs").join(format!("{}.exit", job.name))
 }
 
+/// How one locally run job ended.
 #[derive(Debug, Clone, PartialEq)]
 pub struct JobOutcome {
+    /// The job's name.
     pub name: String,
+    /// Exited with status 0.
     pub ok: bool,
+    /// Wall time (s).
     pub seconds: f64,
+    /// Its log file.
     pub log: PathBuf,
 }
 

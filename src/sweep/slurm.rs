@@ -21,9 +21,11 @@ use crate::train::run_progress;
 /// What the array asks of the scheduler.
 #[derive(Debug, Clone, PartialEq)]
 pub struct SlurmOptions {
+    /// `--partition`.
     pub partition: Option<String>,
     /// `--time`, e.g. `2:00:00`.
     pub time: Option<String>,
+    /// `--cpus-per-task`.
     pub cpus_per_task: u32,
     /// `--mem`, e.g. `4G`.
     pub mem: Option<String>,
@@ -52,9 +54,11 @@ impl Default for SlurmOptions {
 /// One `sbatch` call.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Submission {
+    /// The array job's id.
     pub job_id: String,
     /// Array task ids, as given to `--array` (without the `%N` throttle).
     pub tasks: String,
+    /// When it was submitted (Unix seconds).
     pub submitted_unix: u64,
 }
 
@@ -64,7 +68,7 @@ struct SubmissionLog {
     submissions: Vec<Submission>,
 }
 
-pub fn script_path(sweep_dir: &Path) -> PathBuf {
+pub(crate) fn script_path(sweep_dir: &Path) -> PathBuf {
     sweep_dir.join("slurm.sh")
 }
 
@@ -73,7 +77,7 @@ fn submissions_path(sweep_dir: &Path) -> PathBuf {
 }
 
 /// Every submission recorded for the sweep, oldest first.
-pub fn submissions(sweep_dir: &Path) -> Result<Vec<Submission>> {
+pub(crate) fn submissions(sweep_dir: &Path) -> Result<Vec<Submission>> {
     let path = submissions_path(sweep_dir);
     if !path.exists() {
         return Ok(Vec::new());
@@ -90,7 +94,7 @@ fn record_submission(sweep_dir: &Path, s: Submission) -> Result<()> {
 }
 
 /// `0-3,5,7-8` for [0, 1, 2, 3, 5, 7, 8].
-pub fn array_spec(indices: &[usize]) -> String {
+pub(crate) fn array_spec(indices: &[usize]) -> String {
     let mut parts = Vec::new();
     let mut i = 0;
     while i < indices.len() {
@@ -189,7 +193,7 @@ exit "$status"
 }
 
 /// `program` found on `PATH`, if it is there.
-pub fn on_path(program: &str) -> Option<PathBuf> {
+pub(crate) fn on_path(program: &str) -> Option<PathBuf> {
     let path = std::env::var_os("PATH")?;
     std::env::split_paths(&path).map(|d| d.join(program)).find(|p| p.is_file())
 }
@@ -198,7 +202,7 @@ pub fn on_path(program: &str) -> Option<PathBuf> {
 /// submission the scheduler still knows (squeue), then from accounting (sacct) where the
 /// cluster keeps it. Later submissions win. Errors of the two commands (unknown job ids after
 /// they leave the queue, accounting disabled) leave tasks out rather than failing.
-pub fn task_states(sweep_dir: &Path) -> Result<Vec<(usize, TaskState)>> {
+pub(crate) fn task_states(sweep_dir: &Path) -> Result<Vec<(usize, TaskState)>> {
     let mut out: Vec<(usize, TaskState)> = Vec::new();
     for sub in submissions(sweep_dir)? {
         let mut states = sacct_states(&sub.job_id);
@@ -215,10 +219,12 @@ pub fn task_states(sweep_dir: &Path) -> Result<Vec<(usize, TaskState)>> {
     Ok(out)
 }
 
+/// One array task as Slurm reports it (`squeue`/`sacct`).
 #[derive(Debug, Clone, PartialEq)]
 pub struct TaskState {
     /// `<array job id>_<task>`.
     pub job_id: String,
+    /// Slurm's state name (`PENDING`, `RUNNING`, `COMPLETED`, ...).
     pub state: String,
 }
 
@@ -271,18 +277,18 @@ fn sacct_states(job_id: &str) -> Vec<(usize, String)> {
 }
 
 /// Scheduler states of a task that runs now.
-pub fn is_running(state: &str) -> bool {
+pub(crate) fn is_running(state: &str) -> bool {
     matches!(state, "RUNNING" | "COMPLETING" | "CONFIGURING" | "SIGNALING" | "STAGE_OUT")
 }
 
 /// Scheduler states of a task that will still run or runs now.
-pub fn is_active(state: &str) -> bool {
+pub(crate) fn is_active(state: &str) -> bool {
     is_running(state)
         || matches!(state, "PENDING" | "REQUEUED" | "REQUEUE_HOLD" | "REQUEUE_FED" | "RESIZING" | "SUSPENDED")
 }
 
 /// Scheduler states that end a task without finishing its run.
-pub fn is_failure(state: &str) -> bool {
+pub(crate) fn is_failure(state: &str) -> bool {
     matches!(
         state,
         "FAILED" | "TIMEOUT" | "NODE_FAIL" | "OUT_OF_MEMORY" | "CANCELLED" | "BOOT_FAIL" | "DEADLINE" | "PREEMPTED"
@@ -294,16 +300,23 @@ pub fn is_failure(state: &str) -> bool {
 pub enum Submitted {
     /// The script was written; nothing was submitted (`--dry-run`).
     DryRun {
+        /// The script written.
         script: PathBuf,
+        /// Array task ids it would submit.
         tasks: Vec<usize>,
     },
     /// Every job is finished or already queued.
     Nothing {
+        /// Jobs already finished.
         finished: usize,
+        /// Jobs already queued or running.
         queued: usize,
     },
+    /// An array was submitted.
     Submitted {
+        /// The script submitted.
         script: PathBuf,
+        /// What `sbatch` returned.
         submission: Submission,
     },
 }

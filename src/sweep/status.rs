@@ -9,19 +9,24 @@ use super::{exit_path, log_path, read_plan, Job};
 use crate::train::run_lock::read_lock;
 use crate::train::{run_progress, RunProgress};
 
+/// Where a sweep job stands.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum JobState {
+    /// Reached its budget.
     Finished,
+    /// Running now (its run lock is held).
     Running,
     /// Queued, or not started yet.
     Pending,
     /// Stopped before its budget (a signal, a time limit) with a checkpoint: running the job
     /// again continues it.
     Stopped,
+    /// Exited with an error, or Slurm reports a failed task.
     Failed,
 }
 
 impl JobState {
+    /// The state's name in the status table.
     pub fn label(self) -> &'static str {
         match self {
             JobState::Finished => "finished",
@@ -33,12 +38,18 @@ impl JobState {
     }
 }
 
+/// One job's state, progress and where it runs.
 #[derive(Debug, Clone)]
 pub struct JobStatus {
+    /// The job's name.
     pub name: String,
+    /// Where it stands.
     pub state: JobState,
+    /// Steps done and budget, from its run directory.
     pub progress: Option<RunProgress>,
+    /// The exit code recorded, if it ended.
     pub exit_code: Option<i32>,
+    /// Slurm's view of its array task, for Slurm sweeps.
     pub slurm: Option<TaskState>,
     /// Where the job runs or ran, when another host holds its lock.
     pub host: Option<String>,
@@ -48,7 +59,7 @@ pub struct JobStatus {
 
 /// Decides one job's state. The order matters: a finished run is finished whatever the
 /// scheduler says; the scheduler knows best what still runs or waits; then the local evidence.
-pub fn job_state(
+pub(crate) fn job_state(
     progress: Option<&RunProgress>,
     exit_code: Option<i32>,
     slurm: Option<&str>,

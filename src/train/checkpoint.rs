@@ -18,26 +18,31 @@ use super::seeds::RngState;
 /// Where a run stands, besides the tensors.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct TrainState {
+    /// Environment steps done.
     pub step: u64,
     /// Training episodes started so far (the next one gets this index).
     pub episodes: u64,
     /// True when saved at an episode boundary: resuming then continues exactly.
     pub at_episode_boundary: bool,
+    /// Seconds trained so far, over every stretch.
     pub wall_time: f64,
+    /// The training stream's position.
     pub rng: RngState,
+    /// Each optimiser's update count.
     pub optimizer_steps: HashMap<String, u64>,
+    /// The agent's counters (`Agent::counters`).
     pub counters: HashMap<String, u64>,
 }
 
 /// An exported policy: the actor's tensors only (`train::export_policy`).
-pub const POLICY_FILE: &str = "policy.safetensors";
+pub(crate) const POLICY_FILE: &str = "policy.safetensors";
 
 fn is_actor(name: &str) -> bool {
     name.starts_with("actor.")
 }
 
 /// Writes the actor's tensors (not its target) atomically.
-pub fn save_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
+pub(crate) fn save_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
     let params: HashMap<String, Tensor> =
         agent.parameters().into_iter().filter(|(n, _)| is_actor(n)).map(|(n, v)| (n, v.as_tensor().clone())).collect();
     anyhow::ensure!(!params.is_empty(), "this agent has no actor to export");
@@ -55,7 +60,7 @@ pub fn save_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
 
 /// Loads an exported actor into `agent`, checking every actor tensor's name and shape; the
 /// agent's other networks keep their initial weights (acting does not use them).
-pub fn load_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
+pub(crate) fn load_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
     let tensors = read_tensors(path)?;
     for (name, var) in agent.parameters().into_iter().filter(|(n, _)| is_actor(n)) {
         let t = tensors.get(&name).with_context(|| {
@@ -73,7 +78,7 @@ pub fn load_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
     Ok(())
 }
 
-pub fn checkpoints_dir(run_dir: &Path) -> PathBuf {
+pub(crate) fn checkpoints_dir(run_dir: &Path) -> PathBuf {
     run_dir.join("checkpoints")
 }
 
@@ -139,7 +144,7 @@ fn read_tensors(path: &Path) -> Result<HashMap<String, Tensor>> {
 }
 
 /// Loads network weights into `agent`, checking every name and shape.
-pub fn load_weights(checkpoint: &Path, agent: &dyn Agent) -> Result<()> {
+pub(crate) fn load_weights(checkpoint: &Path, agent: &dyn Agent) -> Result<()> {
     let tensors = read_tensors(&checkpoint.join("model.safetensors"))?;
     let params = agent.parameters();
     if let Some((name, _)) = params.iter().find(|(n, _)| !tensors.contains_key(n)) {
@@ -160,6 +165,7 @@ pub fn load_weights(checkpoint: &Path, agent: &dyn Agent) -> Result<()> {
     Ok(())
 }
 
+/// Reads a checkpoint's `state.toml`.
 pub fn load_state(checkpoint: &Path) -> Result<TrainState> {
     let path = checkpoint.join("state.toml");
     let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
@@ -167,7 +173,7 @@ pub fn load_state(checkpoint: &Path) -> Result<TrainState> {
 }
 
 /// Restores weights, optimiser moments and counters, and returns the saved state and buffer.
-pub fn load_all(checkpoint: &Path, agent: &mut dyn Agent) -> Result<(TrainState, ReplayBuffer)> {
+pub(crate) fn load_all(checkpoint: &Path, agent: &mut dyn Agent) -> Result<(TrainState, ReplayBuffer)> {
     load_weights(checkpoint, agent)?;
     let state = load_state(checkpoint)?;
     let optim = read_tensors(&checkpoint.join("optim.safetensors"))?;

@@ -30,7 +30,7 @@ pub fn build_config(env: &str, algo: Algo, overrides: &[(String, String)]) -> Re
 }
 
 /// Sets `key=value` pairs in a flat table; which keys exist is checked when the table is read.
-pub fn apply_overrides(table: &mut toml::Table, overrides: &[(String, String)]) -> Result<()> {
+pub(crate) fn apply_overrides(table: &mut toml::Table, overrides: &[(String, String)]) -> Result<()> {
     for (key, value) in overrides {
         anyhow::ensure!(key != "algo", "choose the algorithm with --algo, not --set algo=");
         let parsed: toml::Value = format!("v = {value}")

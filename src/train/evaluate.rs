@@ -9,9 +9,12 @@ use crate::rollout::{run_episode, StepView};
 
 use super::seeds::eval_episode_seed;
 
+/// The results of evaluating a policy over some episodes.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Evaluation {
+    /// Each episode's return.
     pub returns: Vec<f64>,
+    /// Each episode's length.
     pub lengths: Vec<usize>,
     /// Mean over episodes of each reward term's episode total.
     pub term_means: Vec<(&'static str, f64)>,
@@ -22,11 +25,11 @@ pub struct Evaluation {
 }
 
 /// An action component this close to its bound (normalised to [-1, 1]) counts as saturated.
-pub const SATURATED: f64 = 0.99;
+pub(crate) const SATURATED: f64 = 0.99;
 
 /// How many components of `action` (in the env's units) sit at their bounds: |a| >= SATURATED
 /// once normalised to [-1, 1] (Humanoid's torques span ±0.4, Minitaur's angles their own range).
-pub fn saturated_components(space: &BoxSpace, action: &[f64]) -> usize {
+pub(crate) fn saturated_components(space: &BoxSpace, action: &[f64]) -> usize {
     action
         .iter()
         .zip(space.low.iter().zip(&space.high))
@@ -35,6 +38,7 @@ pub fn saturated_components(space: &BoxSpace, action: &[f64]) -> usize {
 }
 
 impl Evaluation {
+    /// Mean return.
     pub fn mean(&self) -> f64 {
         self.returns.iter().sum::<f64>() / self.returns.len() as f64
     }

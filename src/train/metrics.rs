@@ -6,19 +6,30 @@ use anyhow::Result;
 use crate::agents::Losses;
 use crate::io::write_atomic;
 
+/// One row of `metrics.csv`: a training episode's end or an evaluation.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct MetricsRow {
     /// `episode` or `eval`.
     pub kind: &'static str,
+    /// Environment steps so far.
     pub step: u64,
+    /// The episode's return (`episode` rows).
     pub episode_return: Option<f64>,
+    /// The episode's length (`episode` rows).
     pub episode_length: Option<u64>,
+    /// Mean evaluation return (`eval` rows).
     pub eval_mean: Option<f64>,
+    /// Std of the evaluation returns (`eval` rows).
     pub eval_std: Option<f64>,
+    /// Latest critic loss.
     pub critic_loss: Option<f64>,
+    /// Latest actor loss.
     pub actor_loss: Option<f64>,
+    /// SAC's temperature.
     pub alpha: Option<f64>,
+    /// Environment steps per second since the previous row.
     pub steps_per_s: f64,
+    /// Seconds since the run started, summed over resumed stretches.
     pub wall_time: f64,
     /// Evaluation rows: share of action components at the bounds (|a| >= 0.99) over every
     /// evaluation step, the sign of a deterministic actor pushed into saturation. Absent in
@@ -48,7 +59,7 @@ impl MetricsRow {
     }
 }
 
-pub const HEADER: [&str; 12] = [
+pub(crate) const HEADER: [&str; 12] = [
     "kind",
     "step",
     "episode_return",
@@ -67,6 +78,7 @@ fn opt<T: ToString>(v: Option<T>) -> String {
     v.map(|x| x.to_string()).unwrap_or_default()
 }
 
+/// Writes the rows to `path` atomically.
 pub fn write(path: &Path, rows: &[MetricsRow]) -> Result<()> {
     write_atomic(path, |w| {
         let mut csv = csv::Writer::from_writer(w);
@@ -92,6 +104,7 @@ pub fn write(path: &Path, rows: &[MetricsRow]) -> Result<()> {
     })
 }
 
+/// Reads the rows of a `metrics.csv`.
 pub fn read(path: &Path) -> Result<Vec<MetricsRow>> {
     let mut rows = Vec::new();
     // Flexible: files from before the eval_saturation column have one field fewer.

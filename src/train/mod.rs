@@ -13,7 +13,7 @@ pub mod provenance;
 mod recording;
 pub mod run_config;
 pub mod run_dir;
-pub mod run_lock;
+pub(crate) mod run_lock;
 pub mod seeds;
 pub mod stop;
 
@@ -46,16 +46,17 @@ pub use run_dir::{
 /// 100k-1M). A run writes its actor at each one it passes, and at its own last step, to
 /// `policies/step-<N>.safetensors`, so a report evaluates every run at the same budget even when
 /// some went further.
-pub const POLICY_BUDGETS: [u64; 3] = [100_000, 300_000, 1_000_000];
-pub const BUDGET_POLICY_DIR: &str = "policies";
+pub(crate) const POLICY_BUDGETS: [u64; 3] = [100_000, 300_000, 1_000_000];
+pub(crate) const BUDGET_POLICY_DIR: &str = "policies";
 
-pub fn budget_policy_path(run_dir: &Path, step: u64) -> PathBuf {
+pub(crate) fn budget_policy_path(run_dir: &Path, step: u64) -> PathBuf {
     run_dir.join(BUDGET_POLICY_DIR).join(format!("step-{step}.safetensors"))
 }
 
 /// How a call to `train`/`resume` ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Outcome {
+    /// Reached its step budget.
     Finished,
     /// Stopped early (a signal, see `stop`, or `stop_after`); `resume` continues it.
     Stopped,
@@ -63,19 +64,27 @@ pub enum Outcome {
     AlreadyFinished,
 }
 
+/// What a call to `train` or `resume` did.
 #[derive(Debug)]
 pub struct RunSummary {
+    /// The run directory.
     pub run_dir: PathBuf,
+    /// How it ended.
     pub outcome: Outcome,
+    /// Environment steps done.
     pub steps: u64,
+    /// The latest evaluation, if any ran.
     pub last_eval: Option<Evaluation>,
+    /// The best evaluation mean so far.
     pub best_eval_mean: Option<f64>,
+    /// The newest checkpoint.
     pub checkpoint: PathBuf,
 }
 
 /// Knobs that do not change what is computed, only when to stop and what to show.
 #[derive(Debug, Clone, Default)]
 pub struct RunControl {
+    /// Show a progress bar.
     pub show_progress: bool,
     /// Stop (with a checkpoint) at the first episode boundary at or after this step.
     pub stop_after: Option<u64>,

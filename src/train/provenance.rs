@@ -21,7 +21,9 @@ pub const FILE: &str = "provenance.csv";
 pub struct Stretch {
     /// The step the stretch starts from (0 for a new run).
     pub from_step: u64,
+    /// The commit the binary was built from.
     pub git_commit: String,
+    /// The crate's version.
     pub crate_version: String,
     /// `model name` from /proc/cpuinfo.
     pub cpu_model: String,
@@ -52,7 +54,7 @@ impl Stretch {
 }
 
 /// The CPU's model name, or "unknown".
-pub fn cpu_model() -> String {
+pub(crate) fn cpu_model() -> String {
     std::fs::read_to_string("/proc/cpuinfo")
         .ok()
         .and_then(|text| {
@@ -65,7 +67,7 @@ pub fn cpu_model() -> String {
 }
 
 /// avx512, avx2 or baseline: which of the exact kernel paths the CPU can run at its widest.
-pub fn simd_level() -> &'static str {
+pub(crate) fn simd_level() -> &'static str {
     match kernel_path::KernelPath::best_exact() {
         kernel_path::KernelPath::Avx512 => "avx512",
         kernel_path::KernelPath::Avx2 => "avx2",
@@ -89,7 +91,7 @@ pub fn read(run_dir: &Path) -> Result<Vec<Stretch>> {
 
 /// Adds `stretch` to `run_dir`'s file, dropping rows that start at or after it (a resume from an
 /// earlier checkpoint recomputes those steps). Written atomically.
-pub fn append(run_dir: &Path, stretch: Stretch) -> Result<()> {
+pub(crate) fn append(run_dir: &Path, stretch: Stretch) -> Result<()> {
     let mut rows: Vec<Stretch> = read(run_dir)?.into_iter().filter(|r| r.from_step < stretch.from_step).collect();
     rows.push(stretch);
     let mut writer = csv::Writer::from_writer(Vec::new());
@@ -101,7 +103,7 @@ pub fn append(run_dir: &Path, stretch: Stretch) -> Result<()> {
 
 /// Why resuming a run whose last stretch is `last` here (`here`) will not continue it bit for bit,
 /// if it will not. `last` is None for a run directory written before this file existed.
-pub fn resume_caveat(last: Option<&Stretch>, here: &Stretch) -> Option<String> {
+pub(crate) fn resume_caveat(last: Option<&Stretch>, here: &Stretch) -> Option<String> {
     let Some(last) = last else {
         return Some(
             "this run predates provenance.csv: it ran on the gemm crate's kernels, so continuing it on the exact ones \

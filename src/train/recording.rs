@@ -12,7 +12,7 @@ use super::metrics::MetricsRow;
 use super::seeds;
 
 /// Logs every value a metrics row carries under `training/`.
-pub fn log_training_row(rec: &RecordingStream, row: &MetricsRow) -> Result<()> {
+pub(crate) fn log_training_row(rec: &RecordingStream, row: &MetricsRow) -> Result<()> {
     rec.reset_time();
     rec.set_time_sequence("train_step", row.step as i64);
     let values = [

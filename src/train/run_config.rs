@@ -18,17 +18,24 @@ use crate::agents::{OtherAlgorithmKeys, TrainConfig};
 use crate::envs::EnvConfig;
 
 /// The format this version writes.
-pub const FORMAT: u32 = 3;
+pub(crate) const FORMAT: u32 = 3;
 
+/// A run's `config.toml`: everything needed to rebuild it.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct RunConfig {
+    /// Version of the run directory format.
     pub format: u32,
+    /// The run's seed.
     pub seed: u64,
+    /// The crate version that started the run.
     pub crate_version: String,
+    /// The commit that started the run, when known.
     pub git_commit: Option<String>,
     /// Checkpoint the weights were initialised from (fine-tuning), if any.
     pub init_from: Option<String>,
+    /// The environment and its options.
     pub env: EnvConfig,
+    /// Every training hyperparameter.
     pub train: TrainConfig,
 }
 
@@ -80,7 +87,7 @@ impl RunConfig {
         })
     }
 
-    pub fn to_toml(&self) -> Result<String> {
+    pub(crate) fn to_toml(&self) -> Result<String> {
         Ok(toml::to_string(self)?)
     }
 }

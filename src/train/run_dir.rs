@@ -15,12 +15,14 @@ use super::{checkpoint, metrics, read_run_config, RunConfig};
 /// How far a run directory has got, from its files alone (no process needed).
 #[derive(Debug, Clone, PartialEq)]
 pub struct RunProgress {
+    /// The run's step budget.
     pub total_steps: u64,
     /// Steps of the newest checkpoint (what a resume starts from).
     pub checkpoint_step: Option<u64>,
     /// Newest step in metrics.csv (written at every evaluation, so ahead of the checkpoint
     /// while a run trains).
     pub metrics_step: Option<u64>,
+    /// The latest evaluation mean.
     pub last_eval: Option<f64>,
 }
 
@@ -34,11 +36,13 @@ impl RunProgress {
         }
     }
 
+    /// The newest step on disk (checkpoint or metrics).
     pub fn step(&self) -> u64 {
         self.checkpoint_step.max(self.metrics_step).unwrap_or(0)
     }
 }
 
+/// Reads a run directory's progress; fails when it has no `config.toml`.
 pub fn run_progress(run_dir: &Path) -> Result<RunProgress> {
     let run = read_run_config(run_dir)?;
     let checkpoint_step =

@@ -9,24 +9,24 @@ use serde::{Deserialize, Serialize};
 
 use crate::io::write_bytes_atomic;
 
-pub const LOCK_FILE: &str = "run.lock";
+pub(crate) const LOCK_FILE: &str = "run.lock";
 
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LockInfo {
-    pub pid: u32,
-    pub host: String,
+pub(crate) struct LockInfo {
+    pub(crate) pid: u32,
+    pub(crate) host: String,
 }
 
 impl LockInfo {
     /// Whether the process that wrote the lock still runs. `None`: it ran on another host,
     /// so this one cannot tell.
-    pub fn alive(&self) -> Option<bool> {
+    pub(crate) fn alive(&self) -> Option<bool> {
         (self.host == hostname()).then(|| Path::new(&format!("/proc/{}", self.pid)).exists())
     }
 }
 
 /// The machine's host name (empty if it cannot be read).
-pub fn hostname() -> String {
+pub(crate) fn hostname() -> String {
     let mut buf = [0u8; 256];
     // SAFETY: the buffer is valid for its length; gethostname NUL-terminates on success.
     let rc = unsafe { libc::gethostname(buf.as_mut_ptr().cast(), buf.len()) };
@@ -38,18 +38,18 @@ pub fn hostname() -> String {
 }
 
 /// The lock of a run directory, if there is one.
-pub fn read_lock(run_dir: &Path) -> Option<LockInfo> {
+pub(crate) fn read_lock(run_dir: &Path) -> Option<LockInfo> {
     toml::from_str(&std::fs::read_to_string(run_dir.join(LOCK_FILE)).ok()?).ok()
 }
 
 /// Held while training; removed when dropped.
 #[derive(Debug)]
-pub struct RunLock {
+pub(crate) struct RunLock {
     path: PathBuf,
 }
 
 /// An error if another live process of this host holds the run directory's lock.
-pub fn refuse_if_running(run_dir: &Path) -> Result<()> {
+pub(crate) fn refuse_if_running(run_dir: &Path) -> Result<()> {
     if let Some(other) = read_lock(run_dir) {
         if other.pid != std::process::id() && other.alive() == Some(true) {
             bail!(
@@ -63,7 +63,7 @@ pub fn refuse_if_running(run_dir: &Path) -> Result<()> {
 }
 
 impl RunLock {
-    pub fn acquire(run_dir: &Path) -> Result<RunLock> {
+    pub(crate) fn acquire(run_dir: &Path) -> Result<RunLock> {
         refuse_if_running(run_dir)?;
         let path = run_dir.join(LOCK_FILE);
         let info = LockInfo { pid: std::process::id(), host: hostname() };

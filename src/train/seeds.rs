@@ -11,50 +11,53 @@ fn mix(mut z: u64) -> u64 {
 }
 
 /// Network initialisation.
-pub fn init_rng(run_seed: u64) -> ChaCha8Rng {
+pub(crate) fn init_rng(run_seed: u64) -> ChaCha8Rng {
     let mut r = ChaCha8Rng::seed_from_u64(run_seed);
     r.set_stream(1);
     r
 }
 
 /// Exploration, warm-up actions, minibatch sampling and the agents' sampling noise.
-pub fn training_rng(run_seed: u64) -> ChaCha8Rng {
+pub(crate) fn training_rng(run_seed: u64) -> ChaCha8Rng {
     let mut r = ChaCha8Rng::seed_from_u64(run_seed);
     r.set_stream(2);
     r
 }
 
 /// Reset seed of training episode `episode`.
-pub fn train_episode_seed(run_seed: u64, episode: u64) -> u64 {
+pub(crate) fn train_episode_seed(run_seed: u64, episode: u64) -> u64 {
     mix(mix(run_seed) ^ episode)
 }
 
 /// Reset seed of evaluation episode `i` (the same for every evaluation of a run).
-pub fn eval_episode_seed(run_seed: u64, i: u64) -> u64 {
+pub(crate) fn eval_episode_seed(run_seed: u64, i: u64) -> u64 {
     mix(mix(run_seed ^ 0xE7A1_0000_0000_0000) ^ i)
 }
 
 /// Reset seed of held-out episode `i` of an evaluation protocol seeded `protocol_seed`: a third
 /// domain, apart from every run's training and evaluation episodes (`evaluation::protocol`
 /// checks that no run's seeds collide with them).
-pub fn held_out_episode_seed(protocol_seed: u64, i: u64) -> u64 {
+pub(crate) fn held_out_episode_seed(protocol_seed: u64, i: u64) -> u64 {
     mix(mix(protocol_seed ^ 0x4E1D_0000_0000_0000) ^ i)
 }
 
 /// A ChaCha8 stream's position, to save and restore it exactly.
 #[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct RngState {
+    /// The ChaCha8 key.
     pub seed: [u8; 32],
+    /// The stream id.
     pub stream: u64,
     /// Word position as a decimal string (u128 does not fit TOML integers).
     pub word_pos: String,
 }
 
 impl RngState {
+    /// Captures `rng`'s position.
     pub fn of(rng: &ChaCha8Rng) -> RngState {
         RngState { seed: rng.get_seed(), stream: rng.get_stream(), word_pos: rng.get_word_pos().to_string() }
     }
-    pub fn restore(&self) -> anyhow::Result<ChaCha8Rng> {
+    pub(crate) fn restore(&self) -> anyhow::Result<ChaCha8Rng> {
         let mut r = ChaCha8Rng::from_seed(self.seed);
         r.set_stream(self.stream);
         r.set_word_pos(self.word_pos.parse::<u128>()?);

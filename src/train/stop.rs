@@ -9,7 +9,7 @@
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, OnceLock};
 
-pub struct StopSignals {
+pub(crate) struct StopSignals {
     now: Arc<AtomicBool>,
     at_episode_end: Arc<AtomicBool>,
 }
@@ -21,13 +21,13 @@ impl StopSignals {
     }
 
     /// Stop at the next episode boundary (SIGUSR1, SIGTERM).
-    pub fn at_episode_end(&self) -> bool {
+    pub(crate) fn at_episode_end(&self) -> bool {
         self.at_episode_end.load(Ordering::SeqCst)
     }
 }
 
 /// The process-wide flags; the handlers are installed on first use.
-pub fn stop_signals() -> &'static StopSignals {
+pub(crate) fn stop_signals() -> &'static StopSignals {
     static SIGNALS: OnceLock<StopSignals> = OnceLock::new();
     SIGNALS.get_or_init(|| {
         let s = StopSignals { now: Arc::new(AtomicBool::new(false)), at_episode_end: Arc::new(AtomicBool::new(false)) };

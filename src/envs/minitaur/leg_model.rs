@@ -3,11 +3,11 @@
 use std::f64::consts::PI;
 
 /// Motor `i` belongs to leg `i / 2`; legs are FL, BL, FR, BR.
-pub const NUM_MOTORS: usize = 8;
-pub const NUM_LEGS: usize = 4;
+pub(crate) const NUM_MOTORS: usize = 8;
+pub(crate) const NUM_LEGS: usize = 4;
 
 /// Sign of the swing term for motor `i`: (-1)^i on the left legs, -(-1)^i on the right legs.
-pub fn swing_sign(motor: usize) -> f64 {
+pub(crate) fn swing_sign(motor: usize) -> f64 {
     let alternating = if motor.is_multiple_of(2) { 1.0 } else { -1.0 };
     if motor < 4 {
         alternating

@@ -18,7 +18,7 @@ use super::simulation::{unstable_step, EnvCore, Simulation};
 use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::{Data, Model};
 
-pub const MODEL_XML: &str = include_str!("../../../models/minitaur.xml");
+pub(crate) const MODEL_XML: &str = include_str!("../../../models/minitaur.xml");
 
 /// How actions are read.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -32,18 +32,25 @@ pub enum ActionMode {
     Torque,
 }
 
+/// PyBullet's `MinitaurBulletEnv-v0` options, with its defaults.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(default, deny_unknown_fields)]
 pub struct MinitaurOptions {
+    /// Weight of the forward distance travelled per step.
     pub distance_weight: f64,
+    /// Weight of the motors' mechanical energy cost.
     pub energy_weight: f64,
+    /// Weight of the sideways drift cost.
     pub drift_weight: f64,
+    /// Weight of the vertical shaking cost.
     pub shake_weight: f64,
+    /// What the action commands: motor angles (PyBullet's default) or torques.
     pub action_mode: ActionMode,
     /// Fallen when the base's up vector has a world-z component below this.
     pub fall_up_threshold: f64,
     /// Fallen when the base is lower than this (m).
     pub fall_height: f64,
+    /// Steps before the episode is truncated.
     pub max_episode_steps: usize,
     /// Physics steps (0.002 s) per control step.
     pub action_repeat: usize,
@@ -56,6 +63,7 @@ pub struct MinitaurOptions {
     pub randomize_dynamics: bool,
     /// Motor PD gains (PWM per rad and per rad/s).
     pub motor_kp: f64,
+    /// Motor damping gain (PWM per rad/s).
     pub motor_kd: f64,
     /// Switch a motor off after 1 s above 2.45 N m, as the real robot does.
     pub overheat_protection: bool,
@@ -84,6 +92,7 @@ impl Default for MinitaurOptions {
 }
 
 impl MinitaurOptions {
+    /// Checks each option's range; the error names the option.
     pub fn validate(&self) -> Result<(), EnvError> {
         let c = Check { env: "minitaur" };
         c.non_negative("distance_weight", self.distance_weight)?;
@@ -108,6 +117,7 @@ struct MotorJoint {
     dof: usize,
 }
 
+/// PyBullet's Minitaur quadruped on MuJoCo, with its motor model, reward and falls.
 pub struct Minitaur {
     opts: MinitaurOptions,
     base_model: Arc<Model>,
@@ -126,6 +136,7 @@ pub struct Minitaur {
 pub const SIM_DT: f64 = 0.002;
 
 impl Minitaur {
+    /// Builds the environment; fails on an invalid option.
     pub fn new(opts: MinitaurOptions) -> Result<Self, EnvError> {
         opts.validate()?;
         let base_model = Arc::new(Model::from_xml_str(MODEL_XML)?);
@@ -175,6 +186,7 @@ impl Minitaur {
         })
     }
 
+    /// The options it was built with.
     pub fn options(&self) -> &MinitaurOptions {
         &self.opts
     }
@@ -184,7 +196,7 @@ impl Minitaur {
         std::array::from_fn(|i| self.core.sim.data.qpos()[self.motors[i].qpos])
     }
 
-    pub fn motor_velocities(&self) -> [f64; NUM_MOTORS] {
+    pub(crate) fn motor_velocities(&self) -> [f64; NUM_MOTORS] {
         std::array::from_fn(|i| self.core.sim.data.qvel()[self.motors[i].dof])
     }
 
@@ -193,6 +205,7 @@ impl Minitaur {
         self.applied_torque
     }
 
+    /// The base's position in world coordinates (m).
     pub fn base_position(&self) -> [f64; 3] {
         let p = &self.core.sim.data.xpos()[3 * self.base_body..];
         [p[0], p[1], p[2]]
@@ -203,7 +216,7 @@ impl Minitaur {
         self.core.sim.data.xmat()[9 * self.base_body + 8]
     }
 
-    pub fn is_fallen(&self) -> bool {
+    pub(crate) fn is_fallen(&self) -> bool {
         self.base_up_z() < self.opts.fall_up_threshold || self.base_position()[2] < self.opts.fall_height
     }
 

@@ -4,15 +4,15 @@
 
 /// Electrical and control parameters of one motor.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct MotorParams {
+pub(crate) struct MotorParams {
     /// PWM per radian of angle error.
     pub kp: f64,
     /// PWM per rad/s of velocity.
-    pub kd: f64,
-    pub voltage: f64,
-    pub resistance: f64,
-    pub torque_constant: f64,
-    pub viscous_damping: f64,
+    pub(crate) kd: f64,
+    pub(crate) voltage: f64,
+    pub(crate) resistance: f64,
+    pub(crate) torque_constant: f64,
+    pub(crate) viscous_damping: f64,
 }
 
 impl Default for MotorParams {
@@ -28,30 +28,30 @@ impl Default for MotorParams {
     }
 }
 
-pub const VOLTAGE_CLIP: f64 = 50.0;
-pub const OBSERVED_TORQUE_LIMIT: f64 = 5.7;
+pub(crate) const VOLTAGE_CLIP: f64 = 50.0;
+pub(crate) const OBSERVED_TORQUE_LIMIT: f64 = 5.7;
 /// Motor current (A) to output torque (N m), measured on the real motor.
 const CURRENT_TABLE: [f64; 7] = [0.0, 10.0, 20.0, 30.0, 40.0, 50.0, 60.0];
 const TORQUE_TABLE: [f64; 7] = [0.0, 1.0, 1.9, 2.45, 3.0, 3.25, 3.5];
 /// The largest torque the curve allows.
-pub const MAX_TORQUE: f64 = 3.5;
+pub(crate) const MAX_TORQUE: f64 = 3.5;
 /// A motor above this torque for `OVERHEAT_SECONDS` is switched off.
-pub const OVERHEAT_TORQUE: f64 = 2.45;
-pub const OVERHEAT_SECONDS: f64 = 1.0;
+pub(crate) const OVERHEAT_TORQUE: f64 = 2.45;
+pub(crate) const OVERHEAT_SECONDS: f64 = 1.0;
 
 impl MotorParams {
     /// Fastest the motor can turn (rad/s): where back-EMF cancels the full battery voltage.
-    pub fn speed_limit(&self) -> f64 {
+    pub(crate) fn speed_limit(&self) -> f64 {
         self.voltage / (self.torque_constant + self.viscous_damping)
     }
 
     /// Duty cycle that tracks a desired angle.
-    pub fn pwm_for_angle(&self, desired: f64, angle: f64, velocity: f64) -> f64 {
+    pub(crate) fn pwm_for_angle(&self, desired: f64, angle: f64, velocity: f64) -> f64 {
         (self.kp * (desired - angle) - self.kd * velocity).clamp(-1.0, 1.0)
     }
 
     /// Duty cycle that would give `torque` at standstill (the torque-command mode).
-    pub fn pwm_for_torque(&self, torque: f64) -> f64 {
+    pub(crate) fn pwm_for_torque(&self, torque: f64) -> f64 {
         (torque * self.resistance / (self.torque_constant * self.voltage)).clamp(-1.0, 1.0)
     }
 
