@@ -1,6 +1,9 @@
 //! Environment steps per second next to bare `mj_step` x frame_skip on the same model, in the
 //! same run. The difference is what the safe layer and the environment logic cost.
 //!
+//! The `vec_env` group steps a vector environment of `COPIES` copies on one thread and on two,
+//! counting env steps, to set beside `env.step` (the ideal on two threads is twice its rate).
+//!
 //! Run: `cargo bench --bench env_step`. Environments run with termination off (where they have
 //! it) and a long time limit so that both sides mostly just step; InvertedPendulum's pole still
 //! falls under random actions, so its env figure includes the resets.
@@ -9,7 +12,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use locobench::envs::{make, model_xml, EnvConfig};
+use locobench::envs::{make, model_xml, EnvConfig, VecEnv};
 use locobench::mujoco::{sys, Data, Model};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -101,5 +104,36 @@ fn bench(c: &mut Criterion) {
     group.finish();
 }
 
-criterion_group!(benches, bench);
+/// Copies in the vector environment benchmark: enough that each thread's block of copies takes far
+/// longer than handing it to a thread.
+const COPIES: usize = 16;
+
+fn bench_vector(c: &mut Criterion) {
+    let mut group = c.benchmark_group("vec_env");
+    group.throughput(Throughput::Elements(COPIES as u64));
+    group.measurement_time(Duration::from_secs(4)).warm_up_time(Duration::from_secs(1)).sample_size(20);
+    for case in CASES.iter().filter(|c| ["half-cheetah", "hopper", "ant"].contains(&c.name)) {
+        let mut pairs: Vec<(String, String)> =
+            case.options.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+        pairs.push(("max_episode_steps".into(), "100000000".into()));
+        let cfg = EnvConfig::new(case.name).with_overrides(&pairs).unwrap();
+        for threads in [1, 2] {
+            let mut env = VecEnv::new(&cfg, COPIES, threads).unwrap();
+            let space = env.spec().action_space.clone();
+            let acts = actions(space.dim(), space.low[0], space.high[0]);
+            env.reset(0).unwrap();
+            let mut i = 0;
+            group.bench_function(format!("{}/{COPIES} copies, {threads} thread(s)", case.name), |b| {
+                b.iter(|| {
+                    i = (i + 1) % acts.len();
+                    let batch: Vec<Vec<f64>> = (0..COPIES).map(|k| acts[(i + k) % acts.len()].clone()).collect();
+                    black_box(env.step(&batch).unwrap());
+                })
+            });
+        }
+    }
+    group.finish();
+}
+
+criterion_group!(benches, bench, bench_vector);
 criterion_main!(benches);

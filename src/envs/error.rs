@@ -35,6 +35,22 @@ pub enum EnvError {
         /// What is wrong, naming the option.
         message: String,
     },
+    /// A vector environment got a different number of actions than it has copies.
+    #[error("got {got} actions for {expected} environment copies")]
+    ActionCount {
+        /// The number of copies.
+        expected: usize,
+        /// The number of actions.
+        got: usize,
+    },
+    /// One copy of a vector environment failed.
+    #[error("environment copy {copy}: {source}")]
+    InCopy {
+        /// The copy's index.
+        copy: usize,
+        /// What went wrong in it.
+        source: Box<EnvError>,
+    },
     /// `step` before the first `reset`.
     #[error("step called before reset")]
     NotReset,

@@ -22,6 +22,7 @@ mod planar_walker;
 mod registry;
 mod simulation;
 mod task;
+mod vector;
 mod walker2d;
 
 pub use ant::{Ant, AntOptions};
@@ -37,6 +38,7 @@ pub use registry::{
 };
 pub use simulation::{Simulation, VelocityNoise};
 pub use task::{Task, TaskStep, Timing};
+pub use vector::{copy_seed, VecEnv, VecStep};
 pub use walker2d::{Walker2d, Walker2dOptions};
 
 use crate::mujoco::Data;
