@@ -1,6 +1,6 @@
 //! The vector environment: shapes, automatic reset, per-copy seeds, the same bits on any thread
-//! count, agreement with stepping the copies one by one, and errors for bad input.
-use locobench::envs::{copy_seed, make, EnvConfig, EnvError, VecEnv};
+//! count, agreement with stepping the copies one by one, exact snapshots, and errors for bad input.
+use locobench::envs::{episode_seed, make, EnvConfig, EnvError, VecEnv};
 
 /// A deterministic action sequence that differs between copies.
 fn action(t: usize, copy: usize, dim: usize) -> Vec<f64> {
@@ -51,17 +51,17 @@ fn same_bits_on_any_thread_count() {
 
 #[test]
 fn each_copy_is_the_single_env_it_stands_for() {
-    // Copy i of a vector env is a plain env reset with copy_seed(seed, i), reset again (with its
-    // own stream continued) whenever its episode ends.
+    // Copy i of a vector env is a plain env reset with episode_seed(seed, i, k) for its k-th
+    // episode.
     let (copies, steps, seed) = (3, 150, 11);
     let config = EnvConfig::new("hopper");
     let mut vector = VecEnv::new(&config, copies, 2).unwrap();
     let first = vector.reset(seed).unwrap();
     let mut singles: Vec<_> = (0..copies).map(|_| make(&config).unwrap()).collect();
     for (i, env) in singles.iter_mut().enumerate() {
-        assert_eq!(env.reset(Some(copy_seed(seed, i))).unwrap().0, first[i]);
+        assert_eq!(env.reset(Some(episode_seed(seed, i, 0))).unwrap().0, first[i]);
     }
-    let mut resets = 0;
+    let mut episodes = vec![1u64; copies];
     for t in 0..steps {
         let actions: Vec<Vec<f64>> = (0..copies).map(|c| action(t, c, 3)).collect();
         let v = vector.step(&actions).unwrap();
@@ -70,23 +70,24 @@ fn each_copy_is_the_single_env_it_stands_for() {
             assert_eq!(v.rewards[i], s.reward);
             assert_eq!((v.terminated[i], v.truncated[i]), (s.terminated, s.truncated));
             if s.done() {
-                resets += 1;
                 assert_eq!(v.final_observations[i].as_ref(), Some(&s.observation));
-                assert_eq!(v.observations[i], env.reset(None).unwrap().0);
+                assert_eq!(v.observations[i], env.reset(Some(episode_seed(seed, i, episodes[i]))).unwrap().0);
+                episodes[i] += 1;
             } else {
                 assert_eq!(v.final_observations[i], None);
                 assert_eq!(v.observations[i], s.observation);
             }
         }
     }
-    assert!(resets > 0, "the test must cover automatic resets");
+    assert!(episodes.iter().any(|&k| k > 1), "the test must cover automatic resets");
 }
 
 #[test]
 fn copies_get_distinct_seeds() {
-    let seeds: std::collections::BTreeSet<u64> =
-        (0..4).flat_map(|seed| (0..64).map(move |copy| copy_seed(seed, copy))).collect();
-    assert_eq!(seeds.len(), 4 * 64);
+    let seeds: std::collections::BTreeSet<u64> = (0..4)
+        .flat_map(|seed| (0..16).flat_map(move |copy| (0..16).map(move |k| episode_seed(seed, copy, k))))
+        .collect();
+    assert_eq!(seeds.len(), 4 * 16 * 16);
     let mut env = VecEnv::new(&EnvConfig::new("ant"), 2, 1).unwrap();
     let obs = env.reset(0).unwrap();
     assert_ne!(obs[0], obs[1], "reset noise differs between copies");
@@ -109,4 +110,47 @@ fn bad_input_is_refused_with_a_clear_error() {
     assert!(nan.to_string().starts_with("environment copy 1: "), "{nan}");
     let long = env.step(&[vec![0.0, 1.0], vec![0.0]]).expect_err("wrong length");
     assert!(matches!(long, EnvError::InCopy { copy: 0, .. }), "{long}");
+}
+
+#[test]
+fn a_snapshot_mid_episode_restores_every_copy_exactly() {
+    for name in ["hopper", "minitaur"] {
+        let config = EnvConfig::new(name);
+        let mut env = VecEnv::new(&config, 3, 2).unwrap();
+        let dim = env.spec().action_space.dim();
+        let batch = |t: usize| -> Vec<Vec<f64>> { (0..3).map(|c| action(t, c, dim)).collect() };
+        env.reset(5).unwrap();
+        for t in 0..90 {
+            env.step(&batch(t)).unwrap();
+        }
+        let snapshot = env.snapshot();
+        assert!(snapshot.actions.iter().any(|a| !a.is_empty()), "{name}: taken mid-episode");
+        let go_on = |env: &mut VecEnv| -> Vec<u64> {
+            (90..150)
+                .flat_map(|t| {
+                    let s = env.step(&batch(t)).unwrap();
+                    s.observations.concat().into_iter().chain(s.rewards).map(f64::to_bits).collect::<Vec<_>>()
+                })
+                .collect()
+        };
+        let expected = go_on(&mut env);
+        // A fresh vector env, on another thread count, restored from the snapshot.
+        let mut restored = VecEnv::new(&config, 3, 1).unwrap();
+        restored.restore(&snapshot).unwrap();
+        assert_eq!(restored.snapshot(), snapshot, "{name}");
+        assert!(go_on(&mut restored) == expected, "{name}: the restored copies continue bit for bit");
+    }
+}
+
+#[test]
+fn a_snapshot_that_does_not_fit_is_refused() {
+    let mut env = VecEnv::new(&EnvConfig::new("hopper"), 2, 1).unwrap();
+    env.reset(0).unwrap();
+    env.step(&[vec![0.1; 3], vec![0.2; 3]]).unwrap();
+    let snapshot = env.snapshot();
+    let mut three = VecEnv::new(&EnvConfig::new("hopper"), 3, 1).unwrap();
+    assert!(matches!(three.restore(&snapshot), Err(EnvError::ActionCount { expected: 3, got: 2 })));
+    let mut ant = VecEnv::new(&EnvConfig::new("ant"), 2, 1).unwrap();
+    let err = ant.restore(&snapshot).expect_err("hopper's 3-dim actions do not fit ant");
+    assert!(err.to_string().contains("partial action"), "{err}");
 }

@@ -6,23 +6,41 @@
 //! keeps the last observation of the ended episode in [`VecStep::final_observations`], so a
 //! learner can bootstrap through a truncation.
 //!
-//! Seeds: `reset(seed)` seeds copy `i` with [`copy_seed`]`(seed, i)`; later episodes of a copy
-//! continue that copy's own random stream. Each copy is a function of its own seed and actions
-//! alone, and the copies are split over threads in contiguous blocks, so the numbers are the
-//! same bit for bit whatever the thread count (tested in `tests/vector_env.rs`).
+//! Seeds: episode `k` of copy `i` after `reset(seed)` is reset with [`episode_seed`]`(seed, i, k)`.
+//! Each copy is a function of its own seeds and actions alone, and the copies are split over
+//! threads in contiguous blocks, so the numbers are the same bit for bit whatever the thread
+//! count (tested in `tests/vector_env.rs`).
+//!
+//! Snapshots: every copy keeps the actions of its episode in progress, so [`VecEnv::snapshot`] is
+//! a few numbers per copy plus those actions, and [`VecEnv::restore`] rebuilds every copy's exact
+//! state by resetting it with the same seed and replaying them. A training checkpoint taken in the
+//! middle of episodes thus resumes bit for bit, for every environment, without reading MuJoCo's
+//! state or an environment's internals.
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::{make, Env, EnvConfig, EnvError, EnvSpec, Info};
 use crate::numeric::denormals::{float_mode, set_float_mode};
 
-/// The reset seed of copy `copy` for a vector reset with `seed`: distinct copies and distinct
-/// seeds get unrelated streams (not `seed + copy`, which would make copy 1 of seed 0 replay
-/// copy 0 of seed 1).
-pub fn copy_seed(seed: u64, copy: usize) -> u64 {
+/// The reset seed of episode `episode` of copy `copy` after a vector reset with `seed`: one ChaCha8
+/// stream per copy, one word pair per episode, so distinct copies and seeds get unrelated seeds
+/// (not `seed + copy`, which would make copy 1 of seed 0 replay copy 0 of seed 1).
+pub fn episode_seed(seed: u64, copy: usize, episode: u64) -> u64 {
     let mut rng = ChaCha8Rng::seed_from_u64(seed);
     rng.set_stream(copy as u64);
+    rng.set_word_pos(2 * episode as u128);
     rng.next_u64()
+}
+
+/// Where a vector environment stands: enough to rebuild every copy's state exactly.
+#[derive(Debug, Clone, PartialEq)]
+pub struct VecEnvSnapshot {
+    /// The seed of the last `reset`.
+    pub seed: u64,
+    /// Per copy: episodes started since that reset.
+    pub episodes: Vec<u64>,
+    /// Per copy: the actions of its episode in progress, one after another.
+    pub actions: Vec<Vec<f64>>,
 }
 
 /// What one vector step returned, one entry per copy.
@@ -53,11 +71,30 @@ struct CopyStep {
     info: Info,
 }
 
+/// One copy and its bookkeeping.
+struct Copy {
+    env: Box<dyn Env>,
+    /// Episodes started since the last vector reset.
+    episodes: u64,
+    /// The actions of the episode in progress, one after another.
+    actions: Vec<f64>,
+}
+
+impl Copy {
+    fn start_episode(&mut self, seed: u64, index: usize) -> Result<Vec<f64>, EnvError> {
+        let (obs, _) = self.env.reset(Some(episode_seed(seed, index, self.episodes)))?;
+        self.episodes += 1;
+        self.actions.clear();
+        Ok(obs)
+    }
+}
+
 /// N copies of one environment, stepped across threads.
 pub struct VecEnv {
-    envs: Vec<Box<dyn Env>>,
+    copies: Vec<Copy>,
     spec: EnvSpec,
     threads: usize,
+    seed: u64,
 }
 
 impl VecEnv {
@@ -69,19 +106,21 @@ impl VecEnv {
                 message: "a vector environment needs at least one copy".into(),
             });
         }
-        let envs = (0..copies).map(|_| make(config)).collect::<Result<Vec<_>, _>>()?;
-        let spec = envs[0].spec().clone();
-        Ok(VecEnv { envs, spec, threads: threads.max(1) })
+        let copies = (0..copies)
+            .map(|_| make(config).map(|env| Copy { env, episodes: 0, actions: Vec::new() }))
+            .collect::<Result<Vec<_>, _>>()?;
+        let spec = copies[0].env.spec().clone();
+        Ok(VecEnv { copies, spec, threads: threads.max(1), seed: 0 })
     }
 
     /// Number of copies.
     pub fn len(&self) -> usize {
-        self.envs.len()
+        self.copies.len()
     }
 
     /// Always false: a vector environment has at least one copy.
     pub fn is_empty(&self) -> bool {
-        self.envs.is_empty()
+        self.copies.is_empty()
     }
 
     /// The spec every copy shares.
@@ -94,10 +133,63 @@ impl VecEnv {
         self.threads = threads.max(1);
     }
 
-    /// Starts an episode in every copy, copy `i` seeded with `copy_seed(seed, i)`; returns the
-    /// first observations.
+    /// Starts an episode in every copy, copy `i` seeded with `episode_seed(seed, i, 0)`; returns
+    /// the first observations.
     pub fn reset(&mut self, seed: u64) -> Result<Vec<Vec<f64>>, EnvError> {
-        let results = self.run(|i, env| env.reset(Some(copy_seed(seed, i))).map(|(obs, _)| obs));
+        self.seed = seed;
+        let results = self.run(|i, copy| {
+            copy.episodes = 0;
+            copy.start_episode(seed, i)
+        });
+        results.into_iter().enumerate().map(|(i, r)| r.map_err(|e| in_copy(i, e))).collect()
+    }
+
+    /// Where every copy stands (see the module docs).
+    pub fn snapshot(&self) -> VecEnvSnapshot {
+        VecEnvSnapshot {
+            seed: self.seed,
+            episodes: self.copies.iter().map(|c| c.episodes).collect(),
+            actions: self.copies.iter().map(|c| c.actions.clone()).collect(),
+        }
+    }
+
+    /// Puts every copy back where `snapshot` found it, by resetting it with the same seed and
+    /// replaying its episode's actions; returns the observations to act on next. Fails when the
+    /// snapshot does not fit these copies (count, action length) or its replay ends an episode.
+    pub fn restore(&mut self, snapshot: &VecEnvSnapshot) -> Result<Vec<Vec<f64>>, EnvError> {
+        let dim = self.spec.action_space.dim();
+        let n = self.copies.len();
+        if snapshot.episodes.len() != n || snapshot.actions.len() != n {
+            return Err(EnvError::ActionCount { expected: n, got: snapshot.episodes.len() });
+        }
+        if let Some(i) = (0..n).find(|&i| snapshot.episodes[i] == 0 || !snapshot.actions[i].len().is_multiple_of(dim)) {
+            return Err(in_copy(
+                i,
+                EnvError::InvalidOption {
+                    env: self.spec.name.to_string(),
+                    message: "the snapshot has no episode in progress or a partial action".into(),
+                },
+            ));
+        }
+        self.seed = snapshot.seed;
+        let results = self.run(|i, copy| {
+            copy.episodes = snapshot.episodes[i] - 1;
+            let mut obs = copy.start_episode(snapshot.seed, i)?;
+            for action in snapshot.actions[i].chunks(dim) {
+                let s = copy.env.step(action)?;
+                if s.done() {
+                    return Err(EnvError::InvalidOption {
+                        env: copy.env.spec().name.to_string(),
+                        message: "replaying the snapshot ended the episode: it was taken with another \
+                                  environment or build"
+                            .into(),
+                    });
+                }
+                obs = s.observation;
+            }
+            copy.actions.extend_from_slice(&snapshot.actions[i]);
+            Ok(obs)
+        });
         results.into_iter().enumerate().map(|(i, r)| r.map_err(|e| in_copy(i, e))).collect()
     }
 
@@ -105,8 +197,8 @@ impl VecEnv {
     /// episode ended. Every action's length and finiteness is checked before any copy steps, so a
     /// bad action leaves every copy where it was.
     pub fn step(&mut self, actions: &[Vec<f64>]) -> Result<VecStep, EnvError> {
-        if actions.len() != self.envs.len() {
-            return Err(EnvError::ActionCount { expected: self.envs.len(), got: actions.len() });
+        if actions.len() != self.copies.len() {
+            return Err(EnvError::ActionCount { expected: self.copies.len(), got: actions.len() });
         }
         let dim = self.spec.action_space.dim();
         for (i, a) in actions.iter().enumerate() {
@@ -117,7 +209,8 @@ impl VecEnv {
                 return Err(in_copy(i, EnvError::NonFiniteAction { index, value: a[index] }));
             }
         }
-        let results = self.run(|i, env| step_copy(env, &actions[i]));
+        let seed = self.seed;
+        let results = self.run(|i, copy| step_copy(copy, &actions[i], seed, i));
         let mut out = VecStep::default();
         for (i, r) in results.into_iter().enumerate() {
             let s = r.map_err(|e| in_copy(i, e))?;
@@ -131,36 +224,36 @@ impl VecEnv {
         Ok(out)
     }
 
-    /// The copies themselves (to read their simulation state).
-    pub fn envs(&self) -> &[Box<dyn Env>] {
-        &self.envs
+    /// Copy `i` itself (to read its simulation state).
+    pub fn env(&self, i: usize) -> &dyn Env {
+        self.copies[i].env.as_ref()
     }
 
     /// `f` on every copy, results in copy order. Copies are split into `threads` contiguous
     /// blocks; worker threads take the caller's floating-point mode (flush-to-zero), so a copy
     /// computes the same bits on any thread.
-    fn run<R: Send>(&mut self, f: impl Fn(usize, &mut dyn Env) -> R + Sync) -> Vec<R> {
-        let n = self.envs.len();
+    fn run<R: Send>(&mut self, f: impl Fn(usize, &mut Copy) -> R + Sync) -> Vec<R> {
+        let n = self.copies.len();
         let threads = self.threads.min(n);
         if threads == 1 {
-            return self.envs.iter_mut().enumerate().map(|(i, e)| f(i, e.as_mut())).collect();
+            return self.copies.iter_mut().enumerate().map(|(i, c)| f(i, c)).collect();
         }
         let block = n.div_ceil(threads);
         let mode = float_mode();
         let f = &f;
         std::thread::scope(|scope| {
-            let mut blocks = self.envs.chunks_mut(block).enumerate();
+            let mut blocks = self.copies.chunks_mut(block).enumerate();
             // The caller steps the first block itself instead of waiting idle.
             let (_, first) = blocks.next().expect("at least one copy");
             let handles: Vec<_> = blocks
-                .map(|(b, envs)| {
+                .map(|(b, copies)| {
                     scope.spawn(move || {
                         set_float_mode(mode);
-                        envs.iter_mut().enumerate().map(|(j, e)| f(b * block + j, e.as_mut())).collect::<Vec<R>>()
+                        copies.iter_mut().enumerate().map(|(j, c)| f(b * block + j, c)).collect::<Vec<R>>()
                     })
                 })
                 .collect();
-            let mut out: Vec<R> = first.iter_mut().enumerate().map(|(j, e)| f(j, e.as_mut())).collect();
+            let mut out: Vec<R> = first.iter_mut().enumerate().map(|(j, c)| f(j, c)).collect();
             for h in handles {
                 out.extend(h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
             }
@@ -169,14 +262,11 @@ impl VecEnv {
     }
 }
 
-fn step_copy(env: &mut dyn Env, action: &[f64]) -> Result<CopyStep, EnvError> {
-    let step = env.step(action)?;
-    let (observation, final_observation) = if step.done() {
-        let (first, _) = env.reset(None)?;
-        (first, Some(step.observation))
-    } else {
-        (step.observation, None)
-    };
+fn step_copy(copy: &mut Copy, action: &[f64], seed: u64, index: usize) -> Result<CopyStep, EnvError> {
+    let step = copy.env.step(action)?;
+    copy.actions.extend_from_slice(action);
+    let (observation, final_observation) =
+        if step.done() { (copy.start_episode(seed, index)?, Some(step.observation)) } else { (step.observation, None) };
     Ok(CopyStep {
         observation,
         reward: step.reward,
