@@ -1,5 +1,7 @@
 //! One gradient update at HalfCheetah sizes (17-dim observation, 6-dim action, batch 256) for
-//! each algorithm, single-observation policy inference, and replay-buffer sampling.
+//! each off-policy algorithm, one PPO minibatch update (64-64 tanh networks, minibatch 64: CleanRL's
+//! 2048-step rollout in 32 minibatches), single-observation policy inference, and replay-buffer
+//! sampling.
 //!
 //! Run: `cargo bench --bench agents`. Networks as in the throughput comparison: TD3 and DDPG
 //! 400-300, SAC 256-256. candle runs on one thread (see .cargo/config.toml); updates are timed
@@ -9,7 +11,8 @@ use std::hint::black_box;
 use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
-use locobench::agents::{make_agent, Algo, Batch, ReplayBuffer, TrainConfig};
+use locobench::agents::ppo::PpoBatch;
+use locobench::agents::{make_agent, Agent, Algo, Batch, PpoAgent, ReplayBuffer, TrainConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -58,6 +61,25 @@ fn bench(c: &mut Criterion) {
             b.iter(|| black_box(agent.act(black_box(&obs)).unwrap()))
         });
     }
+    // PPO: one minibatch of a rollout collected by the policy itself.
+    let cfg = TrainConfig::defaults(Algo::Ppo);
+    let mut ppo = PpoAgent::new(&cfg, OBS, ACT, &mut rng).unwrap();
+    let minibatch = cfg.ppo().rollout_size() / cfg.ppo().num_minibatches;
+    let obs: Vec<f32> = (0..minibatch * OBS).map(|_| rng.random_range(-1.0..1.0)).collect();
+    let step = ppo.policy_step(&obs, &mut rng).unwrap();
+    let batch = PpoBatch {
+        obs,
+        actions: step.actions,
+        log_probs: step.log_probs,
+        advantages: (0..minibatch).map(|_| rng.random_range(-1.0..1.0)).collect(),
+        returns: (0..minibatch).map(|_| rng.random_range(-1.0..1.0)).collect(),
+        values: step.values,
+    };
+    group.bench_function(format!("ppo/update 64-64 minibatch {minibatch}"), |b| {
+        b.iter(|| black_box(ppo.learn(&batch).unwrap()))
+    });
+    let one: Vec<f32> = (0..OBS).map(|i| (i as f32 * 0.1).sin()).collect();
+    group.bench_function("ppo/act one observation 64-64", |b| b.iter(|| black_box(ppo.act(black_box(&one)).unwrap())));
     let mut batch = Batch::new(BATCH, OBS, ACT);
     group.bench_function(format!("buffer/sample batch {BATCH}"), |b| b.iter(|| buf.sample_into(&mut batch, &mut rng)));
     group.finish();

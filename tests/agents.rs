@@ -57,6 +57,12 @@ fn ddpg_learns_inverted_pendulum() {
     learns(Algo::Ddpg);
 }
 
+/// Three force levels per joint (-3, 0, 3 N on the cart): bang-bang control balances the pole.
+#[test]
+fn branching_dqn_learns_inverted_pendulum() {
+    learns(Algo::Dqn);
+}
+
 #[test]
 fn td3_critic_target_on_a_hand_built_batch() {
     let mut cfg = TrainConfig::defaults(Algo::Td3);

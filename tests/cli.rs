@@ -218,7 +218,7 @@ fn train_rejects_bad_arguments() {
     let o = dir.path().join("x");
     let o = o.to_str().unwrap();
     let cases: [(&[&str], &str); 6] = [
-        (&["train", "--env", "ant", "--algo", "ppo", "--out", o], "unknown algorithm 'ppo'"),
+        (&["train", "--env", "ant", "--algo", "a2c", "--out", o], "unknown algorithm 'a2c'"),
         (&["train", "--env", "hoppr", "--algo", "td3", "--out", o], "unknown environment 'hoppr'"),
         (&["train", "--env", "ant", "--algo", "td3", "--set", "tau=7", "--out", o], "tau"),
         (&["train", "--env", "ant", "--algo", "td3", "--reward", "wobble=1", "--out", o], "wobble"),

@@ -23,14 +23,23 @@ fn exact_paths() -> Vec<KernelPath> {
 /// 2,500 steps: 2,200 updates. Hidden sizes that leave partial vectors on both widths (40 = 2.5
 /// AVX-512 vectors, 5 AVX2 vectors; 24 = 1.5 and 3), and a batch that splits over two threads.
 fn config(algo: Algo) -> TrainConfig {
-    let set = "total_steps=2500,warmup_steps=300,learning_starts=300,eval_every=1000,checkpoint_every=600,eval_episodes=2,hidden=[40,24],batch_size=64";
+    let set = if algo.is_on_policy() {
+        // 2,560 steps: 5 rollouts of 2 x 256, 4 epochs of 8 minibatches each.
+        "total_steps=2500,eval_every=1000,checkpoint_every=600,eval_episodes=2,hidden=[40,24],num_envs=2,num_steps=256,\
+         num_minibatches=8,update_epochs=4"
+    } else {
+        "total_steps=2500,warmup_steps=300,learning_starts=300,eval_every=1000,checkpoint_every=600,eval_episodes=2,\
+         hidden=[40,24],batch_size=64"
+    };
     build_config("inverted-pendulum", algo, &split_pairs(set).unwrap()).unwrap()
 }
 
 /// Everything a run computes, without wall times: the checkpoint's weights, optimiser state and
-/// replay buffer as bytes, and metrics.csv without its timing columns.
+/// replay buffer (PPO: rollout state) as bytes, and metrics.csv without its timing columns.
 fn fingerprint(run: &Path, checkpoint: &Path) -> Vec<Vec<u8>> {
-    let mut out: Vec<Vec<u8>> = ["model.safetensors", "optim.safetensors", "buffer.safetensors"]
+    let trainer_file =
+        if checkpoint.join("rollout.safetensors").exists() { "rollout.safetensors" } else { "buffer.safetensors" };
+    let mut out: Vec<Vec<u8>> = ["model.safetensors", "optim.safetensors", trainer_file]
         .iter()
         .map(|f| std::fs::read(checkpoint.join(f)).unwrap())
         .collect();
@@ -55,7 +64,7 @@ fn every_exact_kernel_path_trains_the_same_run_bit_for_bit() {
     let paths = exact_paths();
     eprintln!("exact paths on this CPU: {paths:?}");
     let dir = tempfile::tempdir().unwrap();
-    for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg] {
+    for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg, Algo::Ppo] {
         let runs: Vec<(KernelPath, Vec<Vec<u8>>)> = paths
             .iter()
             .map(|&path| {
@@ -89,7 +98,7 @@ fn a_run_resumed_on_another_kernel_path_continues_exactly() {
     let paths = exact_paths();
     let (first, second) = (paths[0], *paths.last().unwrap());
     let dir = tempfile::tempdir().unwrap();
-    for algo in [Algo::Td3, Algo::Sac] {
+    for algo in [Algo::Td3, Algo::Sac, Algo::Ppo] {
         let whole = dir.path().join(format!("{}-whole", algo.name()));
         let a = train_on(second, algo, &whole, &RunControl::default());
 

@@ -167,8 +167,8 @@ fn sweep_and_report_reject_bad_input() {
     let dir = tempfile::tempdir().unwrap();
     let s = dir.path().join("s");
     let s = s.to_str().unwrap();
-    let (ok, _, err) = locobench(&["sweep", "--env", "minitaur", "--algo", "ppo", "--out", s]);
-    assert!(!ok && err.contains("ppo"), "{err}");
+    let (ok, _, err) = locobench(&["sweep", "--env", "minitaur", "--algo", "a2c", "--out", s]);
+    assert!(!ok && err.contains("a2c"), "{err}");
     let (ok, _, err) = locobench(&["sweep", "--env", "nope", "--algo", "sac", "--out", s]);
     assert!(!ok && err.contains("nope"), "{err}");
     let (ok, _, err) =

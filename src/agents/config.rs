@@ -13,6 +13,10 @@ pub enum Algo {
     Sac,
     /// Deep Deterministic Policy Gradient (Lillicrap et al., 2016).
     Ddpg,
+    /// Proximal Policy Optimization (Schulman et al., 2017), on vector environments.
+    Ppo,
+    /// Action-branching DQN over discretised joint actions (Tavakoli et al., 2018).
+    Dqn,
 }
 
 impl Algo {
@@ -23,9 +27,13 @@ impl Algo {
             anyhow::anyhow!("unknown algorithm '{name}'; known algorithms: {}", known.join(", "))
         })
     }
-    /// The registered name (`td3`, `sac`, `ddpg`).
+    /// The registered name (`td3`, `sac`, `ddpg`, `ppo`, `dqn`).
     pub fn name(self) -> &'static str {
         super::registry::entry(self).name
+    }
+    /// Whether it learns from its own fresh rollouts (PPO) rather than from a replay buffer.
+    pub fn is_on_policy(self) -> bool {
+        self == Algo::Ppo
     }
 }
 
@@ -119,6 +127,12 @@ pub struct TrainConfig {
     /// SAC's own settings (present exactly when `algo` is SAC).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sac: Option<SacConfig>,
+    /// PPO's own settings (present exactly when `algo` is PPO).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub ppo: Option<PpoConfig>,
+    /// The branching DQN's own settings (present exactly when `algo` is DQN).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dqn: Option<DqnConfig>,
 }
 
 /// TD3's and DDPG's own settings.
@@ -193,6 +207,98 @@ impl SacConfig {
         "value_lr",
         "tanh_correction",
     ];
+}
+
+/// PPO's own settings; the defaults are CleanRL's `ppo_continuous_action.py`. PPO reads these
+/// shared settings too: `total_steps`, `hidden`, `gamma`, `actor_lr` and `critic_lr` (its one
+/// learning rate, for the policy and the value network), `normalize_observations` (running
+/// statistics, updated at every step), `reward_scale`, `eval_every`, `eval_episodes` and
+/// `checkpoint_every`; the replay and target-network settings do not apply.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PpoConfig {
+    /// Environment copies stepped together.
+    pub num_envs: usize,
+    /// Steps per copy in each rollout.
+    pub num_steps: usize,
+    /// Minibatches each rollout is split into.
+    pub num_minibatches: usize,
+    /// Passes over each rollout.
+    pub update_epochs: usize,
+    /// GAE's lambda.
+    pub gae_lambda: f64,
+    /// The surrogate objective's clip range (and the value clip's).
+    pub clip_coef: f64,
+    /// Clip the value loss around the collected values.
+    pub clip_vloss: bool,
+    /// Normalise advantages per minibatch.
+    pub norm_adv: bool,
+    /// Weight of the entropy bonus.
+    pub ent_coef: f64,
+    /// Weight of the value loss.
+    pub vf_coef: f64,
+    /// Global gradient-norm limit.
+    pub max_grad_norm: f64,
+    /// Decay the learning rates linearly to 0 over the run.
+    pub anneal_lr: bool,
+    /// Divide rewards by the running std of the discounted return (gymnasium's `NormalizeReward`).
+    pub normalize_rewards: bool,
+    /// Normalised observations are clipped to this magnitude.
+    pub clip_observations: f64,
+    /// Normalised rewards are clipped to this magnitude.
+    pub clip_rewards: f64,
+    /// Stop a rollout's epochs once the approximate KL exceeds this; absent means never.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_kl: Option<f64>,
+    /// Adam's epsilon.
+    pub adam_eps: f64,
+}
+
+impl PpoConfig {
+    pub(crate) const KEYS: &'static [&'static str] = &[
+        "num_envs",
+        "num_steps",
+        "num_minibatches",
+        "update_epochs",
+        "gae_lambda",
+        "clip_coef",
+        "clip_vloss",
+        "norm_adv",
+        "ent_coef",
+        "vf_coef",
+        "max_grad_norm",
+        "anneal_lr",
+        "normalize_rewards",
+        "clip_observations",
+        "clip_rewards",
+        "target_kl",
+        "adam_eps",
+    ];
+
+    /// Transitions per rollout.
+    pub fn rollout_size(&self) -> usize {
+        self.num_envs * self.num_steps
+    }
+}
+
+/// The action-branching DQN's own settings. It reads the shared `critic_lr` (its one network's
+/// learning rate), `tau` (the target network's Polyak coefficient), `batch_size`, the buffer and
+/// `learning_starts`; `warmup_steps` must be 0 (epsilon-greedy exploration starts at random).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DqnConfig {
+    /// Evenly spaced values each action dimension is discretised into, bounds included.
+    pub levels: usize,
+    /// Exploration rate at the start.
+    pub epsilon_start: f64,
+    /// Exploration rate after `exploration_steps`, and from then on.
+    pub epsilon_end: f64,
+    /// Exploratory steps over which epsilon decays linearly.
+    pub exploration_steps: u64,
+}
+
+impl DqnConfig {
+    pub(crate) const KEYS: &'static [&'static str] = &["levels", "epsilon_start", "epsilon_end", "exploration_steps"];
 }
 
 /// How [`TrainConfig::from_table`] treats a key of another algorithm's section.
@@ -282,6 +388,16 @@ impl TrainConfig {
         self.sac.as_ref().expect("a SAC config")
     }
 
+    /// PPO's section. Panics for another algorithm.
+    pub fn ppo(&self) -> &PpoConfig {
+        self.ppo.as_ref().expect("a PPO config")
+    }
+
+    /// The branching DQN's section. Panics for another algorithm.
+    pub fn dqn(&self) -> &DqnConfig {
+        self.dqn.as_ref().expect("a DQN config")
+    }
+
     /// The defaults each algorithm was published with (sources in docs/references.md), from its
     /// registry entry.
     pub fn defaults(algo: Algo) -> TrainConfig {
@@ -312,6 +428,8 @@ impl TrainConfig {
             td3: None,
             ddpg: None,
             sac: None,
+            ppo: None,
+            dqn: None,
         }
     }
 
@@ -363,13 +481,71 @@ impl TrainConfig {
         }
     }
 
+    /// CleanRL's `ppo_continuous_action.py` (vwxyzjn/cleanrl): 64-64 tanh networks, Adam 3e-4
+    /// (eps 1e-5) annealed, one copy, 2048-step rollouts in 32 minibatches for 10 epochs.
+    pub(crate) fn ppo_defaults() -> TrainConfig {
+        TrainConfig {
+            warmup_steps: 0,
+            learning_starts: 0,
+            batch_size: 64,
+            buffer_capacity: 1,
+            hidden: vec![64, 64],
+            normalize_observations: true,
+            weight_init: WeightInit::Orthogonal,
+            actor_lr: 3e-4,
+            critic_lr: 3e-4,
+            eval_every: 10_000,
+            ppo: Some(PpoConfig {
+                num_envs: 1,
+                num_steps: 2048,
+                num_minibatches: 32,
+                update_epochs: 10,
+                gae_lambda: 0.95,
+                clip_coef: 0.2,
+                clip_vloss: true,
+                norm_adv: true,
+                ent_coef: 0.0,
+                vf_coef: 0.5,
+                max_grad_norm: 0.5,
+                anneal_lr: true,
+                normalize_rewards: true,
+                clip_observations: 10.0,
+                clip_rewards: 10.0,
+                target_kl: None,
+                adam_eps: 1e-5,
+            }),
+            ..TrainConfig::shared_defaults(Algo::Ppo)
+        }
+    }
+
+    /// Tavakoli et al. (2018)'s branching DQN: Adam 1e-4, batch 64, 512-256 shared torso, three
+    /// levels per joint (the Minitaur study this project grew from used three), epsilon-greedy
+    /// from 1 to 0.05 over 50k steps.
+    pub(crate) fn dqn_defaults() -> TrainConfig {
+        TrainConfig {
+            warmup_steps: 0,
+            batch_size: 64,
+            hidden: vec![512, 256],
+            actor_lr: 1e-4,
+            critic_lr: 1e-4,
+            dqn: Some(DqnConfig { levels: 3, epsilon_start: 1.0, epsilon_end: 0.05, exploration_steps: 50_000 }),
+            ..TrainConfig::shared_defaults(Algo::Dqn)
+        }
+    }
+
     /// Checks every setting's range and that exactly the algorithm's own section is present.
     pub fn validate(&self) -> anyhow::Result<()> {
         let positive = |name: &str, v: f64| -> anyhow::Result<()> {
             anyhow::ensure!(v.is_finite() && v > 0.0, "{name} must be a finite number > 0, got {v}");
             Ok(())
         };
-        let sections = [("td3", self.td3.is_some()), ("ddpg", self.ddpg.is_some()), ("sac", self.sac.is_some())];
+        let sections = [
+            ("td3", self.td3.is_some()),
+            ("ddpg", self.ddpg.is_some()),
+            ("sac", self.sac.is_some()),
+            ("ppo", self.ppo.is_some()),
+            ("dqn", self.dqn.is_some()),
+        ];
         for (name, present) in sections {
             anyhow::ensure!(
                 present == (name == self.algo.name()),
@@ -382,7 +558,9 @@ impl TrainConfig {
         positive("critic_lr", self.critic_lr)?;
         positive("reward_scale", self.reward_scale)?;
         anyhow::ensure!(
-            !self.normalize_observations || self.learning_starts >= self.batch_size.max(2) as u64,
+            self.algo.is_on_policy()
+                || !self.normalize_observations
+                || self.learning_starts >= self.batch_size.max(2) as u64,
             "normalize_observations estimates its statistics from the transitions before learning starts: \
              learning_starts ({}) must be at least the batch size ({})",
             self.learning_starts,
@@ -414,6 +592,42 @@ impl TrainConfig {
             positive("value_lr", s.value_lr)?;
             positive("initial_alpha", s.initial_alpha)?;
         }
+        if let Some(d) = &self.dqn {
+            anyhow::ensure!(d.levels >= 2, "levels must be at least 2 (the two bounds), got {}", d.levels);
+            anyhow::ensure!(
+                (0.0..=1.0).contains(&d.epsilon_start) && (0.0..=1.0).contains(&d.epsilon_end),
+                "epsilon_start and epsilon_end must lie in [0, 1]"
+            );
+            anyhow::ensure!(
+                self.warmup_steps == 0,
+                "dqn explores with epsilon-greedy levels from the start: warmup_steps must be 0 (the warm-up's \
+                 uniform continuous actions are not levels), got {}",
+                self.warmup_steps
+            );
+        }
+        if let Some(p) = &self.ppo {
+            anyhow::ensure!(
+                p.num_envs >= 1 && p.num_steps >= 1 && p.update_epochs >= 1 && p.num_minibatches >= 1,
+                "num_envs, num_steps, num_minibatches and update_epochs must be at least 1"
+            );
+            anyhow::ensure!(
+                p.num_minibatches <= p.rollout_size(),
+                "num_minibatches ({}) is more than a rollout holds (num_envs x num_steps = {}): a minibatch would \
+                 be empty",
+                p.num_minibatches,
+                p.rollout_size()
+            );
+            anyhow::ensure!((0.0..=1.0).contains(&p.gae_lambda), "gae_lambda must lie in [0, 1]");
+            positive("clip_coef", p.clip_coef)?;
+            positive("max_grad_norm", p.max_grad_norm)?;
+            positive("clip_observations", p.clip_observations)?;
+            positive("clip_rewards", p.clip_rewards)?;
+            positive("adam_eps", p.adam_eps)?;
+            anyhow::ensure!(p.ent_coef >= 0.0 && p.vf_coef >= 0.0, "ent_coef and vf_coef must be >= 0");
+            if let Some(kl) = p.target_kl {
+                positive("target_kl", kl)?;
+            }
+        }
         Ok(())
     }
 }
@@ -429,15 +643,16 @@ mod tests {
 
     #[test]
     fn sections_hold_exactly_their_algorithms_settings() {
-        for algo in [Algo::Td3, Algo::Ddpg, Algo::Sac] {
+        for algo in [Algo::Td3, Algo::Ddpg, Algo::Sac, Algo::Ppo, Algo::Dqn] {
             let d = TrainConfig::defaults(algo);
             d.validate().unwrap();
             let table = toml::Table::try_from(&d).unwrap();
             let section = table[algo.name()].as_table().unwrap();
             // Every serialised key is declared (target_entropy is absent while None).
             assert!(section.keys().all(|k| section_keys(algo).contains(&k.as_str())), "{algo:?}");
-            assert_eq!(section.len() + usize::from(algo == Algo::Sac), section_keys(algo).len());
-            for other in ["td3", "ddpg", "sac"].into_iter().filter(|o| *o != algo.name()) {
+            // target_entropy (SAC) and target_kl (PPO) are absent while None.
+            assert_eq!(section.len() + usize::from(matches!(algo, Algo::Sac | Algo::Ppo)), section_keys(algo).len());
+            for other in ["td3", "ddpg", "sac", "ppo", "dqn"].into_iter().filter(|o| *o != algo.name()) {
                 assert!(!table.contains_key(other));
             }
             // Flat and sectioned spellings read the same.

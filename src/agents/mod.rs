@@ -1,4 +1,5 @@
-//! Off-policy actor-critic agents on candle-nn: TD3, DDPG and SAC.
+//! Agents on candle-nn: the off-policy actor-critics TD3, DDPG and SAC, the on-policy PPO, and the
+//! action-branching DQN over discretised joint actions.
 //!
 //! Agents work in the normalised action space [-1, 1]^n; the trainer maps actions to the
 //! environment's bounds. All randomness (initialisation, exploration, target smoothing, SAC's
@@ -7,9 +8,11 @@ pub mod buffer;
 pub mod config;
 mod critics;
 mod dpg;
+pub mod dqn;
 pub(crate) mod nets;
 pub mod noise;
 pub mod normalize;
+pub mod ppo;
 pub mod registry;
 mod sac;
 
@@ -21,9 +24,14 @@ pub use crate::numeric::denormals::{float_mode, flush_denormals_to_zero, set_flo
 /// The optimiser and the helper thread live in [`crate::numeric`]; these paths stay for callers.
 pub use crate::numeric::{optim, second_core};
 pub use buffer::{Batch, ReplayBuffer};
-pub use config::{Algo, DpgConfig, OtherAlgorithmKeys, SacConfig, SacVersion, TanhCorrection, TrainConfig, WeightInit};
+pub use config::{
+    Algo, DpgConfig, DqnConfig, OtherAlgorithmKeys, PpoConfig, SacConfig, SacVersion, TanhCorrection, TrainConfig,
+    WeightInit,
+};
 pub use dpg::DeterministicAgent;
+pub use dqn::BranchingDqnAgent;
 pub use normalize::NormalizedAgent;
+pub use ppo::PpoAgent;
 pub use sac::SacAgent;
 
 use crate::numeric::optim::Adam;
@@ -73,7 +81,9 @@ pub trait Agent: Send {
 /// Builds the agent a config asks for, initialised from `rng`.
 pub fn make_agent(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
     let agent = (registry::entry(cfg.algo).build)(cfg, obs_dim, act_dim, rng)?;
-    Ok(if cfg.normalize_observations { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
+    // PPO keeps running statistics of its own (`agents::ppo`).
+    let frozen_statistics = cfg.normalize_observations && !cfg.algo.is_on_policy();
+    Ok(if frozen_statistics { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
 }
 
 /// Layer sizes `input, hidden..., output`.

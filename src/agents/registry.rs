@@ -4,7 +4,10 @@
 use candle_core::Result;
 use rand_chacha::ChaCha8Rng;
 
-use super::{Agent, Algo, DeterministicAgent, DpgConfig, SacAgent, SacConfig, TrainConfig};
+use super::{
+    Agent, Algo, BranchingDqnAgent, DeterministicAgent, DpgConfig, DqnConfig, PpoAgent, PpoConfig, SacAgent, SacConfig,
+    TrainConfig,
+};
 
 /// A registered algorithm: its name, published defaults, settings and constructor.
 pub struct AlgoEntry {
@@ -45,6 +48,20 @@ pub(crate) const ALGOS: &[AlgoEntry] = &[
         settings: DpgConfig::KEYS,
         build: deterministic,
     },
+    AlgoEntry {
+        algo: Algo::Ppo,
+        name: "ppo",
+        defaults: TrainConfig::ppo_defaults,
+        settings: PpoConfig::KEYS,
+        build: ppo,
+    },
+    AlgoEntry {
+        algo: Algo::Dqn,
+        name: "dqn",
+        defaults: TrainConfig::dqn_defaults,
+        settings: DqnConfig::KEYS,
+        build: dqn,
+    },
 ];
 
 /// The entry of an algorithm (every `Algo` has one; tested).
@@ -58,6 +75,14 @@ fn deterministic(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng
 
 fn sac(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
     Ok(Box::new(SacAgent::new(cfg, obs, act, rng)?))
+}
+
+fn ppo(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
+    Ok(Box::new(PpoAgent::new(cfg, obs, act, rng)?))
+}
+
+fn dqn(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
+    Ok(Box::new(BranchingDqnAgent::new(cfg, obs, act, rng)?))
 }
 
 #[cfg(test)]
@@ -75,10 +100,10 @@ mod tests {
             let table = toml::Table::try_from((e.defaults)()).unwrap();
             assert_eq!(table["algo"].as_str(), Some(e.name));
         }
-        for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg] {
+        for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg, Algo::Ppo, Algo::Dqn] {
             entry(algo);
         }
-        let err = Algo::parse("ppo").unwrap_err().to_string();
-        assert!(err.contains("ppo") && err.contains("td3, sac, ddpg"), "{err}");
+        let err = Algo::parse("a2c").unwrap_err().to_string();
+        assert!(err.contains("a2c") && err.contains("td3, sac, ddpg, ppo, dqn"), "{err}");
     }
 }

@@ -38,7 +38,7 @@ pub use registry::{
 };
 pub use simulation::{Simulation, VelocityNoise};
 pub use task::{Task, TaskStep, Timing};
-pub use vector::{episode_seed, VecEnv, VecEnvSnapshot, VecStep};
+pub use vector::{episode_seed, EpisodeSeeds, VecEnv, VecEnvSnapshot, VecStep};
 pub use walker2d::{Walker2d, Walker2dOptions};
 
 use crate::mujoco::Data;

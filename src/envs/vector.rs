@@ -6,7 +6,8 @@
 //! keeps the last observation of the ended episode in [`VecStep::final_observations`], so a
 //! learner can bootstrap through a truncation.
 //!
-//! Seeds: episode `k` of copy `i` after `reset(seed)` is reset with [`episode_seed`]`(seed, i, k)`.
+//! Seeds: episode `k` of copy `i` after `reset(seed)` is reset with [`episode_seed`]`(seed, i, k)`
+//! (or the trainer's own scheme, [`VecEnv::with_episode_seeds`]).
 //! Each copy is a function of its own seeds and actions alone, and the copies are split over
 //! threads in contiguous blocks, so the numbers are the same bit for bit whatever the thread
 //! count (tested in `tests/vector_env.rs`).
@@ -30,6 +31,14 @@ pub fn episode_seed(seed: u64, copy: usize, episode: u64) -> u64 {
     rng.set_stream(copy as u64);
     rng.set_word_pos(2 * episode as u128);
     rng.next_u64()
+}
+
+/// How a vector environment picks reset seeds: `(seed, copy, copies, episode)` to the reset seed of
+/// that copy's episode. [`episode_seed`] by default; a trainer may use its own seed domain.
+pub type EpisodeSeeds = fn(u64, usize, usize, u64) -> u64;
+
+fn default_seeds(seed: u64, copy: usize, _copies: usize, episode: u64) -> u64 {
+    episode_seed(seed, copy, episode)
 }
 
 /// Where a vector environment stands: enough to rebuild every copy's state exactly.
@@ -81,8 +90,9 @@ struct Copy {
 }
 
 impl Copy {
-    fn start_episode(&mut self, seed: u64, index: usize) -> Result<Vec<f64>, EnvError> {
-        let (obs, _) = self.env.reset(Some(episode_seed(seed, index, self.episodes)))?;
+    fn start_episode(&mut self, seeds: (EpisodeSeeds, u64, usize), index: usize) -> Result<Vec<f64>, EnvError> {
+        let (f, seed, copies) = seeds;
+        let (obs, _) = self.env.reset(Some(f(seed, index, copies, self.episodes)))?;
         self.episodes += 1;
         self.actions.clear();
         Ok(obs)
@@ -95,6 +105,7 @@ pub struct VecEnv {
     spec: EnvSpec,
     threads: usize,
     seed: u64,
+    seeds: EpisodeSeeds,
 }
 
 impl VecEnv {
@@ -110,7 +121,7 @@ impl VecEnv {
             .map(|_| make(config).map(|env| Copy { env, episodes: 0, actions: Vec::new() }))
             .collect::<Result<Vec<_>, _>>()?;
         let spec = copies[0].env.spec().clone();
-        Ok(VecEnv { copies, spec, threads: threads.max(1), seed: 0 })
+        Ok(VecEnv { copies, spec, threads: threads.max(1), seed: 0, seeds: default_seeds })
     }
 
     /// Number of copies.
@@ -128,6 +139,16 @@ impl VecEnv {
         &self.spec
     }
 
+    /// Uses `seeds` for every later reset instead of [`episode_seed`].
+    pub fn with_episode_seeds(mut self, seeds: EpisodeSeeds) -> VecEnv {
+        self.seeds = seeds;
+        self
+    }
+
+    fn seeding(&self) -> (EpisodeSeeds, u64, usize) {
+        (self.seeds, self.seed, self.copies.len())
+    }
+
     /// Changes how many threads step the copies; the results do not change.
     pub fn set_threads(&mut self, threads: usize) {
         self.threads = threads.max(1);
@@ -137,9 +158,10 @@ impl VecEnv {
     /// the first observations.
     pub fn reset(&mut self, seed: u64) -> Result<Vec<Vec<f64>>, EnvError> {
         self.seed = seed;
+        let seeding = self.seeding();
         let results = self.run(|i, copy| {
             copy.episodes = 0;
-            copy.start_episode(seed, i)
+            copy.start_episode(seeding, i)
         });
         results.into_iter().enumerate().map(|(i, r)| r.map_err(|e| in_copy(i, e))).collect()
     }
@@ -172,9 +194,10 @@ impl VecEnv {
             ));
         }
         self.seed = snapshot.seed;
+        let seeding = self.seeding();
         let results = self.run(|i, copy| {
             copy.episodes = snapshot.episodes[i] - 1;
-            let mut obs = copy.start_episode(snapshot.seed, i)?;
+            let mut obs = copy.start_episode(seeding, i)?;
             for action in snapshot.actions[i].chunks(dim) {
                 let s = copy.env.step(action)?;
                 if s.done() {
@@ -209,8 +232,8 @@ impl VecEnv {
                 return Err(in_copy(i, EnvError::NonFiniteAction { index, value: a[index] }));
             }
         }
-        let seed = self.seed;
-        let results = self.run(|i, copy| step_copy(copy, &actions[i], seed, i));
+        let seeding = self.seeding();
+        let results = self.run(|i, copy| step_copy(copy, &actions[i], seeding, i));
         let mut out = VecStep::default();
         for (i, r) in results.into_iter().enumerate() {
             let s = r.map_err(|e| in_copy(i, e))?;
@@ -262,11 +285,19 @@ impl VecEnv {
     }
 }
 
-fn step_copy(copy: &mut Copy, action: &[f64], seed: u64, index: usize) -> Result<CopyStep, EnvError> {
+fn step_copy(
+    copy: &mut Copy,
+    action: &[f64],
+    seeding: (EpisodeSeeds, u64, usize),
+    index: usize,
+) -> Result<CopyStep, EnvError> {
     let step = copy.env.step(action)?;
     copy.actions.extend_from_slice(action);
-    let (observation, final_observation) =
-        if step.done() { (copy.start_episode(seed, index)?, Some(step.observation)) } else { (step.observation, None) };
+    let (observation, final_observation) = if step.done() {
+        (copy.start_episode(seeding, index)?, Some(step.observation))
+    } else {
+        (step.observation, None)
+    };
     Ok(CopyStep {
         observation,
         reward: step.reward,

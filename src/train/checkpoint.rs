@@ -1,12 +1,14 @@
 //! Checkpoints: `checkpoints/step_<N>/` holds `model.safetensors` (every network, targets
-//! included), `optim.safetensors` (Adam moments), `buffer.safetensors` (replay buffer, only in
-//! the newest checkpoint) and `state.toml` (counters, RNG position). A checkpoint directory is
+//! included), `optim.safetensors` (Adam moments), `state.toml` (counters, RNG position) and the
+//! trainer's own state: `buffer.safetensors` (the off-policy replay buffer, only in the newest
+//! checkpoint) or `rollout.safetensors` (PPO: where the environment copies and the reward
+//! statistics stand). A checkpoint directory is
 //! assembled under a temporary name and renamed into place, so a crash never leaves half of one.
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use candle_core::{DType, Device, Tensor};
+use candle_core::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
 use crate::agents::buffer::ReplayBuffer;
@@ -73,7 +75,7 @@ pub(crate) fn load_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
             t.dims(),
             var.dims()
         );
-        var.set(&t.to_dtype(DType::F32)?)?;
+        var.set(&t.to_dtype(var.dtype())?)?;
     }
     Ok(())
 }
@@ -85,6 +87,17 @@ pub(crate) fn checkpoints_dir(run_dir: &Path) -> PathBuf {
 /// Writes a checkpoint for `state.step` and makes it the latest. Older checkpoints keep their
 /// weights but lose their replay buffer (the only large file).
 pub fn save(run_dir: &Path, agent: &mut dyn Agent, buffer: &ReplayBuffer, state: &TrainState) -> Result<PathBuf> {
+    save_with(run_dir, agent, state, |dir| super::buffer_file::write(buffer, &dir.join("buffer.safetensors")))
+}
+
+/// Writes a checkpoint like [`save`], with `trainer_files` writing the trainer's own state into
+/// the checkpoint directory before it becomes visible.
+pub(crate) fn save_with(
+    run_dir: &Path,
+    agent: &mut dyn Agent,
+    state: &TrainState,
+    trainer_files: impl FnOnce(&Path) -> Result<()>,
+) -> Result<PathBuf> {
     let root = checkpoints_dir(run_dir);
     std::fs::create_dir_all(&root)?;
     let name = format!("step_{:09}", state.step);
@@ -102,7 +115,7 @@ pub fn save(run_dir: &Path, agent: &mut dyn Agent, buffer: &ReplayBuffer, state:
         optimizer_steps.insert(name.to_string(), steps);
     }
     candle_core::safetensors::save(&optim, tmp.path().join("optim.safetensors"))?;
-    super::buffer_file::write(buffer, &tmp.path().join("buffer.safetensors"))?;
+    trainer_files(tmp.path())?;
 
     let state = TrainState {
         optimizer_steps,
@@ -160,7 +173,7 @@ pub(crate) fn load_weights(checkpoint: &Path, agent: &dyn Agent) -> Result<()> {
                 var.dims()
             );
         }
-        var.set(&t.to_dtype(DType::F32)?)?;
+        var.set(&t.to_dtype(var.dtype())?)?;
     }
     Ok(())
 }
@@ -174,6 +187,13 @@ pub fn load_state(checkpoint: &Path) -> Result<TrainState> {
 
 /// Restores weights, optimiser moments and counters, and returns the saved state and buffer.
 pub(crate) fn load_all(checkpoint: &Path, agent: &mut dyn Agent) -> Result<(TrainState, ReplayBuffer)> {
+    let state = load_training(checkpoint, agent)?;
+    let buffer = super::buffer_file::read(&checkpoint.join("buffer.safetensors"))?;
+    Ok((state, buffer))
+}
+
+/// Restores weights, optimiser moments and counters, and returns the saved state.
+pub(crate) fn load_training(checkpoint: &Path, agent: &mut dyn Agent) -> Result<TrainState> {
     load_weights(checkpoint, agent)?;
     let state = load_state(checkpoint)?;
     let optim = read_tensors(&checkpoint.join("optim.safetensors"))?;
@@ -185,6 +205,10 @@ pub(crate) fn load_all(checkpoint: &Path, agent: &mut dyn Agent) -> Result<(Trai
     for (name, value) in &state.counters {
         agent.set_counter(name, *value);
     }
-    let buffer = super::buffer_file::read(&checkpoint.join("buffer.safetensors"))?;
-    Ok((state, buffer))
+    Ok(state)
+}
+
+/// Reads a checkpoint's tensor file other than the network's (a trainer's own state).
+pub(crate) fn read_trainer_file(checkpoint: &Path, name: &str) -> Result<HashMap<String, Tensor>> {
+    read_tensors(&checkpoint.join(name))
 }

@@ -9,6 +9,7 @@ pub mod checkpoint;
 pub mod config;
 pub mod evaluate;
 pub mod metrics;
+mod on_policy;
 pub mod provenance;
 mod recording;
 pub mod run_config;
@@ -102,6 +103,21 @@ pub struct RunControl {
     pub threads: usize,
 }
 
+/// Every agent acts in [-1, 1]^n mapped onto the action space's bounds (the branching DQN's
+/// levels are spread over them), so an unbounded action dimension is refused up front.
+pub(crate) fn check_bounded_actions(env: &str, space: &crate::envs::BoxSpace, algo: crate::agents::Algo) -> Result<()> {
+    if let Some(i) = (0..space.dim()).find(|&i| !(space.low[i].is_finite() && space.high[i].is_finite())) {
+        bail!(
+            "{env}'s action dimension {i} is unbounded ([{}, {}]): {} acts within finite bounds{}",
+            space.low[i],
+            space.high[i],
+            algo.name(),
+            if algo == crate::agents::Algo::Dqn { " (its levels are spread over each dimension's range)" } else { "" }
+        );
+    }
+    Ok(())
+}
+
 /// The commit this binary was built from (build.rs), not whatever the source tree holds now.
 pub(crate) fn git_commit() -> Option<String> {
     option_env!("LOCOBENCH_GIT_COMMIT").map(str::to_string)
@@ -141,6 +157,13 @@ pub fn train(
         env,
         train,
     };
+    if run.train.algo.is_on_policy() {
+        std::fs::create_dir_all(run_dir)?;
+        let _lock = run_lock::RunLock::acquire(run_dir)?;
+        write_bytes_atomic(&run_dir.join("config.toml"), run.to_toml()?.as_bytes())?;
+        provenance::append(run_dir, provenance::Stretch::here(0, control.threads, run.git_commit.as_deref()))?;
+        return on_policy::train(run_dir, &run, init_checkpoint.as_deref(), control);
+    }
     let mut trainer = Trainer::new(run_dir, &run)?;
     if let Some(ckpt) = &init_checkpoint {
         checkpoint::load_weights(ckpt, trainer.agent.as_ref())?;
@@ -189,6 +212,10 @@ pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
         });
     }
     let _lock = run_lock::RunLock::acquire(run_dir)?;
+    if run.train.algo.is_on_policy() {
+        provenance::append(run_dir, provenance::Stretch::here(saved.step, control.threads, git_commit().as_deref()))?;
+        return on_policy::resume(run_dir, &run, &ckpt, control);
+    }
     let mut trainer = Trainer::new(run_dir, &run)?;
     let (state, buffer) = checkpoint::load_all(&ckpt, trainer.agent.as_mut())?;
     trainer.buffer = buffer;
@@ -226,6 +253,7 @@ struct Trainer {
 impl Trainer {
     fn new(run_dir: &Path, run: &RunConfig) -> Result<Trainer> {
         let env = make(&run.env)?;
+        check_bounded_actions(&run.env.name, &env.spec().action_space, run.train.algo)?;
         let eval_env = make(&run.env)?;
         let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
         let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
@@ -414,5 +442,19 @@ impl Trainer {
             counters: Default::default(),
         };
         checkpoint::save(&self.run_dir, self.agent.as_mut(), &self.buffer, &state)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::agents::Algo;
+    use crate::envs::BoxSpace;
+
+    #[test]
+    fn unbounded_action_spaces_are_refused_naming_the_dimension() {
+        let space = BoxSpace::new(vec![-1.0, f64::NEG_INFINITY], vec![1.0, 2.0]);
+        let err = super::check_bounded_actions("toy", &space, Algo::Dqn).unwrap_err().to_string();
+        assert!(err.contains("toy's action dimension 1 is unbounded") && err.contains("levels"), "{err}");
+        assert!(super::check_bounded_actions("toy", &BoxSpace::uniform(3, -0.4, 0.4), Algo::Td3).is_ok());
     }
 }

@@ -1,0 +1,455 @@
+//! Proximal Policy Optimization (Schulman et al. 2017) for continuous actions, after CleanRL's
+//! `ppo_continuous_action.py` (vwxyzjn/cleanrl): a Gaussian policy whose mean is a tanh MLP and
+//! whose log-std is a state-independent parameter, a separate tanh MLP critic, orthogonal
+//! initialisation (gain sqrt 2, 0.01 on the mean's output, 1 on the value's), the clipped
+//! surrogate objective, a clipped value loss, advantage normalisation per minibatch and global
+//! gradient-norm clipping. Observations are normalised by running statistics that belong to the
+//! policy (they are saved with it and used when it acts).
+//!
+//! The collection loop, GAE and reward normalisation live in `train::on_policy`; this file holds
+//! the networks and one minibatch update. Actions live in [-1, 1]^n like every agent's: a sample
+//! is clipped to it before it reaches the environment, and its log-probability is that of the
+//! unclipped sample, as in CleanRL.
+use candle_core::{DType, Device, Result, Tensor, Var, D};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+
+use super::buffer::Batch;
+use super::config::{Algo, PpoConfig, TrainConfig};
+use super::nets::{batch_tensor, orthogonal};
+use super::{layer_sizes, Agent, Losses};
+use crate::numeric::dense::dense;
+use crate::numeric::inplace::Activation;
+use crate::numeric::optim::Adam;
+
+/// gymnasium's `NormalizeObservation` epsilon and the clip CleanRL applies after it.
+const OBS_EPSILON: f64 = 1e-8;
+
+/// Dense layers with tanh between them and nothing after the last.
+struct TanhMlp(Vec<(Var, Var)>);
+
+impl TanhMlp {
+    fn new(sizes: &[usize], output_gain: f64, rng: &mut ChaCha8Rng) -> Result<TanhMlp> {
+        let n = sizes.len() - 1;
+        let mut layers = Vec::with_capacity(n);
+        for (i, w) in sizes.windows(2).enumerate() {
+            let gain = if i + 1 == n { output_gain } else { std::f64::consts::SQRT_2 };
+            let weight = Tensor::from_vec(orthogonal(w[1], w[0], gain, rng), (w[1], w[0]), &Device::Cpu)?;
+            let bias = Tensor::zeros(w[1], DType::F32, &Device::Cpu)?;
+            layers.push((Var::from_tensor(&weight)?, Var::from_tensor(&bias)?));
+        }
+        Ok(TanhMlp(layers))
+    }
+
+    fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let mut h = x.clone();
+        for (i, (w, b)) in self.0.iter().enumerate() {
+            h = dense(&h, w.as_tensor(), b.as_tensor(), Activation::Identity)?;
+            if i + 1 < self.0.len() {
+                h = h.tanh()?;
+            }
+        }
+        Ok(h)
+    }
+
+    fn vars(&self) -> Vec<Var> {
+        self.0.iter().flat_map(|(w, b)| [w.clone(), b.clone()]).collect()
+    }
+
+    fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
+        self.0
+            .iter()
+            .enumerate()
+            .flat_map(|(i, (w, b))| {
+                [(format!("{prefix}.{i}.weight"), w.clone()), (format!("{prefix}.{i}.bias"), b.clone())]
+            })
+            .collect()
+    }
+}
+
+/// What the policy and value function say about a batch of observations while collecting.
+pub struct PolicyStep {
+    /// Sampled actions, unclipped, `n x act_dim`.
+    pub actions: Vec<f32>,
+    /// Log-probability of each sampled action.
+    pub log_probs: Vec<f32>,
+    /// The value of each observation.
+    pub values: Vec<f32>,
+}
+
+/// A minibatch of a rollout, row-major.
+pub struct PpoBatch {
+    /// Normalised observations, `n x obs_dim`.
+    pub obs: Vec<f32>,
+    /// The actions taken (unclipped samples), `n x act_dim`.
+    pub actions: Vec<f32>,
+    /// Their log-probabilities when sampled.
+    pub log_probs: Vec<f32>,
+    /// GAE advantages.
+    pub advantages: Vec<f32>,
+    /// Value targets (advantage + value).
+    pub returns: Vec<f32>,
+    /// The values when collected.
+    pub values: Vec<f32>,
+}
+
+/// The diagnostics CleanRL logs per update.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct PpoLosses {
+    /// Clipped surrogate loss.
+    pub policy: f64,
+    /// Value loss (half the mean squared error, clipped if so set).
+    pub value: f64,
+    /// Mean entropy of the policy.
+    pub entropy: f64,
+    /// Approximate KL divergence from the collecting policy, `((r - 1) - log r).mean()`.
+    pub approx_kl: f64,
+    /// Share of samples whose ratio was clipped.
+    pub clip_fraction: f64,
+}
+
+/// PPO's policy and value networks, their optimisers and the observation statistics.
+pub struct PpoAgent {
+    obs_dim: usize,
+    act_dim: usize,
+    settings: PpoConfig,
+    actor: TanhMlp,
+    log_std: Var,
+    critic: TanhMlp,
+    /// Running mean, variance and count of the raw observations (f64, as gymnasium keeps them).
+    obs_mean: Var,
+    obs_var: Var,
+    obs_count: Var,
+    actor_opt: Adam,
+    critic_opt: Adam,
+    base_actor_lr: f64,
+    base_critic_lr: f64,
+    normalize_observations: bool,
+}
+
+impl PpoAgent {
+    /// Builds the networks for `obs_dim`/`act_dim`, initialised from `rng`.
+    pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
+        let settings = cfg.ppo().clone();
+        let critic = TanhMlp::new(&layer_sizes(obs_dim, &cfg.hidden, 1), 1.0, rng)?;
+        let actor = TanhMlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), 0.01, rng)?;
+        let log_std = Var::from_tensor(&Tensor::zeros((1, act_dim), DType::F32, &Device::Cpu)?)?;
+        let mut actor_vars = actor.vars();
+        actor_vars.push(log_std.clone());
+        let mut actor_opt = Adam::new(actor_vars, cfg.actor_lr);
+        let mut critic_opt = Adam::new(critic.vars(), cfg.critic_lr);
+        actor_opt.eps = settings.adam_eps;
+        critic_opt.eps = settings.adam_eps;
+        let f64_var =
+            |values: Vec<f64>| Var::from_tensor(&Tensor::from_vec(values.clone(), values.len(), &Device::Cpu)?);
+        Ok(PpoAgent {
+            obs_dim,
+            act_dim,
+            settings,
+            actor,
+            log_std,
+            critic,
+            // gymnasium's RunningMeanStd starts at mean 0, variance 1, count 1e-4.
+            obs_mean: f64_var(vec![0.0; obs_dim])?,
+            obs_var: f64_var(vec![1.0; obs_dim])?,
+            obs_count: f64_var(vec![1e-4])?,
+            actor_opt,
+            critic_opt,
+            base_actor_lr: cfg.actor_lr,
+            base_critic_lr: cfg.critic_lr,
+            normalize_observations: cfg.normalize_observations,
+        })
+    }
+
+    /// Folds a batch of raw observations (`n x obs_dim`, in order) into the running statistics,
+    /// with the parallel update numpy's and gymnasium's `RunningMeanStd` use.
+    pub fn observe(&mut self, raw: &[Vec<f64>]) -> Result<()> {
+        if !self.normalize_observations || raw.is_empty() {
+            return Ok(());
+        }
+        let mut mean = self.obs_mean.as_tensor().to_vec1::<f64>()?;
+        let mut var = self.obs_var.as_tensor().to_vec1::<f64>()?;
+        let count = self.obs_count.as_tensor().to_vec1::<f64>()?[0];
+        let n = raw.len() as f64;
+        let total = count + n;
+        for j in 0..self.obs_dim {
+            let batch_mean = raw.iter().map(|o| o[j]).sum::<f64>() / n;
+            let batch_var = raw.iter().map(|o| (o[j] - batch_mean).powi(2)).sum::<f64>() / n;
+            let delta = batch_mean - mean[j];
+            let m2 = var[j] * count + batch_var * n + delta * delta * count * n / total;
+            mean[j] += delta * n / total;
+            var[j] = m2 / total;
+        }
+        self.obs_mean.set(&Tensor::from_vec(mean, self.obs_dim, &Device::Cpu)?)?;
+        self.obs_var.set(&Tensor::from_vec(var, self.obs_dim, &Device::Cpu)?)?;
+        self.obs_count.set(&Tensor::from_vec(vec![total], 1, &Device::Cpu)?)
+    }
+
+    /// Raw observations normalised by the running statistics and clipped, as the networks see
+    /// them (`n x obs_dim`, f32).
+    pub fn normalize(&self, raw: &[Vec<f64>]) -> Result<Vec<f32>> {
+        if !self.normalize_observations {
+            return Ok(raw.iter().flatten().map(|&v| v as f32).collect());
+        }
+        let mean = self.obs_mean.as_tensor().to_vec1::<f64>()?;
+        let var = self.obs_var.as_tensor().to_vec1::<f64>()?;
+        let clip = self.settings.clip_observations;
+        Ok(raw
+            .iter()
+            .flat_map(|o| {
+                o.iter()
+                    .zip(mean.iter().zip(&var))
+                    .map(move |(&x, (&m, &v))| ((x - m) / (v + OBS_EPSILON).sqrt()).clamp(-clip, clip) as f32)
+            })
+            .collect())
+    }
+
+    /// Samples an action for each normalised observation, with its log-probability and value.
+    pub fn policy_step(&self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<PolicyStep> {
+        let n = obs.len() / self.obs_dim;
+        let x = batch_tensor(obs, n, self.obs_dim)?;
+        let mean = self.actor.forward(&x)?.to_vec2::<f32>()?;
+        let log_std = self.log_std.as_tensor().flatten_all()?.to_vec1::<f32>()?;
+        let values = self.values(obs)?;
+        let mut actions = Vec::with_capacity(n * self.act_dim);
+        let mut log_probs = Vec::with_capacity(n);
+        for row in &mean {
+            let mut lp = 0.0f32;
+            for (m, &s) in row.iter().zip(&log_std) {
+                let eps: f32 = rng.sample(StandardNormal);
+                actions.push(m + s.exp() * eps);
+                lp += -0.5 * eps * eps - s - HALF_LOG_2PI;
+            }
+            log_probs.push(lp);
+        }
+        Ok(PolicyStep { actions, log_probs, values })
+    }
+
+    /// The value of each normalised observation.
+    pub fn values(&self, obs: &[f32]) -> Result<Vec<f32>> {
+        let n = obs.len() / self.obs_dim;
+        self.critic.forward(&batch_tensor(obs, n, self.obs_dim)?)?.flatten_all()?.to_vec1::<f32>()
+    }
+
+    /// Sets both learning rates to `fraction` of their configured values (annealing).
+    pub fn anneal(&mut self, fraction: f64) {
+        self.actor_opt.lr = fraction * self.base_actor_lr;
+        self.critic_opt.lr = fraction * self.base_critic_lr;
+    }
+
+    /// One gradient step on a minibatch.
+    pub fn learn(&mut self, b: &PpoBatch) -> Result<PpoLosses> {
+        let n = b.log_probs.len();
+        let s = &self.settings;
+        let obs = batch_tensor(&b.obs, n, self.obs_dim)?;
+        let actions = batch_tensor(&b.actions, n, self.act_dim)?;
+        let column = |v: &[f32]| Tensor::from_slice(v, n, &Device::Cpu);
+        let old_log_probs = column(&b.log_probs)?;
+        let mut advantages = b.advantages.clone();
+        if s.norm_adv && n > 1 {
+            // torch's std is the sample std; CleanRL adds 1e-8.
+            let mean = advantages.iter().map(|&a| a as f64).sum::<f64>() / n as f64;
+            let var = advantages.iter().map(|&a| (a as f64 - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+            let std = var.sqrt();
+            advantages = advantages.iter().map(|&a| ((a as f64 - mean) / (std + 1e-8)) as f32).collect();
+        }
+        let advantages = column(&advantages)?;
+
+        let mean = self.actor.forward(&obs)?;
+        let log_std = self.log_std.as_tensor().broadcast_as(mean.shape())?;
+        let z = ((&actions - &mean)? / log_std.exp()?)?;
+        let new_log_probs = ((z.sqr()?.affine(-0.5, -HALF_LOG_2PI as f64))? - &log_std)?.sum(D::Minus1)?;
+        let entropy = log_std.affine(1.0, 0.5 + HALF_LOG_2PI as f64)?.sum(D::Minus1)?.mean_all()?;
+        let log_ratio = (&new_log_probs - &old_log_probs)?;
+        let ratio = log_ratio.exp()?;
+        let clipped = ratio.clamp(1.0 - s.clip_coef as f32, 1.0 + s.clip_coef as f32)?;
+        let pg1 = (advantages.neg()? * &ratio)?;
+        let pg2 = (advantages.neg()? * &clipped)?;
+        let policy_loss = pg1.maximum(&pg2)?.mean_all()?;
+
+        let new_values = self.critic.forward(&obs)?.flatten_all()?;
+        let returns = column(&b.returns)?;
+        let unclipped = (&new_values - &returns)?.sqr()?;
+        let value_loss = if s.clip_vloss {
+            let old = column(&b.values)?;
+            let delta = (&new_values - &old)?.clamp(-s.clip_coef as f32, s.clip_coef as f32)?;
+            let v_clipped = ((old + delta)? - &returns)?.sqr()?;
+            unclipped.maximum(&v_clipped)?.mean_all()?.affine(0.5, 0.0)?
+        } else {
+            unclipped.mean_all()?.affine(0.5, 0.0)?
+        };
+        let loss = ((&policy_loss - entropy.affine(s.ent_coef, 0.0)?)? + value_loss.affine(s.vf_coef, 0.0)?)?;
+        let mut grads = loss.backward()?;
+
+        // Global gradient-norm clipping over every trained parameter, as torch's
+        // clip_grad_norm_ (the norm accumulates in f64 in a fixed order).
+        let vars: Vec<Var> =
+            self.actor.vars().into_iter().chain([self.log_std.clone()]).chain(self.critic.vars()).collect();
+        let mut sum_sq = 0.0f64;
+        for v in &vars {
+            if let Some(g) = grads.get(v.as_tensor()) {
+                sum_sq += g.sqr()?.sum_all()?.to_scalar::<f32>()? as f64;
+            }
+        }
+        let coef = s.max_grad_norm / (sum_sq.sqrt() + 1e-6);
+        if coef < 1.0 {
+            for v in &vars {
+                if let Some(g) = grads.remove(v.as_tensor()) {
+                    grads.insert(v.as_tensor(), g.affine(coef, 0.0)?);
+                }
+            }
+        }
+        self.actor_opt.step(&grads)?;
+        self.critic_opt.step(&grads)?;
+
+        let ratio_values = ratio.to_vec1::<f32>()?;
+        let log_ratio_values = log_ratio.to_vec1::<f32>()?;
+        let approx_kl =
+            ratio_values.iter().zip(&log_ratio_values).map(|(&r, &l)| (r - 1.0 - l) as f64).sum::<f64>() / n as f64;
+        let clip_fraction =
+            ratio_values.iter().filter(|&&r| ((r - 1.0).abs() as f64) > s.clip_coef).count() as f64 / n as f64;
+        Ok(PpoLosses {
+            policy: policy_loss.to_scalar::<f32>()? as f64,
+            value: value_loss.to_scalar::<f32>()? as f64,
+            entropy: entropy.to_scalar::<f32>()? as f64,
+            approx_kl,
+            clip_fraction,
+        })
+    }
+}
+
+/// ln(2 pi) / 2.
+const HALF_LOG_2PI: f32 = 0.918_938_5;
+
+impl Agent for PpoAgent {
+    fn algo(&self) -> Algo {
+        Algo::Ppo
+    }
+
+    /// The policy's mean, clipped to [-1, 1].
+    fn act(&self, obs: &[f32]) -> Result<Vec<f32>> {
+        let raw: Vec<f64> = obs.iter().map(|&v| v as f64).collect();
+        let x = self.normalize(&[raw])?;
+        let mean = self.actor.forward(&batch_tensor(&x, 1, self.obs_dim)?)?;
+        Ok(mean.flatten_all()?.to_vec1::<f32>()?.into_iter().map(|a| a.clamp(-1.0, 1.0)).collect())
+    }
+
+    fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
+        let raw: Vec<f64> = obs.iter().map(|&v| v as f64).collect();
+        let x = self.normalize(&[raw])?;
+        Ok(self.policy_step(&x, rng)?.actions.into_iter().map(|a| a.clamp(-1.0, 1.0)).collect())
+    }
+
+    fn update(&mut self, _batch: &Batch, _rng: &mut ChaCha8Rng) -> Result<Losses> {
+        Err(candle_core::Error::Msg(
+            "PPO learns from its own rollouts (train::on_policy), not from replay minibatches".into(),
+        ))
+    }
+
+    fn parameters(&self) -> Vec<(String, Var)> {
+        let mut out = self.actor.named_vars("actor.mean");
+        out.push(("actor.log_std".into(), self.log_std.clone()));
+        out.push(("actor.obs_mean".into(), self.obs_mean.clone()));
+        out.push(("actor.obs_var".into(), self.obs_var.clone()));
+        out.push(("actor.obs_count".into(), self.obs_count.clone()));
+        out.extend(self.critic.named_vars("critic"));
+        out
+    }
+
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
+        vec![("actor_opt", &mut self.actor_opt), ("critic_opt", &mut self.critic_opt)]
+    }
+
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        Vec::new()
+    }
+
+    fn set_counter(&mut self, _name: &str, _value: u64) {}
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    fn agent() -> PpoAgent {
+        let mut cfg = TrainConfig::defaults(Algo::Ppo);
+        cfg.hidden = vec![8, 8];
+        PpoAgent::new(&cfg, 3, 2, &mut ChaCha8Rng::seed_from_u64(0)).unwrap()
+    }
+
+    #[test]
+    fn running_statistics_match_numpy_s_parallel_update() {
+        let mut a = agent();
+        let batches = [vec![vec![1.0, 2.0, -1.0], vec![3.0, 2.0, 0.0]], vec![vec![-2.0, 5.0, 4.0]]];
+        for b in &batches {
+            a.observe(b).unwrap();
+        }
+        // By hand: the prior (mean 0, var 1, count 1e-4) plus the three samples.
+        let samples = [[1.0, 2.0, -1.0], [3.0, 2.0, 0.0], [-2.0, 5.0, 4.0]];
+        let count = 3.0 + 1e-4;
+        for j in 0..3 {
+            let mean = samples.iter().map(|s| s[j]).sum::<f64>() / count;
+            let m2 = 1e-4 * (1.0 + mean * mean) + samples.iter().map(|s| (s[j] - mean).powi(2)).sum::<f64>();
+            let got_mean = a.obs_mean.as_tensor().to_vec1::<f64>().unwrap()[j];
+            let got_var = a.obs_var.as_tensor().to_vec1::<f64>().unwrap()[j];
+            assert!((got_mean - mean).abs() < 1e-12, "mean {j}: {got_mean} vs {mean}");
+            assert!((got_var - m2 / count).abs() < 1e-9, "var {j}: {got_var} vs {}", m2 / count);
+        }
+        assert!((a.obs_count.as_tensor().to_vec1::<f64>().unwrap()[0] - count).abs() < 1e-12);
+    }
+
+    #[test]
+    fn sampled_log_probabilities_are_the_gaussian_density() {
+        let a = agent();
+        let obs = vec![0.1, -0.2, 0.3, 0.5, 0.0, -1.0];
+        let step = a.policy_step(&obs, &mut ChaCha8Rng::seed_from_u64(3)).unwrap();
+        let mean = a.actor.forward(&batch_tensor(&obs, 2, 3).unwrap()).unwrap().to_vec2::<f32>().unwrap();
+        // log-std starts at 0: log N(a; m, 1) = -(a - m)^2 / 2 - ln(2 pi) / 2 per dimension.
+        for (r, row) in mean.iter().enumerate() {
+            let lp: f64 = (0..2)
+                .map(|j| {
+                    let d = (step.actions[2 * r + j] - row[j]) as f64;
+                    -0.5 * d * d - 0.5 * (2.0 * std::f64::consts::PI).ln()
+                })
+                .sum();
+            assert!((step.log_probs[r] as f64 - lp).abs() < 1e-5, "{} vs {lp}", step.log_probs[r]);
+        }
+        assert_eq!(step.values.len(), 2);
+    }
+
+    #[test]
+    fn a_first_update_leaves_the_ratio_at_one_and_moves_towards_the_advantage() {
+        let mut a = agent();
+        let obs = vec![0.1, -0.2, 0.3, 0.5, 0.0, -1.0];
+        let step = a.policy_step(&obs, &mut ChaCha8Rng::seed_from_u64(1)).unwrap();
+        let batch = PpoBatch {
+            obs: obs.clone(),
+            actions: step.actions.clone(),
+            log_probs: step.log_probs.clone(),
+            advantages: vec![1.0, -1.0],
+            returns: vec![1.0, 1.0],
+            values: step.values.clone(),
+        };
+        let l = a.learn(&batch).unwrap();
+        // Nothing changed between sampling and the loss: ratio 1, nothing clipped, KL 0.
+        assert!(l.approx_kl.abs() < 1e-6 && l.clip_fraction == 0.0, "{l:?}");
+        // The entropy of a unit Gaussian per dimension: 1/2 + ln(2 pi)/2.
+        assert!((l.entropy - 2.0 * (0.5 + 0.5 * (2.0 * std::f64::consts::PI).ln())).abs() < 1e-5);
+        // The action with the positive advantage became more likely, the other less.
+        let after = PpoBatch { ..batch };
+        let mean = a.actor.forward(&batch_tensor(&after.obs, 2, 3).unwrap()).unwrap().to_vec2::<f32>().unwrap();
+        let log_std = a.log_std.as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        let lp = |r: usize| -> f32 {
+            (0..2)
+                .map(|j| {
+                    let z = (after.actions[2 * r + j] - mean[r][j]) / log_std[j].exp();
+                    -0.5 * z * z - log_std[j] - HALF_LOG_2PI
+                })
+                .sum()
+        };
+        assert!(lp(0) > after.log_probs[0], "{} <= {}", lp(0), after.log_probs[0]);
+        assert!(lp(1) < after.log_probs[1], "{} >= {}", lp(1), after.log_probs[1]);
+    }
+}

@@ -1,0 +1,540 @@
+//! PPO's training loop: collect a rollout on a vector environment, compute GAE advantages, run
+//! the update epochs, evaluate and checkpoint between rollouts (CleanRL's
+//! `ppo_continuous_action.py` is the reference; docs/training.md lists the differences).
+//!
+//! Reward normalisation is gymnasium's `NormalizeReward`: each copy keeps a discounted return,
+//! reset at termination, whose running variance scales the rewards, which are then clipped. One
+//! set of observation and return statistics serves every copy (as Stable-Baselines3's
+//! `VecNormalize`), updated in copy order. A copy truncated by its time limit adds `gamma V` of
+//! its last observation to its last reward, so the time limit is not treated as a terminal state.
+//!
+//! Checkpoints are taken between rollouts and resume bit for bit: the vector environment's
+//! snapshot (`envs::VecEnvSnapshot`), the reward statistics and the running episode totals go to
+//! `rollout.safetensors` beside the networks.
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use candle_core::{Device, Tensor};
+use indicatif::{ProgressBar, ProgressStyle};
+use rand::seq::SliceRandom;
+use rand_chacha::ChaCha8Rng;
+
+use super::checkpoint::{self, TrainState};
+use super::evaluate::{evaluate, Evaluation};
+use super::metrics::{self, MetricsRow};
+use super::recording::TrainingRecorder;
+use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
+use super::{budget_policy_path, Outcome, RunConfig, RunControl, RunSummary, BUDGET_POLICY_DIR, POLICY_BUDGETS};
+use crate::agents::ppo::{PpoBatch, PpoLosses};
+use crate::agents::{Losses, PpoAgent, PpoConfig, TrainConfig};
+use crate::envs::{make, Env, VecEnv, VecEnvSnapshot};
+use crate::record::Recording;
+
+const ROLLOUT_FILE: &str = "rollout.safetensors";
+/// gymnasium's `NormalizeReward` epsilon.
+const RETURN_EPSILON: f64 = 1e-8;
+
+/// Training episode `k` of copy `i` of `n` is the run's training episode `k n + i`, so the
+/// evaluation protocol's check against training seeds (`train_episode_seed`) covers PPO runs too.
+fn training_seeds(run_seed: u64, copy: usize, copies: usize, episode: u64) -> u64 {
+    train_episode_seed(run_seed, episode * copies as u64 + copy as u64)
+}
+
+/// A scalar running mean and variance (numpy's parallel update, gymnasium's `RunningMeanStd`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct RunningStat {
+    mean: f64,
+    var: f64,
+    count: f64,
+}
+
+impl RunningStat {
+    fn new() -> RunningStat {
+        RunningStat { mean: 0.0, var: 1.0, count: 1e-4 }
+    }
+
+    fn update(&mut self, xs: &[f64]) {
+        let n = xs.len() as f64;
+        let batch_mean = xs.iter().sum::<f64>() / n;
+        let batch_var = xs.iter().map(|x| (x - batch_mean).powi(2)).sum::<f64>() / n;
+        let total = self.count + n;
+        let delta = batch_mean - self.mean;
+        let m2 = self.var * self.count + batch_var * n + delta * delta * self.count * n / total;
+        self.mean += delta * n / total;
+        self.var = m2 / total;
+        self.count = total;
+    }
+}
+
+/// One rollout, time-major (`t * copies + i`).
+struct Rollout {
+    obs: Vec<f32>,
+    actions: Vec<f32>,
+    log_probs: Vec<f32>,
+    values: Vec<f32>,
+    rewards: Vec<f32>,
+    /// The transition ended its episode (terminated, truncated or unstable).
+    dones: Vec<bool>,
+    /// The physics blew up: not a real transition, left out of the update.
+    unstable: Vec<bool>,
+}
+
+struct OnPolicyTrainer {
+    run_dir: PathBuf,
+    run: RunConfig,
+    settings: PpoConfig,
+    agent: PpoAgent,
+    envs: VecEnv,
+    eval_env: Box<dyn Env>,
+    rng: ChaCha8Rng,
+    /// The observations to act on next, raw.
+    obs: Vec<Vec<f64>>,
+    step: u64,
+    episodes: u64,
+    wall_offset: f64,
+    metrics: Vec<MetricsRow>,
+    returns: Vec<f64>,
+    return_stat: RunningStat,
+    episode_returns: Vec<f64>,
+    episode_lengths: Vec<u64>,
+}
+
+/// Starts a new PPO run (the run directory and `config.toml` are already in place).
+pub(super) fn train(
+    run_dir: &Path,
+    run: &RunConfig,
+    init_from: Option<&Path>,
+    control: &RunControl,
+) -> Result<RunSummary> {
+    let mut t = OnPolicyTrainer::new(run_dir, run, control)?;
+    if let Some(ckpt) = init_from {
+        checkpoint::load_weights(ckpt, &t.agent)?;
+    }
+    t.obs = t.envs.reset(run.seed)?;
+    t.agent.observe(&t.obs)?;
+    t.run(control)
+}
+
+/// Continues a PPO run from `ckpt`.
+pub(super) fn resume(run_dir: &Path, run: &RunConfig, ckpt: &Path, control: &RunControl) -> Result<RunSummary> {
+    let mut t = OnPolicyTrainer::new(run_dir, run, control)?;
+    let state = checkpoint::load_training(ckpt, &mut t.agent)?;
+    t.rng = state.rng.restore()?;
+    t.step = state.step;
+    t.episodes = state.episodes;
+    t.wall_offset = state.wall_time;
+    let saved = checkpoint::read_trainer_file(ckpt, ROLLOUT_FILE)?;
+    let snapshot =
+        t.read_rollout_state(&saved).with_context(|| format!("{} is corrupt", ckpt.join(ROLLOUT_FILE).display()))?;
+    t.obs = t.envs.restore(&snapshot)?;
+    let metrics_path = run_dir.join("metrics.csv");
+    if metrics_path.exists() {
+        t.metrics = metrics::read(&metrics_path)?.into_iter().filter(|r| r.step <= state.step).collect();
+    }
+    t.run(control)
+}
+
+impl OnPolicyTrainer {
+    fn new(run_dir: &Path, run: &RunConfig, control: &RunControl) -> Result<OnPolicyTrainer> {
+        let settings = run.train.ppo().clone();
+        let envs = VecEnv::new(&run.env, settings.num_envs, control.threads.max(1))?.with_episode_seeds(training_seeds);
+        let spec = envs.spec().clone();
+        let agent =
+            PpoAgent::new(&run.train, spec.observation_space.dim(), spec.action_space.dim(), &mut init_rng(run.seed))?;
+        let n = settings.num_envs;
+        Ok(OnPolicyTrainer {
+            run_dir: run_dir.to_path_buf(),
+            run: run.clone(),
+            agent,
+            envs,
+            eval_env: make(&run.env)?,
+            rng: training_rng(run.seed),
+            obs: Vec::new(),
+            step: 0,
+            episodes: 0,
+            wall_offset: 0.0,
+            metrics: Vec::new(),
+            returns: vec![0.0; n],
+            return_stat: RunningStat::new(),
+            episode_returns: vec![0.0; n],
+            episode_lengths: vec![0; n],
+            settings,
+        })
+    }
+
+    fn cfg(&self) -> &TrainConfig {
+        &self.run.train
+    }
+
+    fn run(&mut self, control: &RunControl) -> Result<RunSummary> {
+        let _runtime = crate::runtime::Runtime::enter(control.threads);
+        let total = self.cfg().total_steps;
+        let rollout = self.settings.rollout_size() as u64;
+        let iterations = total.div_ceil(rollout).max(1);
+        let signals = super::stop::stop_signals();
+        let bar = if control.show_progress { ProgressBar::new(total) } else { ProgressBar::hidden() };
+        bar.set_style(
+            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} steps, {per_sec} {msg}")
+                .expect("valid template")
+                .progress_chars("=> "),
+        );
+        bar.set_position(self.step);
+        let started = Instant::now();
+        let start_step = self.step;
+        let wall = |offset: f64| offset + started.elapsed().as_secs_f64();
+        let rate = |step: u64| (step - start_step) as f64 / started.elapsed().as_secs_f64().max(1e-9);
+        let recording = control.record.as_deref().map(Recording::create).transpose()?;
+        let mut recorder = match &recording {
+            Some(r) => Some(TrainingRecorder::new(r.stream(), &self.run.env)?),
+            None => None,
+        };
+        let mut losses: Option<Losses>;
+        let mut last_eval: Option<Evaluation> = None;
+        let mut best_eval: Option<f64> = None;
+        let checkpoint_every = self.cfg().checkpoint_every;
+        let eval_every = self.cfg().eval_every;
+        let eval_episodes = self.cfg().eval_episodes;
+        let mut next_checkpoint = (self.step / checkpoint_every + 1) * checkpoint_every;
+
+        let outcome = loop {
+            let solved = control.target_return.is_some_and(|t| last_eval.as_ref().is_some_and(|e| e.mean() >= t));
+            if self.step >= total || solved {
+                break Outcome::Finished;
+            }
+            // Rollouts are short (seconds), so every stop request waits for the next boundary,
+            // where a checkpoint resumes exactly.
+            if signals.now() || signals.at_episode_end() || control.stop_after.is_some_and(|s| self.step >= s) {
+                break Outcome::Stopped;
+            }
+            if self.settings.anneal_lr {
+                let iteration = self.step / rollout;
+                self.agent.anneal(1.0 - iteration as f64 / iterations as f64);
+            }
+            let before = self.step;
+            let data = self.collect(&bar, &rate, &wall, recorder.as_ref())?;
+            let l = self.update(&data)?;
+            losses = Some(Losses { critic: l.value, actor: Some(l.policy), ..Losses::default() });
+
+            if before / eval_every != self.step / eval_every || self.step >= total {
+                let e = evaluate(&self.agent, self.eval_env.as_mut(), eval_episodes, self.run.seed)?;
+                best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
+                bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
+                self.metrics.push(MetricsRow {
+                    eval_mean: Some(e.mean()),
+                    eval_std: Some(e.std()),
+                    eval_saturation: Some(e.saturation),
+                    ..MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset))
+                });
+                metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
+                if let Some(r) = &mut recorder {
+                    r.curves(self.metrics.last().expect("just pushed"))?;
+                    let evaluations = self.metrics.iter().filter(|m| m.kind == "eval").count() as u64;
+                    if (evaluations - 1).is_multiple_of(control.record_every.max(1)) {
+                        r.evaluation_rollout(&self.agent, self.step, self.run.seed)?;
+                    }
+                }
+                last_eval = Some(e);
+            }
+            bar.set_position(self.step);
+            if self.step >= next_checkpoint {
+                self.save(wall(self.wall_offset))?;
+                next_checkpoint = (self.step / checkpoint_every + 1) * checkpoint_every;
+            }
+        };
+        bar.finish_and_clear();
+        if outcome == Outcome::Finished {
+            self.save_budget_policy()?;
+        }
+        let checkpoint = self.save(wall(self.wall_offset))?;
+        metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
+        drop(recorder);
+        if let Some(r) = recording {
+            r.finish()?;
+        }
+        Ok(RunSummary {
+            run_dir: self.run_dir.clone(),
+            outcome,
+            steps: self.step,
+            last_eval,
+            best_eval_mean: best_eval,
+            checkpoint,
+        })
+    }
+
+    /// Steps every copy `num_steps` times with the current policy.
+    fn collect(
+        &mut self,
+        bar: &ProgressBar,
+        rate: &dyn Fn(u64) -> f64,
+        wall: &dyn Fn(f64) -> f64,
+        recorder: Option<&TrainingRecorder>,
+    ) -> Result<Rollout> {
+        let (n, steps) = (self.settings.num_envs, self.settings.num_steps);
+        let gamma = self.cfg().gamma;
+        let reward_scale = self.cfg().reward_scale;
+        let mut r = Rollout {
+            obs: Vec::new(),
+            actions: Vec::new(),
+            log_probs: Vec::new(),
+            values: Vec::new(),
+            rewards: Vec::new(),
+            dones: Vec::new(),
+            unstable: Vec::new(),
+        };
+        let space = self.envs.spec().action_space.clone();
+        for _ in 0..steps {
+            let x = self.agent.normalize(&self.obs)?;
+            let policy = self.agent.policy_step(&x, &mut self.rng)?;
+            let act_dim = space.dim();
+            let env_actions: Vec<Vec<f64>> = policy
+                .actions
+                .chunks(act_dim)
+                .map(|a| {
+                    a.iter()
+                        .zip(space.low.iter().zip(&space.high))
+                        .map(|(&v, (&l, &h))| l + (v.clamp(-1.0, 1.0) as f64 + 1.0) * 0.5 * (h - l))
+                        .collect()
+                })
+                .collect();
+            let s = self.envs.step(&env_actions)?;
+            let before = self.step;
+            self.step += n as u64;
+            if let Some(&budget) = POLICY_BUDGETS.iter().find(|&&b| before < b && b <= self.step) {
+                // The actor that collected this step is the one at the budget.
+                self.save_policy_at(budget)?;
+            }
+
+            // Observation statistics see every observation once: each ended episode's last,
+            // then the observations acted on next.
+            let finals: Vec<Vec<f64>> = s.final_observations.iter().flatten().cloned().collect();
+            let mut bootstrap = vec![0.0f64; n];
+            let truncated: Vec<usize> =
+                (0..n).filter(|&i| s.truncated[i] && !s.terminated[i] && !s.infos[i].unstable).collect();
+            if !truncated.is_empty() {
+                let last: Vec<Vec<f64>> =
+                    truncated.iter().map(|&i| s.final_observations[i].clone().expect("an ended episode")).collect();
+                let values = self.agent.values(&self.agent.normalize(&last)?)?;
+                for (&i, v) in truncated.iter().zip(values) {
+                    bootstrap[i] = gamma * v as f64;
+                }
+            }
+            let mut raw_rewards = Vec::with_capacity(n);
+            for i in 0..n {
+                let reward = s.rewards[i] * reward_scale;
+                self.returns[i] = self.returns[i] * gamma * if s.terminated[i] { 0.0 } else { 1.0 } + reward;
+                raw_rewards.push(reward);
+            }
+            let normalise = self.settings.normalize_rewards;
+            if normalise {
+                self.return_stat.update(&self.returns);
+            }
+            let scale = if normalise { (self.return_stat.var + RETURN_EPSILON).sqrt() } else { 1.0 };
+            let clip = self.settings.clip_rewards;
+            r.obs.extend_from_slice(&x);
+            r.actions.extend_from_slice(&policy.actions);
+            r.log_probs.extend_from_slice(&policy.log_probs);
+            r.values.extend_from_slice(&policy.values);
+            for i in 0..n {
+                let reward = if normalise { (raw_rewards[i] / scale).clamp(-clip, clip) } else { raw_rewards[i] };
+                r.rewards.push((reward + bootstrap[i]) as f32);
+                r.dones.push(s.terminated[i] || s.truncated[i]);
+                r.unstable.push(s.infos[i].unstable);
+            }
+
+            for i in 0..n {
+                if s.infos[i].unstable {
+                    bar.println(format!(
+                        "warning: physics unstable at step {} in copy {i}; episode dropped ({:?})",
+                        self.step, s.infos[i].warnings
+                    ));
+                    self.episode_returns[i] = 0.0;
+                    self.episode_lengths[i] = 0;
+                    self.returns[i] = 0.0;
+                    continue;
+                }
+                self.episode_returns[i] += s.rewards[i];
+                self.episode_lengths[i] += 1;
+                if s.terminated[i] || s.truncated[i] {
+                    self.episodes += 1;
+                    self.metrics.push(MetricsRow {
+                        episode_return: Some(self.episode_returns[i]),
+                        episode_length: Some(self.episode_lengths[i]),
+                        ..MetricsRow::progress("episode", self.step, None, rate(self.step), wall(self.wall_offset))
+                    });
+                    if let Some(rec) = recorder {
+                        rec.curves(self.metrics.last().expect("just pushed"))?;
+                    }
+                    self.episode_returns[i] = 0.0;
+                    self.episode_lengths[i] = 0;
+                }
+            }
+            self.obs = s.observations;
+            if !finals.is_empty() {
+                self.agent.observe(&finals)?;
+            }
+            self.agent.observe(&self.obs)?;
+        }
+        Ok(r)
+    }
+
+    /// GAE over the rollout, then `update_epochs` passes of shuffled minibatches.
+    fn update(&mut self, r: &Rollout) -> Result<PpoLosses> {
+        let n = self.settings.num_envs;
+        let steps = self.settings.num_steps;
+        let (gamma, lambda) = (self.cfg().gamma as f32, self.settings.gae_lambda as f32);
+        let next_values = self.agent.values(&self.agent.normalize(&self.obs)?)?;
+        let mut advantages = vec![0.0f32; steps * n];
+        for (i, &bootstrap) in next_values.iter().enumerate() {
+            let mut last = 0.0f32;
+            for t in (0..steps).rev() {
+                let k = t * n + i;
+                if r.unstable[k] {
+                    last = 0.0;
+                    continue;
+                }
+                let next_value = if t + 1 == steps { bootstrap } else { r.values[k + n] };
+                let not_done = if r.dones[k] { 0.0 } else { 1.0 };
+                let delta = r.rewards[k] + gamma * next_value * not_done - r.values[k];
+                last = delta + gamma * lambda * not_done * last;
+                advantages[k] = last;
+            }
+        }
+        let returns: Vec<f32> = advantages.iter().zip(&r.values).map(|(a, v)| a + v).collect();
+        let mut indices: Vec<usize> = (0..steps * n).filter(|&k| !r.unstable[k]).collect();
+        let (obs_dim, act_dim) = (r.obs.len() / (steps * n), r.actions.len() / (steps * n));
+        let minibatch = indices.len().div_ceil(self.settings.num_minibatches).max(1);
+        let mut last = PpoLosses::default();
+        for _ in 0..self.settings.update_epochs {
+            indices.shuffle(&mut self.rng);
+            for chunk in indices.chunks(minibatch) {
+                let rows = |src: &[f32], width: usize| -> Vec<f32> {
+                    chunk.iter().flat_map(|&k| src[k * width..(k + 1) * width].iter().copied()).collect()
+                };
+                let batch = PpoBatch {
+                    obs: rows(&r.obs, obs_dim),
+                    actions: rows(&r.actions, act_dim),
+                    log_probs: rows(&r.log_probs, 1),
+                    advantages: rows(&advantages, 1),
+                    returns: rows(&returns, 1),
+                    values: rows(&r.values, 1),
+                };
+                last = self.agent.learn(&batch)?;
+            }
+            if self.settings.target_kl.is_some_and(|kl| last.approx_kl > kl) {
+                break;
+            }
+        }
+        Ok(last)
+    }
+
+    fn save_policy_at(&self, step: u64) -> Result<()> {
+        let dir = self.run_dir.join(BUDGET_POLICY_DIR);
+        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+        checkpoint::save_actor(&budget_policy_path(&self.run_dir, step), &self.agent)
+    }
+
+    fn save_budget_policy(&self) -> Result<()> {
+        self.save_policy_at(self.step)
+    }
+
+    fn save(&mut self, wall_time: f64) -> Result<PathBuf> {
+        let state = TrainState {
+            step: self.step,
+            episodes: self.episodes,
+            at_episode_boundary: true,
+            wall_time,
+            rng: RngState::of(&self.rng),
+            optimizer_steps: Default::default(),
+            counters: Default::default(),
+        };
+        let tensors = self.rollout_state()?;
+        checkpoint::save_with(&self.run_dir.clone(), &mut self.agent, &state, |dir| {
+            candle_core::safetensors::save(&tensors, dir.join(ROLLOUT_FILE))?;
+            Ok(())
+        })
+    }
+
+    /// What a resume needs besides the networks: the copies' snapshot, the reward statistics and
+    /// the episode totals in progress.
+    fn rollout_state(&self) -> Result<HashMap<String, Tensor>> {
+        let snapshot = self.envs.snapshot();
+        let cpu = &Device::Cpu;
+        let ints = |v: Vec<i64>| Tensor::from_vec(v.clone(), v.len(), cpu);
+        let floats = |v: Vec<f64>| Tensor::from_vec(v.clone(), v.len(), cpu);
+        let mut out = HashMap::new();
+        out.insert("seed".to_string(), ints(vec![snapshot.seed as i64])?);
+        out.insert("episodes".to_string(), ints(snapshot.episodes.iter().map(|&e| e as i64).collect())?);
+        out.insert("action_lengths".to_string(), ints(snapshot.actions.iter().map(|a| a.len() as i64).collect())?);
+        // One extra entry keeps the tensor non-empty when every copy has just reset.
+        out.insert("actions".to_string(), floats(snapshot.actions.concat().into_iter().chain([0.0]).collect())?);
+        out.insert("returns".to_string(), floats(self.returns.clone())?);
+        let s = self.return_stat;
+        out.insert("return_stat".to_string(), floats(vec![s.mean, s.var, s.count])?);
+        out.insert("episode_returns".to_string(), floats(self.episode_returns.clone())?);
+        out.insert("episode_lengths".to_string(), ints(self.episode_lengths.iter().map(|&l| l as i64).collect())?);
+        Ok(out)
+    }
+
+    fn read_rollout_state(&mut self, t: &HashMap<String, Tensor>) -> Result<VecEnvSnapshot> {
+        let get = |name: &str| t.get(name).with_context(|| format!("no tensor '{name}'"));
+        let ints = |name: &str| -> Result<Vec<i64>> { Ok(get(name)?.to_vec1::<i64>()?) };
+        let floats = |name: &str| -> Result<Vec<f64>> { Ok(get(name)?.to_vec1::<f64>()?) };
+        let n = self.settings.num_envs;
+        let lengths = ints("action_lengths")?;
+        let all_actions = floats("actions")?;
+        anyhow::ensure!(
+            lengths.len() == n && lengths.iter().sum::<i64>() as usize + 1 == all_actions.len(),
+            "the saved actions do not fit {n} copies"
+        );
+        let mut actions = Vec::with_capacity(n);
+        let mut at = 0;
+        for &len in &lengths {
+            actions.push(all_actions[at..at + len as usize].to_vec());
+            at += len as usize;
+        }
+        let episodes: Vec<u64> = ints("episodes")?.into_iter().map(|e| e as u64).collect();
+        let returns = floats("returns")?;
+        let stat = floats("return_stat")?;
+        let episode_returns = floats("episode_returns")?;
+        let episode_lengths: Vec<u64> = ints("episode_lengths")?.into_iter().map(|l| l as u64).collect();
+        anyhow::ensure!(
+            episodes.len() == n
+                && returns.len() == n
+                && stat.len() == 3
+                && episode_returns.len() == n
+                && episode_lengths.len() == n,
+            "the saved per-copy state does not fit {n} copies"
+        );
+        self.returns = returns;
+        self.return_stat = RunningStat { mean: stat[0], var: stat[1], count: stat[2] };
+        self.episode_returns = episode_returns;
+        self.episode_lengths = episode_lengths;
+        Ok(VecEnvSnapshot { seed: ints("seed")?[0] as u64, episodes, actions })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn running_statistic_matches_the_two_pass_formula() {
+        let mut s = RunningStat::new();
+        s.update(&[1.0, 2.0]);
+        s.update(&[4.0]);
+        // The prior counts 1e-4 of a sample with mean 0 and variance 1.
+        let count = 3.0 + 1e-4;
+        let mean = 7.0 / count;
+        let m2 = 1e-4 * (1.0 + mean * mean) + [1.0, 2.0, 4.0].iter().map(|x: &f64| (x - mean).powi(2)).sum::<f64>();
+        assert!((s.mean - mean).abs() < 1e-12 && (s.var - m2 / count).abs() < 1e-9 && (s.count - count).abs() < 1e-12);
+    }
+
+    #[test]
+    fn training_seeds_interleave_the_copies_into_the_run_s_training_episodes() {
+        assert_eq!(training_seeds(9, 0, 4, 0), train_episode_seed(9, 0));
+        assert_eq!(training_seeds(9, 3, 4, 0), train_episode_seed(9, 3));
+        assert_eq!(training_seeds(9, 1, 4, 2), train_episode_seed(9, 9));
+    }
+}
