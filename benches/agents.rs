@@ -1,5 +1,5 @@
 //! One gradient update at HalfCheetah sizes (17-dim observation, 6-dim action, batch 256) for
-//! each off-policy algorithm, one PPO minibatch update (64-64 tanh networks, minibatch 64: CleanRL's
+//! each off-policy algorithm (CrossQ with 512-512 critics), one PPO minibatch update (64-64 tanh networks, minibatch 64: CleanRL's
 //! 2048-step rollout in 32 minibatches), single-observation policy inference, and replay-buffer
 //! sampling.
 //!
@@ -39,10 +39,20 @@ fn bench(c: &mut Criterion) {
     let buf = filled_buffer(&mut rng);
     let mut group = c.benchmark_group("agents");
     group.measurement_time(Duration::from_secs(8)).warm_up_time(Duration::from_secs(2)).sample_size(20);
-    for (algo, hidden) in [(Algo::Td3, vec![400, 300]), (Algo::Sac, vec![256, 256]), (Algo::Ddpg, vec![400, 300])] {
+    let cases = [
+        (Algo::Td3, vec![400, 300]),
+        (Algo::Sac, vec![256, 256]),
+        (Algo::Ddpg, vec![400, 300]),
+        (Algo::Crossq, vec![256, 256]),
+    ];
+    for (algo, hidden) in cases {
         let mut cfg = TrainConfig::defaults(algo);
         cfg.hidden = hidden.clone();
         cfg.batch_size = BATCH;
+        if let Some(c) = cfg.crossq.as_mut() {
+            // 512-wide critics: what two cores afford (the paper's are 2048 wide).
+            c.critic_hidden = vec![512, 512];
+        }
         let mut agent = make_agent(&cfg, OBS, ACT, &mut rng).unwrap();
         let mut batch = Batch::new(BATCH, OBS, ACT);
         let label = format!("{}-{}", hidden[0], hidden[1]);

@@ -89,7 +89,7 @@ pub struct TrainArgs {
     /// Environment name (see `locobench envs`).
     #[arg(long, required_unless_present = "resume")]
     pub env: Option<String>,
-    /// td3, sac, ddpg, ppo or dqn.
+    /// td3, sac, ddpg, crossq, ppo or dqn.
     #[arg(long, required_unless_present = "resume")]
     pub algo: Option<String>,
     /// The run's seed.

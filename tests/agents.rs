@@ -57,6 +57,11 @@ fn ddpg_learns_inverted_pendulum() {
     learns(Algo::Ddpg);
 }
 
+#[test]
+fn crossq_learns_inverted_pendulum() {
+    learns(Algo::Crossq);
+}
+
 /// Three force levels per joint (-3, 0, 3 N on the cart): bang-bang control balances the pole.
 #[test]
 fn branching_dqn_learns_inverted_pendulum() {

@@ -17,6 +17,8 @@ pub enum Algo {
     Ppo,
     /// Action-branching DQN over discretised joint actions (Tavakoli et al., 2018).
     Dqn,
+    /// CrossQ (Bhatt et al., 2024): SAC with batch-renormalised critics and no target networks.
+    Crossq,
 }
 
 impl Algo {
@@ -27,7 +29,7 @@ impl Algo {
             anyhow::anyhow!("unknown algorithm '{name}'; known algorithms: {}", known.join(", "))
         })
     }
-    /// The registered name (`td3`, `sac`, `ddpg`, `ppo`, `dqn`).
+    /// The registered name (`td3`, `sac`, `ddpg`, `ppo`, `dqn`, `crossq`).
     pub fn name(self) -> &'static str {
         super::registry::entry(self).name
     }
@@ -133,6 +135,9 @@ pub struct TrainConfig {
     /// The branching DQN's own settings (present exactly when `algo` is DQN).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub dqn: Option<DqnConfig>,
+    /// CrossQ's own settings (present exactly when `algo` is CrossQ).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub crossq: Option<CrossqConfig>,
 }
 
 /// TD3's and DDPG's own settings.
@@ -301,6 +306,44 @@ impl DqnConfig {
     pub(crate) const KEYS: &'static [&'static str] = &["levels", "epsilon_start", "epsilon_end", "exploration_steps"];
 }
 
+/// CrossQ's own settings; the defaults are the paper's and sbx's. It reads the shared `hidden`
+/// (the actor's layers), `actor_lr` and `critic_lr`, `batch_size`, `gamma`, the buffer,
+/// `warmup_steps` and `learning_starts`; it has no target networks, so `tau` does not apply.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CrossqConfig {
+    /// The critics' hidden layers (the paper's 2048-2048; 256-512 wide is what 2 cores afford).
+    pub critic_hidden: Vec<usize>,
+    /// Actor and temperature updates happen every this many critic updates.
+    pub policy_delay: u32,
+    /// Adam's beta1 for every optimiser.
+    pub adam_beta1: f64,
+    /// Temperature at the start.
+    pub initial_alpha: f64,
+    /// Adam learning rate of the log-temperature.
+    pub alpha_lr: f64,
+    /// Target entropy for the temperature; absent means -dim(A).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_entropy: Option<f64>,
+    /// Weight of the old value in the running statistics' moving average.
+    pub batch_norm_momentum: f64,
+    /// Training passes of plain batch normalisation before the renormalisation's corrections start.
+    pub renorm_warmup_steps: u64,
+}
+
+impl CrossqConfig {
+    pub(crate) const KEYS: &'static [&'static str] = &[
+        "critic_hidden",
+        "policy_delay",
+        "adam_beta1",
+        "initial_alpha",
+        "alpha_lr",
+        "target_entropy",
+        "batch_norm_momentum",
+        "renorm_warmup_steps",
+    ];
+}
+
 /// How [`TrainConfig::from_table`] treats a key of another algorithm's section.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum OtherAlgorithmKeys {
@@ -398,6 +441,11 @@ impl TrainConfig {
         self.dqn.as_ref().expect("a DQN config")
     }
 
+    /// CrossQ's section. Panics for another algorithm.
+    pub fn crossq(&self) -> &CrossqConfig {
+        self.crossq.as_ref().expect("a CrossQ config")
+    }
+
     /// The defaults each algorithm was published with (sources in docs/references.md), from its
     /// registry entry.
     pub fn defaults(algo: Algo) -> TrainConfig {
@@ -430,6 +478,7 @@ impl TrainConfig {
             sac: None,
             ppo: None,
             dqn: None,
+            crossq: None,
         }
     }
 
@@ -533,6 +582,31 @@ impl TrainConfig {
         }
     }
 
+    /// CrossQ's (Bhatt et al. 2024; sbx's `CrossQ`): actor 256-256, critics 2048-2048, Adam 1e-3
+    /// with beta1 0.5, batch 256, 5000 random steps, policy delay 3, batch-norm momentum 0.99 and
+    /// 100k renormalisation warm-up passes.
+    pub(crate) fn crossq_defaults() -> TrainConfig {
+        TrainConfig {
+            warmup_steps: 5000,
+            learning_starts: 5000,
+            batch_size: 256,
+            hidden: vec![256, 256],
+            actor_lr: 1e-3,
+            critic_lr: 1e-3,
+            crossq: Some(CrossqConfig {
+                critic_hidden: vec![2048, 2048],
+                policy_delay: 3,
+                adam_beta1: 0.5,
+                initial_alpha: 1.0,
+                alpha_lr: 1e-3,
+                target_entropy: None,
+                batch_norm_momentum: 0.99,
+                renorm_warmup_steps: 100_000,
+            }),
+            ..TrainConfig::shared_defaults(Algo::Crossq)
+        }
+    }
+
     /// Checks every setting's range and that exactly the algorithm's own section is present.
     pub fn validate(&self) -> anyhow::Result<()> {
         let positive = |name: &str, v: f64| -> anyhow::Result<()> {
@@ -545,6 +619,7 @@ impl TrainConfig {
             ("sac", self.sac.is_some()),
             ("ppo", self.ppo.is_some()),
             ("dqn", self.dqn.is_some()),
+            ("crossq", self.crossq.is_some()),
         ];
         for (name, present) in sections {
             anyhow::ensure!(
@@ -591,6 +666,22 @@ impl TrainConfig {
             positive("alpha_lr", s.alpha_lr)?;
             positive("value_lr", s.value_lr)?;
             positive("initial_alpha", s.initial_alpha)?;
+        }
+        if let Some(c) = &self.crossq {
+            anyhow::ensure!(
+                !c.critic_hidden.is_empty() && c.critic_hidden.iter().all(|&h| h > 0),
+                "critic_hidden needs at least one layer size > 0"
+            );
+            anyhow::ensure!(c.policy_delay >= 1, "policy_delay must be at least 1");
+            anyhow::ensure!((0.0..1.0).contains(&c.adam_beta1), "adam_beta1 must lie in [0, 1)");
+            anyhow::ensure!((0.0..1.0).contains(&c.batch_norm_momentum), "batch_norm_momentum must lie in [0, 1)");
+            positive("initial_alpha", c.initial_alpha)?;
+            positive("alpha_lr", c.alpha_lr)?;
+            anyhow::ensure!(
+                self.batch_size >= 2,
+                "batch normalisation needs at least 2 transitions per batch, got batch_size {}",
+                self.batch_size
+            );
         }
         if let Some(d) = &self.dqn {
             anyhow::ensure!(d.levels >= 2, "levels must be at least 2 (the two bounds), got {}", d.levels);
@@ -643,7 +734,7 @@ mod tests {
 
     #[test]
     fn sections_hold_exactly_their_algorithms_settings() {
-        for algo in [Algo::Td3, Algo::Ddpg, Algo::Sac, Algo::Ppo, Algo::Dqn] {
+        for algo in [Algo::Td3, Algo::Ddpg, Algo::Sac, Algo::Ppo, Algo::Dqn, Algo::Crossq] {
             let d = TrainConfig::defaults(algo);
             d.validate().unwrap();
             let table = toml::Table::try_from(&d).unwrap();
@@ -651,8 +742,9 @@ mod tests {
             // Every serialised key is declared (target_entropy is absent while None).
             assert!(section.keys().all(|k| section_keys(algo).contains(&k.as_str())), "{algo:?}");
             // target_entropy (SAC) and target_kl (PPO) are absent while None.
-            assert_eq!(section.len() + usize::from(matches!(algo, Algo::Sac | Algo::Ppo)), section_keys(algo).len());
-            for other in ["td3", "ddpg", "sac", "ppo", "dqn"].into_iter().filter(|o| *o != algo.name()) {
+            let optional = usize::from(matches!(algo, Algo::Sac | Algo::Ppo | Algo::Crossq));
+            assert_eq!(section.len() + optional, section_keys(algo).len());
+            for other in ["td3", "ddpg", "sac", "ppo", "dqn", "crossq"].into_iter().filter(|o| *o != algo.name()) {
                 assert!(!table.contains_key(other));
             }
             // Flat and sectioned spellings read the same.

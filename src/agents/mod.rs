@@ -1,5 +1,5 @@
-//! Agents on candle-nn: the off-policy actor-critics TD3, DDPG and SAC, the on-policy PPO, and the
-//! action-branching DQN over discretised joint actions.
+//! Agents on candle-nn: the off-policy actor-critics TD3, DDPG, SAC and CrossQ, the on-policy PPO,
+//! and the action-branching DQN over discretised joint actions.
 //!
 //! Agents work in the normalised action space [-1, 1]^n; the trainer maps actions to the
 //! environment's bounds. All randomness (initialisation, exploration, target smoothing, SAC's
@@ -7,6 +7,7 @@
 pub mod buffer;
 pub mod config;
 mod critics;
+pub mod crossq;
 mod dpg;
 pub mod dqn;
 pub(crate) mod nets;
@@ -25,9 +26,10 @@ pub use crate::numeric::denormals::{float_mode, flush_denormals_to_zero, set_flo
 pub use crate::numeric::{optim, second_core};
 pub use buffer::{Batch, ReplayBuffer};
 pub use config::{
-    Algo, DpgConfig, DqnConfig, OtherAlgorithmKeys, PpoConfig, SacConfig, SacVersion, TanhCorrection, TrainConfig,
-    WeightInit,
+    Algo, CrossqConfig, DpgConfig, DqnConfig, OtherAlgorithmKeys, PpoConfig, SacConfig, SacVersion, TanhCorrection,
+    TrainConfig, WeightInit,
 };
+pub use crossq::CrossqAgent;
 pub use dpg::DeterministicAgent;
 pub use dqn::BranchingDqnAgent;
 pub use normalize::NormalizedAgent;

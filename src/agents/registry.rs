@@ -5,8 +5,8 @@ use candle_core::Result;
 use rand_chacha::ChaCha8Rng;
 
 use super::{
-    Agent, Algo, BranchingDqnAgent, DeterministicAgent, DpgConfig, DqnConfig, PpoAgent, PpoConfig, SacAgent, SacConfig,
-    TrainConfig,
+    Agent, Algo, BranchingDqnAgent, CrossqAgent, CrossqConfig, DeterministicAgent, DpgConfig, DqnConfig, PpoAgent,
+    PpoConfig, SacAgent, SacConfig, TrainConfig,
 };
 
 /// A registered algorithm: its name, published defaults, settings and constructor.
@@ -62,6 +62,13 @@ pub(crate) const ALGOS: &[AlgoEntry] = &[
         settings: DqnConfig::KEYS,
         build: dqn,
     },
+    AlgoEntry {
+        algo: Algo::Crossq,
+        name: "crossq",
+        defaults: TrainConfig::crossq_defaults,
+        settings: CrossqConfig::KEYS,
+        build: crossq,
+    },
 ];
 
 /// The entry of an algorithm (every `Algo` has one; tested).
@@ -85,6 +92,10 @@ fn dqn(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Resul
     Ok(Box::new(BranchingDqnAgent::new(cfg, obs, act, rng)?))
 }
 
+fn crossq(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
+    Ok(Box::new(CrossqAgent::new(cfg, obs, act, rng)?))
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -100,10 +111,10 @@ mod tests {
             let table = toml::Table::try_from((e.defaults)()).unwrap();
             assert_eq!(table["algo"].as_str(), Some(e.name));
         }
-        for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg, Algo::Ppo, Algo::Dqn] {
+        for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg, Algo::Ppo, Algo::Dqn, Algo::Crossq] {
             entry(algo);
         }
         let err = Algo::parse("a2c").unwrap_err().to_string();
-        assert!(err.contains("a2c") && err.contains("td3, sac, ddpg, ppo, dqn"), "{err}");
+        assert!(err.contains("a2c") && err.contains("td3, sac, ddpg, ppo, dqn, crossq"), "{err}");
     }
 }

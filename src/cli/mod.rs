@@ -30,7 +30,7 @@ enum Command {
         after_help = "Example:\n  locobench rollout --env ant --policy random --episodes 2 --seed 0 --out ant.csv"
     )]
     Rollout(rollout::RolloutArgs),
-    /// Train TD3, SAC, DDPG, PPO or a branching DQN; resume a run; fine-tune from a checkpoint.
+    /// Train TD3, SAC, DDPG, CrossQ, PPO or a branching DQN; resume a run; fine-tune a checkpoint.
     #[command(
         after_help = "Example:\n  locobench train --env inverted-pendulum --algo sac --seed 0 --out runs/pendulum-sac"
     )]

@@ -64,7 +64,7 @@ mod tests {
         assert!(!c.dpg().twin_critics);
         assert!(build_config("ant", Algo::Sac, &split_pairs("nonsense=1").unwrap()).is_err());
         let err = build_config("ant", Algo::Td3, &split_pairs("alpha_lr=0.1").unwrap()).unwrap_err().to_string();
-        assert!(err.contains("'alpha_lr' is a setting of sac, not of td3"), "{err}");
+        assert!(err.contains("'alpha_lr' is a setting of sac and crossq, not of td3"), "{err}");
         let c = build_config("ant", Algo::Sac, &split_pairs("target_entropy=-4,alpha_lr=0.001").unwrap()).unwrap();
         assert_eq!((c.sac().target_entropy, c.sac().alpha_lr), (Some(-4.0), 0.001));
         assert!(build_config("ant", Algo::Sac, &split_pairs("tau=2").unwrap()).is_err());

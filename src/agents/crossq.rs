@@ -1,0 +1,415 @@
+//! CrossQ (Bhatt et al., "CrossQ: Batch Normalization in Deep Reinforcement Learning for Greater
+//! Sample Efficiency and Simplicity", ICLR 2024), after Stable-Baselines Jax's `sbx/crossq`
+//! (repository `araffin/sbx`): SAC without target networks. Both critics and the actor put batch
+//! renormalisation (Ioffe, "Batch Renormalization", NeurIPS 2017) before every dense layer; the
+//! critics see the (s, a) and (s', a') batches concatenated in one forward pass, so both halves
+//! are normalised with the same statistics, and the target is computed from that same pass
+//! (held constant). Adam with beta1 = 0.5, learning rate 1e-3, the actor and temperature updated
+//! every third critic update.
+use candle_core::{DType, Device, Result, Tensor, Var};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+use super::buffer::Batch;
+use super::config::{Algo, TanhCorrection, TrainConfig};
+use super::nets::{batch_tensor, scalar_var, Mlp, Output};
+use super::sac::squashed_gaussian_log_prob;
+use super::{layer_sizes, Agent, Losses};
+use crate::numeric::dense::dense;
+use crate::numeric::inplace::Activation;
+use crate::numeric::optim::Adam;
+
+const LOG_STD_MIN: f32 = -20.0;
+const LOG_STD_MAX: f32 = 2.0;
+/// Batch renormalisation's limits on r and d (Ioffe 2017; sbx's `BatchRenorm`).
+const R_MAX: f64 = 3.0;
+const D_MAX: f64 = 5.0;
+/// Added to every variance (sbx, flax).
+const EPSILON: f64 = 1e-3;
+
+/// Batch renormalisation over the batch dimension of `[n, features]` inputs, with a learned
+/// scale and bias. In training mode it normalises with the batch's statistics, corrected towards
+/// the running ones by r and d (held constant) once `warmup` training passes have run (before,
+/// plain batch normalisation), and moves the running statistics towards the batch's; in
+/// evaluation mode it uses the running statistics alone.
+pub struct BatchRenorm {
+    scale: Var,
+    bias: Var,
+    running_mean: Var,
+    running_var: Var,
+    momentum: f64,
+    warmup: u64,
+}
+
+impl BatchRenorm {
+    /// A layer for `features` inputs: scale 1, bias 0, running mean 0 and variance 1.
+    pub fn new(features: usize, momentum: f64, warmup: u64) -> Result<BatchRenorm> {
+        let cpu = &Device::Cpu;
+        let var = |v: f32| Var::from_tensor(&Tensor::full(v, features, cpu)?);
+        Ok(BatchRenorm {
+            scale: var(1.0)?,
+            bias: var(0.0)?,
+            running_mean: var(0.0)?,
+            running_var: var(1.0)?,
+            momentum,
+            warmup,
+        })
+    }
+
+    /// Normalises `x`. `train`: batch statistics (and the running ones move); `steps`: training
+    /// passes before this one; `frozen`: scale and bias held constant (gradients reach `x` only).
+    pub fn forward(&self, x: &Tensor, train: bool, steps: u64, frozen: bool) -> Result<Tensor> {
+        let (scale, bias) = if frozen {
+            (self.scale.as_tensor().detach(), self.bias.as_tensor().detach())
+        } else {
+            (self.scale.as_tensor().clone(), self.bias.as_tensor().clone())
+        };
+        let (mean, var) = if train {
+            let mean = x.mean_keepdim(0)?;
+            let var = x.broadcast_sub(&mean)?.sqr()?.mean_keepdim(0)?;
+            let (batch_mean, batch_var) = (mean.detach(), var.detach());
+            let corrected = if steps >= self.warmup {
+                let running_std = (self.running_var.as_tensor().affine(1.0, EPSILON)?).sqrt()?.unsqueeze(0)?;
+                let std = batch_var.affine(1.0, EPSILON)?.sqrt()?;
+                let r = (std / &running_std)?.clamp(1.0 / R_MAX, R_MAX)?;
+                let d = batch_mean
+                    .broadcast_sub(&self.running_mean.as_tensor().unsqueeze(0)?)?
+                    .broadcast_div(&running_std)?
+                    .clamp(-D_MAX, D_MAX)?;
+                // (x - mean') / sqrt(var' + eps) with var' = var / r^2, mean' = mean - d sqrt(var) / r.
+                let corrected_var = var.broadcast_div(&r.sqr()?)?;
+                let corrected_mean = (&mean - (d * var.sqrt()? / &r)?)?;
+                (corrected_mean, corrected_var)
+            } else {
+                (mean, var)
+            };
+            let m = self.momentum;
+            let update = |running: &Var, batch: &Tensor| -> Result<()> {
+                running.set(&(running.as_tensor().affine(m, 0.0)? + batch.squeeze(0)?.affine(1.0 - m, 0.0)?)?)
+            };
+            update(&self.running_mean, &batch_mean)?;
+            update(&self.running_var, &batch_var)?;
+            corrected
+        } else {
+            (self.running_mean.as_tensor().unsqueeze(0)?, self.running_var.as_tensor().unsqueeze(0)?)
+        };
+        let normalised = x.broadcast_sub(&mean)?.broadcast_div(&var.affine(1.0, EPSILON)?.sqrt()?)?;
+        normalised.broadcast_mul(&scale)?.broadcast_add(&bias)
+    }
+
+    fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
+        vec![
+            (format!("{prefix}.scale"), self.scale.clone()),
+            (format!("{prefix}.bias"), self.bias.clone()),
+            (format!("{prefix}.running_mean"), self.running_mean.clone()),
+            (format!("{prefix}.running_var"), self.running_var.clone()),
+        ]
+    }
+}
+
+/// Dense layers with batch renormalisation before each and ReLU between them.
+struct RenormMlp {
+    norms: Vec<BatchRenorm>,
+    layers: Vec<(Var, Var)>,
+}
+
+impl RenormMlp {
+    fn new(sizes: &[usize], cfg: &TrainConfig, rng: &mut ChaCha8Rng) -> Result<RenormMlp> {
+        let s = cfg.crossq();
+        let mlp = Mlp::new(sizes, Output::Linear, cfg.weight_init, rng)?;
+        let layers: Vec<(Var, Var)> = (0..sizes.len() - 1).map(|i| mlp.layer(i).clone()).collect();
+        let norms = sizes[..sizes.len() - 1]
+            .iter()
+            .map(|&f| BatchRenorm::new(f, s.batch_norm_momentum, s.renorm_warmup_steps))
+            .collect::<Result<_>>()?;
+        Ok(RenormMlp { norms, layers })
+    }
+
+    fn forward(&self, x: &Tensor, train: bool, steps: u64, frozen: bool) -> Result<Tensor> {
+        let mut h = x.clone();
+        let last = self.layers.len() - 1;
+        for (i, (norm, (w, b))) in self.norms.iter().zip(&self.layers).enumerate() {
+            h = norm.forward(&h, train, steps, frozen)?;
+            let (w, b) = if frozen {
+                (w.as_tensor().detach(), b.as_tensor().detach())
+            } else {
+                (w.as_tensor().clone(), b.as_tensor().clone())
+            };
+            h = dense(&h, &w, &b, if i < last { Activation::Relu } else { Activation::Identity })?;
+        }
+        Ok(h)
+    }
+
+    /// The trained parameters (weights, biases, scales, norm biases), not the running statistics.
+    fn trained_vars(&self) -> Vec<Var> {
+        let mut out: Vec<Var> = self.layers.iter().flat_map(|(w, b)| [w.clone(), b.clone()]).collect();
+        out.extend(self.norms.iter().flat_map(|n| [n.scale.clone(), n.bias.clone()]));
+        out
+    }
+
+    fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
+        let mut out = Vec::new();
+        for (i, (w, b)) in self.layers.iter().enumerate() {
+            out.push((format!("{prefix}.{i}.weight"), w.clone()));
+            out.push((format!("{prefix}.{i}.bias"), b.clone()));
+        }
+        for (i, n) in self.norms.iter().enumerate() {
+            out.extend(n.named_vars(&format!("{prefix}.norm{i}")));
+        }
+        out
+    }
+}
+
+/// CrossQ: SAC's policy and temperature with batch-renormalised twin critics and no targets.
+pub struct CrossqAgent {
+    obs_dim: usize,
+    act_dim: usize,
+    gamma: f64,
+    actor: RenormMlp,
+    critics: [RenormMlp; 2],
+    log_alpha: Var,
+    target_entropy: f64,
+    actor_opt: Adam,
+    critic_opt: Adam,
+    alpha_opt: Adam,
+    policy_delay: u64,
+    updates: u64,
+    /// Training passes through the actor's and the critics' normalisation layers.
+    actor_passes: u64,
+    critic_passes: u64,
+}
+
+impl CrossqAgent {
+    /// Builds the networks for `obs_dim`/`act_dim`, initialised from `rng`.
+    pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
+        let s = cfg.crossq();
+        let actor = RenormMlp::new(&layer_sizes(obs_dim, &cfg.hidden, 2 * act_dim), cfg, rng)?;
+        let critic_sizes = layer_sizes(obs_dim + act_dim, &s.critic_hidden, 1);
+        let critics = [RenormMlp::new(&critic_sizes, cfg, rng)?, RenormMlp::new(&critic_sizes, cfg, rng)?];
+        let log_alpha = scalar_var(s.initial_alpha.ln() as f32)?;
+        let adam = |vars: Vec<Var>, lr: f64| {
+            let mut opt = Adam::new(vars, lr);
+            opt.beta1 = s.adam_beta1;
+            opt
+        };
+        Ok(CrossqAgent {
+            obs_dim,
+            act_dim,
+            gamma: cfg.gamma,
+            actor_opt: adam(actor.trained_vars(), cfg.actor_lr),
+            critic_opt: adam(critics.iter().flat_map(|c| c.trained_vars()).collect(), cfg.critic_lr),
+            alpha_opt: adam(vec![log_alpha.clone()], s.alpha_lr),
+            actor,
+            critics,
+            log_alpha,
+            target_entropy: s.target_entropy.unwrap_or(-(act_dim as f64)),
+            policy_delay: s.policy_delay as u64,
+            updates: 0,
+            actor_passes: 0,
+            critic_passes: 0,
+        })
+    }
+
+    /// The current temperature.
+    pub fn alpha(&self) -> Result<f64> {
+        Ok(self.log_alpha.as_tensor().exp()?.flatten_all()?.to_vec1::<f32>()?[0] as f64)
+    }
+
+    fn mean_log_std(&self, obs: &Tensor, train: bool) -> Result<(Tensor, Tensor)> {
+        let out = self.actor.forward(obs, train, self.actor_passes, false)?;
+        let mean = out.narrow(1, 0, self.act_dim)?;
+        let log_std = out.narrow(1, self.act_dim, self.act_dim)?.clamp(LOG_STD_MIN, LOG_STD_MAX)?;
+        Ok((mean, log_std))
+    }
+
+    fn sample(&self, obs: &Tensor, train: bool, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
+        let n = obs.dims()[0];
+        let (mean, log_std) = self.mean_log_std(obs, train)?;
+        let eps: Vec<f32> = (0..n * self.act_dim).map(|_| StandardNormal.sample(rng)).collect();
+        let eps = Tensor::from_vec(eps, (n, self.act_dim), &Device::Cpu)?;
+        let u = (mean + (log_std.exp()? * &eps)?)?;
+        let log_prob = squashed_gaussian_log_prob(&u, &eps, &log_std, TanhCorrection::Exact)?;
+        Ok((u.tanh()?, log_prob))
+    }
+}
+
+impl Agent for CrossqAgent {
+    fn algo(&self) -> Algo {
+        Algo::Crossq
+    }
+
+    fn act(&self, obs: &[f32]) -> Result<Vec<f32>> {
+        let (mean, _) = self.mean_log_std(&batch_tensor(obs, 1, self.obs_dim)?, false)?;
+        mean.tanh()?.flatten_all()?.to_vec1::<f32>()
+    }
+
+    fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
+        let (a, _) = self.sample(&batch_tensor(obs, 1, self.obs_dim)?, false, rng)?;
+        a.flatten_all()?.to_vec1::<f32>()
+    }
+
+    fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
+        let n = batch.size;
+        let obs = batch_tensor(&batch.obs, n, self.obs_dim)?;
+        let actions = batch_tensor(&batch.actions, n, self.act_dim)?;
+        let next_obs = batch_tensor(&batch.next_obs, n, self.obs_dim)?;
+        let rewards = batch_tensor(&batch.rewards, n, 1)?;
+        let not_done = batch_tensor(&batch.terminated, n, 1)?.affine(-1.0, 1.0)?;
+        let alpha = self.alpha()?;
+        let mut losses = Losses::default();
+
+        // One pass of both critics over [(s, a); (s', a')]: the halves share batch statistics.
+        let (next_a, next_logp) = self.sample(&next_obs, false, rng)?;
+        let joint = Tensor::cat(&[Tensor::cat(&[&obs, &actions], 1)?, Tensor::cat(&[&next_obs, &next_a], 1)?], 0)?;
+        let q: Vec<Tensor> =
+            self.critics.iter().map(|c| c.forward(&joint, true, self.critic_passes, false)).collect::<Result<_>>()?;
+        self.critic_passes += 1;
+        let q_next = q[0].narrow(0, n, n)?.minimum(&q[1].narrow(0, n, n)?)?.detach();
+        let soft_next = (q_next - next_logp.detach().affine(alpha, 0.0)?)?;
+        let y = (rewards + (not_done * soft_next)?.affine(self.gamma, 0.0)?)?.detach();
+        let mut critic_loss = Tensor::zeros((), DType::F32, &Device::Cpu)?;
+        for qk in &q {
+            critic_loss =
+                (critic_loss + qk.narrow(0, 0, n)?.broadcast_sub(&y)?.sqr()?.mean_all()?.affine(0.5, 0.0)?)?;
+        }
+        self.critic_opt.step(&critic_loss.backward()?)?;
+        losses.critic = critic_loss.to_scalar::<f32>()? as f64;
+        self.updates += 1;
+
+        if self.updates.is_multiple_of(self.policy_delay) {
+            let (pi_a, logp) = self.sample(&obs, true, rng)?;
+            self.actor_passes += 1;
+            let x = Tensor::cat(&[&obs, &pi_a], 1)?;
+            let q_pi = self.critics[0]
+                .forward(&x, false, self.critic_passes, true)?
+                .minimum(&self.critics[1].forward(&x, false, self.critic_passes, true)?)?;
+            let actor_loss = (logp.affine(alpha, 0.0)? - q_pi)?.mean_all()?;
+            self.actor_opt.step(&actor_loss.backward()?)?;
+            losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
+
+            let gap = logp.detach().affine(1.0, self.target_entropy)?;
+            let alpha_loss = self.log_alpha.as_tensor().broadcast_mul(&gap)?.mean_all()?.neg()?;
+            self.alpha_opt.step(&alpha_loss.backward()?)?;
+            losses.alpha_loss = Some(alpha_loss.to_scalar::<f32>()? as f64);
+        }
+        losses.alpha = Some(self.alpha()?);
+        Ok(losses)
+    }
+
+    fn parameters(&self) -> Vec<(String, Var)> {
+        let mut out = self.actor.named_vars("actor");
+        out.extend(self.critics[0].named_vars("critic0"));
+        out.extend(self.critics[1].named_vars("critic1"));
+        out.push(("log_alpha".into(), self.log_alpha.clone()));
+        out
+    }
+
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
+        vec![
+            ("actor_opt", &mut self.actor_opt),
+            ("critic_opt", &mut self.critic_opt),
+            ("alpha_opt", &mut self.alpha_opt),
+        ]
+    }
+
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![("updates", self.updates), ("actor_passes", self.actor_passes), ("critic_passes", self.critic_passes)]
+    }
+
+    fn set_counter(&mut self, name: &str, value: u64) {
+        match name {
+            "updates" => self.updates = value,
+            "actor_passes" => self.actor_passes = value,
+            "critic_passes" => self.critic_passes = value,
+            _ => {}
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn column_stats(x: &[[f64; 2]]) -> ([f64; 2], [f64; 2]) {
+        let n = x.len() as f64;
+        let mut mean = [0.0; 2];
+        let mut var = [0.0; 2];
+        for j in 0..2 {
+            mean[j] = x.iter().map(|r| r[j]).sum::<f64>() / n;
+            var[j] = x.iter().map(|r| (r[j] - mean[j]).powi(2)).sum::<f64>() / n;
+        }
+        (mean, var)
+    }
+
+    fn run(layer: &BatchRenorm, x: &[[f64; 2]], train: bool, steps: u64) -> Vec<Vec<f32>> {
+        let flat: Vec<f32> = x.iter().flatten().map(|&v| v as f32).collect();
+        let t = Tensor::from_vec(flat, (x.len(), 2), &Device::Cpu).unwrap();
+        layer.forward(&t, train, steps, false).unwrap().to_vec2::<f32>().unwrap()
+    }
+
+    #[test]
+    fn batch_renorm_matches_a_hand_computation() {
+        let x = [[1.0, -2.0], [3.0, 0.5], [-1.0, 4.0], [2.0, 1.5]];
+        let (mean, var) = column_stats(&x);
+        let m = 0.9;
+
+        // During warm-up: plain batch normalisation, and the running statistics move.
+        let layer = BatchRenorm::new(2, m, 10).unwrap();
+        let y = run(&layer, &x, true, 0);
+        for (i, row) in x.iter().enumerate() {
+            for j in 0..2 {
+                let expect = (row[j] - mean[j]) / (var[j] + EPSILON).sqrt();
+                assert!((y[i][j] as f64 - expect).abs() < 1e-5, "warm-up ({i}, {j}): {} vs {expect}", y[i][j]);
+            }
+        }
+        let rm = layer.running_mean.as_tensor().to_vec1::<f32>().unwrap();
+        let rv = layer.running_var.as_tensor().to_vec1::<f32>().unwrap();
+        for j in 0..2 {
+            assert!((rm[j] as f64 - (1.0 - m) * mean[j]).abs() < 1e-6);
+            assert!((rv[j] as f64 - (m + (1.0 - m) * var[j])).abs() < 1e-6);
+        }
+
+        // After warm-up: r and d correct the batch statistics towards the running ones (here the
+        // running statistics after the pass above), with r and d clipped.
+        let x2 = [[10.0, 0.0], [12.0, 0.1], [8.0, -0.1], [14.0, 0.2]];
+        let (mean2, var2) = column_stats(&x2);
+        let y2 = run(&layer, &x2, true, 10);
+        for j in 0..2 {
+            let running_std = (rv[j] as f64 + EPSILON).sqrt();
+            let r = ((var2[j] + EPSILON).sqrt() / running_std).clamp(1.0 / R_MAX, R_MAX);
+            let d = ((mean2[j] - rm[j] as f64) / running_std).clamp(-D_MAX, D_MAX);
+            let (cm, cv) = (mean2[j] - d * var2[j].sqrt() / r, var2[j] / (r * r));
+            for (i, row) in x2.iter().enumerate() {
+                let expect = (row[j] - cm) / (cv + EPSILON).sqrt();
+                assert!((y2[i][j] as f64 - expect).abs() < 1e-4, "renorm ({i}, {j}): {} vs {expect}", y2[i][j]);
+            }
+        }
+        // Column 0's mean is far from the running one: d is clipped at D_MAX.
+        assert!((mean2[0] - rm[0] as f64) / (rv[0] as f64 + EPSILON).sqrt() > D_MAX);
+
+        // Evaluation: the running statistics alone, and they stay where they are.
+        let before = layer.running_mean.as_tensor().to_vec1::<f32>().unwrap();
+        let rv = layer.running_var.as_tensor().to_vec1::<f32>().unwrap();
+        let y3 = run(&layer, &x, false, 10);
+        for (i, row) in x.iter().enumerate() {
+            for j in 0..2 {
+                let expect = (row[j] - before[j] as f64) / (rv[j] as f64 + EPSILON).sqrt();
+                assert!((y3[i][j] as f64 - expect).abs() < 1e-5);
+            }
+        }
+        assert_eq!(layer.running_mean.as_tensor().to_vec1::<f32>().unwrap(), before);
+    }
+
+    #[test]
+    fn gradients_flow_through_the_batch_statistics() {
+        // Batch normalisation's output sums to zero per column whatever the input, so the
+        // gradient of the column sum with respect to every input is zero; a layer that treated
+        // the statistics as constants would give 1 / std instead.
+        let layer = BatchRenorm::new(1, 0.99, 100).unwrap();
+        let x = Var::from_tensor(&Tensor::new(&[[1.0f32], [2.0], [4.0]], &Device::Cpu).unwrap()).unwrap();
+        let y = layer.forward(x.as_tensor(), true, 0, false).unwrap();
+        let grads = y.sum_all().unwrap().backward().unwrap();
+        let g = grads.get(x.as_tensor()).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+        assert!(g.iter().all(|v| v.abs() < 1e-5), "{g:?}");
+    }
+}
