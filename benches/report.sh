@@ -23,6 +23,9 @@ runs=(
   # HalfCheetah and Humanoid: curves only
   $r/half-cheetah/{td3,sac,ddpg}-seed{0,1}-300k
   $r/humanoid/{td3,sac}-seed{0,1}-300k $r/humanoid/td3-seed2-300k $r/humanoid/td3-cleanrl-seed{0,1,2}-300k
+  # PPO with CleanRL's settings, 1M steps, with their policies; PPO and the branching DQN on Minitaur
+  $r/{half-cheetah,hopper,walker2d}/ppo-seed{0,1,2}-1m
+  $r/minitaur/ppo-8envs-seed{0,1,2}-2m $r/minitaur/dqn-seed0-300k $r/inverted-pendulum/dqn-seed0
 )
 existing=()
 for d in "${runs[@]}"; do
