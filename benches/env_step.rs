@@ -118,6 +118,8 @@ fn bench_vector(c: &mut Criterion) {
         pairs.push(("max_episode_steps".into(), "100000000".into()));
         let cfg = EnvConfig::new(case.name).with_overrides(&pairs).unwrap();
         for threads in [1, 2] {
+            // As training runs it: two threads means the runtime's helper thread.
+            let _runtime = locobench::runtime::Runtime::enter(threads);
             let mut env = VecEnv::new(&cfg, COPIES, threads).unwrap();
             let space = env.spec().action_space.clone();
             let acts = actions(space.dim(), space.low[0], space.high[0]);

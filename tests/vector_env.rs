@@ -46,6 +46,13 @@ fn same_bits_on_any_thread_count() {
     for threads in [2, 3, 5, 8] {
         assert!(one == trace("hopper", 5, threads, 120, 7), "{threads} threads differ from one");
     }
+    // With the training runtime's helper thread, two threads split the copies between the
+    // caller and the helper.
+    let helper = std::thread::spawn(|| {
+        let _runtime = locobench::runtime::Runtime::enter(2);
+        trace("hopper", 5, 2, 120, 7)
+    });
+    assert!(one == helper.join().unwrap(), "the helper thread's split differs from one thread");
     assert!(one != trace("hopper", 5, 1, 120, 8), "another seed gives another trace");
 }
 

@@ -252,14 +252,29 @@ impl VecEnv {
         self.copies[i].env.as_ref()
     }
 
-    /// `f` on every copy, results in copy order. Copies are split into `threads` contiguous
-    /// blocks; worker threads take the caller's floating-point mode (flush-to-zero), so a copy
-    /// computes the same bits on any thread.
+    /// `f` on every copy, results in copy order. Copies are split into contiguous blocks: two,
+    /// when the calling thread has a helper thread (`numeric::second_core`), else `threads`
+    /// blocks on scoped threads. Every thread computes with the caller's floating-point mode
+    /// (flush-to-zero), so a copy computes the same bits on any thread.
     fn run<R: Send>(&mut self, f: impl Fn(usize, &mut Copy) -> R + Sync) -> Vec<R> {
         let n = self.copies.len();
         let threads = self.threads.min(n);
         if threads == 1 {
             return self.copies.iter_mut().enumerate().map(|(i, c)| f(i, c)).collect();
+        }
+        if crate::numeric::second_core::has_helper() {
+            // The training thread's helper (`runtime::Runtime` with two threads) takes the second
+            // half: a thread that already runs, instead of one spawned per step.
+            let (first, second) = self.copies.split_at_mut(n.div_ceil(2));
+            let offset = first.len();
+            let (mut a, mut b) = (Vec::new(), Vec::new());
+            let f = &f;
+            crate::numeric::second_core::join(
+                || a = first.iter_mut().enumerate().map(|(i, c)| f(i, c)).collect(),
+                || b = second.iter_mut().enumerate().map(|(j, c)| f(offset + j, c)).collect(),
+            );
+            a.extend(b);
+            return a;
         }
         let block = n.div_ceil(threads);
         let mode = float_mode();

@@ -80,6 +80,11 @@ pub(crate) fn enable_on_this_thread() {
     });
 }
 
+/// Whether this thread has a helper (`join` then runs its second closure on the other core).
+pub(crate) fn has_helper() -> bool {
+    HELPER.with(|h| h.borrow().is_some())
+}
+
 /// Stops this thread's helper, if any.
 pub(crate) fn disable_on_this_thread() {
     HELPER.with(|h| h.borrow_mut().take());
