@@ -197,7 +197,11 @@ impl Policy for AgentPolicy<'_> {
 
 /// Maps a normalised action in [-1, 1] to the environment's bounds.
 pub(crate) fn to_env_action(env: &dyn Env, normalised: &[f32]) -> Vec<f64> {
-    let s = &env.spec().action_space;
+    to_space(&env.spec().action_space, normalised)
+}
+
+/// Maps a normalised action in [-1, 1] to a space's bounds.
+pub(crate) fn to_space(s: &BoxSpace, normalised: &[f32]) -> Vec<f64> {
     normalised
         .iter()
         .zip(s.low.iter().zip(&s.high))

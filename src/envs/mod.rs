@@ -158,14 +158,20 @@ pub trait Env: Send {
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError>;
 }
 
-/// Checks an action against the space and returns a clipped copy and the number clipped.
-pub(crate) fn clip_action(space: &BoxSpace, action: &[f64]) -> Result<(Vec<f64>, usize), EnvError> {
+/// Refuses an action of the wrong length or with a NaN or infinite entry.
+pub(crate) fn check_action(space: &BoxSpace, action: &[f64]) -> Result<(), EnvError> {
     if action.len() != space.dim() {
         return Err(EnvError::ActionLength { expected: space.dim(), got: action.len() });
     }
     if let Some(index) = action.iter().position(|a| !a.is_finite()) {
         return Err(EnvError::NonFiniteAction { index, value: action[index] });
     }
+    Ok(())
+}
+
+/// Checks an action against the space and returns a clipped copy and the number clipped.
+pub(crate) fn clip_action(space: &BoxSpace, action: &[f64]) -> Result<(Vec<f64>, usize), EnvError> {
+    check_action(space, action)?;
     let mut clipped = 0;
     let out = action
         .iter()

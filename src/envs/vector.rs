@@ -20,7 +20,7 @@
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::{make, Env, EnvConfig, EnvError, EnvSpec, Info};
+use super::{check_action, make, Env, EnvConfig, EnvError, EnvSpec, Info};
 use crate::numeric::denormals::{float_mode, set_float_mode};
 
 /// The reset seed of episode `episode` of copy `copy` after a vector reset with `seed`: one ChaCha8
@@ -223,14 +223,8 @@ impl VecEnv {
         if actions.len() != self.copies.len() {
             return Err(EnvError::ActionCount { expected: self.copies.len(), got: actions.len() });
         }
-        let dim = self.spec.action_space.dim();
         for (i, a) in actions.iter().enumerate() {
-            if a.len() != dim {
-                return Err(in_copy(i, EnvError::ActionLength { expected: dim, got: a.len() }));
-            }
-            if let Some(index) = a.iter().position(|x| !x.is_finite()) {
-                return Err(in_copy(i, EnvError::NonFiniteAction { index, value: a[index] }));
-            }
+            check_action(&self.spec.action_space, a).map_err(|e| in_copy(i, e))?;
         }
         let seeding = self.seeding();
         let results = self.run(|i, copy| step_copy(copy, &actions[i], seeding, i));

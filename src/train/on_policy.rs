@@ -30,6 +30,7 @@ use super::{budget_policy_path, Outcome, RunConfig, RunControl, RunSummary, BUDG
 use crate::agents::ppo::{PpoBatch, PpoLosses};
 use crate::agents::{Losses, PpoAgent, PpoConfig, TrainConfig};
 use crate::envs::{make, Env, VecEnv, VecEnvSnapshot};
+use crate::policy::to_space;
 use crate::record::Recording;
 
 const ROLLOUT_FILE: &str = "rollout.safetensors";
@@ -287,16 +288,10 @@ impl OnPolicyTrainer {
         for _ in 0..steps {
             let x = self.agent.normalize(&self.obs)?;
             let policy = self.agent.policy_step(&x, &mut self.rng)?;
-            let act_dim = space.dim();
             let env_actions: Vec<Vec<f64>> = policy
                 .actions
-                .chunks(act_dim)
-                .map(|a| {
-                    a.iter()
-                        .zip(space.low.iter().zip(&space.high))
-                        .map(|(&v, (&l, &h))| l + (v.clamp(-1.0, 1.0) as f64 + 1.0) * 0.5 * (h - l))
-                        .collect()
-                })
+                .chunks(space.dim())
+                .map(|a| to_space(&space, &a.iter().map(|v| v.clamp(-1.0, 1.0)).collect::<Vec<f32>>()))
                 .collect();
             let s = self.envs.step(&env_actions)?;
             let before = self.step;
