@@ -57,6 +57,11 @@ impl MetricsRow {
             ..Default::default()
         }
     }
+
+    /// This row with an evaluation's mean, std and saturation.
+    pub(crate) fn with_evaluation(self, e: &super::evaluate::Evaluation) -> MetricsRow {
+        MetricsRow { eval_mean: Some(e.mean()), eval_std: Some(e.std()), eval_saturation: Some(e.saturation), ..self }
+    }
 }
 
 pub(crate) const HEADER: [&str; 12] = [

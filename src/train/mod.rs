@@ -118,6 +118,49 @@ pub(crate) fn check_bounded_actions(env: &str, space: &crate::envs::BoxSpace, al
     Ok(())
 }
 
+/// The training progress bar (hidden unless `show`), at `position` of `total` steps.
+fn progress_bar(show: bool, total: u64, position: u64) -> ProgressBar {
+    let bar = if show { ProgressBar::new(total) } else { ProgressBar::hidden() };
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} steps, {per_sec} {msg}")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    bar.set_position(position);
+    bar
+}
+
+/// Writes the actor as the run's policy at `step` (`policies/step-<step>.safetensors`).
+fn save_budget_policy(run_dir: &Path, step: u64, agent: &dyn Agent) -> Result<()> {
+    let dir = run_dir.join(BUDGET_POLICY_DIR);
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    checkpoint::save_actor(&budget_policy_path(run_dir, step), agent)
+}
+
+/// Appends an evaluation's row, rewrites `metrics.csv`, and logs the row to the recording, with a
+/// rollout of the policy at every `record_every`-th evaluation.
+fn log_evaluation(
+    run_dir: &Path,
+    metrics: &mut Vec<MetricsRow>,
+    row: MetricsRow,
+    recorder: Option<&mut TrainingRecorder>,
+    record_every: u64,
+    agent: &dyn Agent,
+    run_seed: u64,
+) -> Result<()> {
+    let step = row.step;
+    metrics.push(row);
+    metrics::write(&run_dir.join("metrics.csv"), metrics)?;
+    if let Some(r) = recorder {
+        r.curves(metrics.last().expect("just pushed"))?;
+        let evaluations = metrics.iter().filter(|m| m.kind == "eval").count() as u64;
+        if (evaluations - 1).is_multiple_of(record_every.max(1)) {
+            r.evaluation_rollout(agent, step, run_seed)?;
+        }
+    }
+    Ok(())
+}
+
 /// The commit this binary was built from (build.rs), not whatever the source tree holds now.
 pub(crate) fn git_commit() -> Option<String> {
     option_env!("LOCOBENCH_GIT_COMMIT").map(str::to_string)
@@ -280,13 +323,7 @@ impl Trainer {
         let _runtime = crate::runtime::Runtime::enter(control.threads);
         let cfg = self.cfg.clone();
         let signals = stop::stop_signals();
-        let bar = if control.show_progress { ProgressBar::new(cfg.total_steps) } else { ProgressBar::hidden() };
-        bar.set_style(
-            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} steps, {per_sec} {msg}")
-                .expect("valid template")
-                .progress_chars("=> "),
-        );
-        bar.set_position(self.step);
+        let bar = progress_bar(control.show_progress, cfg.total_steps, self.step);
         let started = Instant::now();
         let start_step = self.step;
         let act_dim = self.env.spec().action_space.dim();
@@ -376,7 +413,7 @@ impl Trainer {
 
             // The actor at each reporting budget, for the report's per-budget rows.
             if POLICY_BUDGETS.contains(&self.step) || self.step == cfg.total_steps {
-                self.save_budget_policy()?;
+                save_budget_policy(&self.run_dir, self.step, self.agent.as_ref())?;
             }
 
             // Evaluate.
@@ -384,20 +421,16 @@ impl Trainer {
                 let e = evaluate(self.agent.as_ref(), self.eval_env.as_mut(), cfg.eval_episodes, self.seed)?;
                 best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
-                self.metrics.push(MetricsRow {
-                    eval_mean: Some(e.mean()),
-                    eval_std: Some(e.std()),
-                    eval_saturation: Some(e.saturation),
-                    ..MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset))
-                });
-                metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
-                if let Some(r) = &mut recorder {
-                    r.curves(self.metrics.last().unwrap())?;
-                    let evaluations = self.metrics.iter().filter(|m| m.kind == "eval").count() as u64;
-                    if (evaluations - 1).is_multiple_of(control.record_every.max(1)) {
-                        r.evaluation_rollout(self.agent.as_ref(), self.step, self.seed)?;
-                    }
-                }
+                let row = MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset));
+                log_evaluation(
+                    &self.run_dir,
+                    &mut self.metrics,
+                    row.with_evaluation(&e),
+                    recorder.as_mut(),
+                    control.record_every,
+                    self.agent.as_ref(),
+                    self.seed,
+                )?;
                 last_eval = Some(e);
             }
             bar.set_position(self.step);
@@ -423,12 +456,6 @@ impl Trainer {
             best_eval_mean: best_eval,
             checkpoint,
         })
-    }
-
-    fn save_budget_policy(&self) -> Result<()> {
-        let dir = self.run_dir.join(BUDGET_POLICY_DIR);
-        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-        checkpoint::save_actor(&budget_policy_path(&self.run_dir, self.step), self.agent.as_ref())
     }
 
     fn save(&mut self, at_episode_boundary: bool, wall_time: f64) -> Result<PathBuf> {

@@ -17,7 +17,7 @@ use std::time::Instant;
 
 use anyhow::{Context, Result};
 use candle_core::{Device, Tensor};
-use indicatif::{ProgressBar, ProgressStyle};
+use indicatif::ProgressBar;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
@@ -26,7 +26,9 @@ use super::evaluate::{evaluate, Evaluation};
 use super::metrics::{self, MetricsRow};
 use super::recording::TrainingRecorder;
 use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
-use super::{budget_policy_path, Outcome, RunConfig, RunControl, RunSummary, BUDGET_POLICY_DIR, POLICY_BUDGETS};
+use super::{
+    log_evaluation, progress_bar, save_budget_policy, Outcome, RunConfig, RunControl, RunSummary, POLICY_BUDGETS,
+};
 use crate::agents::ppo::{PpoBatch, PpoLosses};
 use crate::agents::{Losses, PpoAgent, PpoConfig, TrainConfig};
 use crate::envs::{make, Env, VecEnv, VecEnvSnapshot};
@@ -175,13 +177,7 @@ impl OnPolicyTrainer {
         let rollout = self.settings.rollout_size() as u64;
         let iterations = total.div_ceil(rollout).max(1);
         let signals = super::stop::stop_signals();
-        let bar = if control.show_progress { ProgressBar::new(total) } else { ProgressBar::hidden() };
-        bar.set_style(
-            ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} steps, {per_sec} {msg}")
-                .expect("valid template")
-                .progress_chars("=> "),
-        );
-        bar.set_position(self.step);
+        let bar = progress_bar(control.show_progress, total, self.step);
         let started = Instant::now();
         let start_step = self.step;
         let wall = |offset: f64| offset + started.elapsed().as_secs_f64();
@@ -222,20 +218,16 @@ impl OnPolicyTrainer {
                 let e = evaluate(&self.agent, self.eval_env.as_mut(), eval_episodes, self.run.seed)?;
                 best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
-                self.metrics.push(MetricsRow {
-                    eval_mean: Some(e.mean()),
-                    eval_std: Some(e.std()),
-                    eval_saturation: Some(e.saturation),
-                    ..MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset))
-                });
-                metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
-                if let Some(r) = &mut recorder {
-                    r.curves(self.metrics.last().expect("just pushed"))?;
-                    let evaluations = self.metrics.iter().filter(|m| m.kind == "eval").count() as u64;
-                    if (evaluations - 1).is_multiple_of(control.record_every.max(1)) {
-                        r.evaluation_rollout(&self.agent, self.step, self.run.seed)?;
-                    }
-                }
+                let row = MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset));
+                log_evaluation(
+                    &self.run_dir,
+                    &mut self.metrics,
+                    row.with_evaluation(&e),
+                    recorder.as_mut(),
+                    control.record_every,
+                    &self.agent,
+                    self.run.seed,
+                )?;
                 last_eval = Some(e);
             }
             bar.set_position(self.step);
@@ -246,7 +238,7 @@ impl OnPolicyTrainer {
         };
         bar.finish_and_clear();
         if outcome == Outcome::Finished {
-            self.save_budget_policy()?;
+            save_budget_policy(&self.run_dir, self.step, &self.agent)?;
         }
         let checkpoint = self.save(wall(self.wall_offset))?;
         metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
@@ -298,7 +290,7 @@ impl OnPolicyTrainer {
             self.step += n as u64;
             if let Some(&budget) = POLICY_BUDGETS.iter().find(|&&b| before < b && b <= self.step) {
                 // The actor that collected this step is the one at the budget.
-                self.save_policy_at(budget)?;
+                save_budget_policy(&self.run_dir, budget, &self.agent)?;
             }
 
             // Observation statistics see every observation once: each ended episode's last,
@@ -422,16 +414,6 @@ impl OnPolicyTrainer {
             }
         }
         Ok(last)
-    }
-
-    fn save_policy_at(&self, step: u64) -> Result<()> {
-        let dir = self.run_dir.join(BUDGET_POLICY_DIR);
-        std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-        checkpoint::save_actor(&budget_policy_path(&self.run_dir, step), &self.agent)
-    }
-
-    fn save_budget_policy(&self) -> Result<()> {
-        self.save_policy_at(self.step)
     }
 
     fn save(&mut self, wall_time: f64) -> Result<PathBuf> {
