@@ -8,19 +8,16 @@
 //! every third critic update.
 use candle_core::{DType, Device, Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
-use rand_distr::{Distribution, StandardNormal};
 
 use super::buffer::Batch;
 use super::config::{Algo, TanhCorrection, TrainConfig};
-use super::nets::{batch_tensor, scalar_var, Mlp, Output};
-use super::sac::squashed_gaussian_log_prob;
+use super::nets::{batch_tensor, scalar_var, DenseStack, Mlp, Output};
+use super::sac::{sample_squashed, temperature, temperature_loss, LOG_STD_MAX, LOG_STD_MIN};
 use super::{layer_sizes, Agent, Losses};
 use crate::numeric::dense::dense;
 use crate::numeric::inplace::Activation;
 use crate::numeric::optim::Adam;
 
-const LOG_STD_MIN: f32 = -20.0;
-const LOG_STD_MAX: f32 = 2.0;
 /// Batch renormalisation's limits on r and d (Ioffe 2017; sbx's `BatchRenorm`).
 const R_MAX: f64 = 3.0;
 const D_MAX: f64 = 5.0;
@@ -110,14 +107,14 @@ impl BatchRenorm {
 /// Dense layers with batch renormalisation before each and ReLU between them.
 struct RenormMlp {
     norms: Vec<BatchRenorm>,
-    layers: Vec<(Var, Var)>,
+    layers: DenseStack,
 }
 
 impl RenormMlp {
     fn new(sizes: &[usize], cfg: &TrainConfig, rng: &mut ChaCha8Rng) -> Result<RenormMlp> {
         let s = cfg.crossq();
         let mlp = Mlp::new(sizes, Output::Linear, cfg.weight_init, rng)?;
-        let layers: Vec<(Var, Var)> = (0..sizes.len() - 1).map(|i| mlp.layer(i).clone()).collect();
+        let layers = DenseStack::new((0..sizes.len() - 1).map(|i| mlp.layer(i).clone()).collect());
         let norms = sizes[..sizes.len() - 1]
             .iter()
             .map(|&f| BatchRenorm::new(f, s.batch_norm_momentum, s.renorm_warmup_steps))
@@ -127,8 +124,8 @@ impl RenormMlp {
 
     fn forward(&self, x: &Tensor, train: bool, steps: u64, frozen: bool) -> Result<Tensor> {
         let mut h = x.clone();
-        let last = self.layers.len() - 1;
-        for (i, (norm, (w, b))) in self.norms.iter().zip(&self.layers).enumerate() {
+        let last = self.layers.layers().len() - 1;
+        for (i, (norm, (w, b))) in self.norms.iter().zip(self.layers.layers()).enumerate() {
             h = norm.forward(&h, train, steps, frozen)?;
             let (w, b) = if frozen {
                 (w.as_tensor().detach(), b.as_tensor().detach())
@@ -142,17 +139,13 @@ impl RenormMlp {
 
     /// The trained parameters (weights, biases, scales, norm biases), not the running statistics.
     fn trained_vars(&self) -> Vec<Var> {
-        let mut out: Vec<Var> = self.layers.iter().flat_map(|(w, b)| [w.clone(), b.clone()]).collect();
+        let mut out = self.layers.vars();
         out.extend(self.norms.iter().flat_map(|n| [n.scale.clone(), n.bias.clone()]));
         out
     }
 
     fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
-        let mut out = Vec::new();
-        for (i, (w, b)) in self.layers.iter().enumerate() {
-            out.push((format!("{prefix}.{i}.weight"), w.clone()));
-            out.push((format!("{prefix}.{i}.bias"), b.clone()));
-        }
+        let mut out = self.layers.named_vars(prefix);
         for (i, n) in self.norms.iter().enumerate() {
             out.extend(n.named_vars(&format!("{prefix}.norm{i}")));
         }
@@ -212,24 +205,19 @@ impl CrossqAgent {
 
     /// The current temperature.
     pub fn alpha(&self) -> Result<f64> {
-        Ok(self.log_alpha.as_tensor().exp()?.flatten_all()?.to_vec1::<f32>()?[0] as f64)
+        temperature(&self.log_alpha)
     }
 
     fn mean_log_std(&self, obs: &Tensor, train: bool) -> Result<(Tensor, Tensor)> {
         let out = self.actor.forward(obs, train, self.actor_passes, false)?;
         let mean = out.narrow(1, 0, self.act_dim)?;
-        let log_std = out.narrow(1, self.act_dim, self.act_dim)?.clamp(LOG_STD_MIN, LOG_STD_MAX)?;
+        let log_std = out.narrow(1, self.act_dim, self.act_dim)?.clamp(LOG_STD_MIN as f32, LOG_STD_MAX as f32)?;
         Ok((mean, log_std))
     }
 
     fn sample(&self, obs: &Tensor, train: bool, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
-        let n = obs.dims()[0];
         let (mean, log_std) = self.mean_log_std(obs, train)?;
-        let eps: Vec<f32> = (0..n * self.act_dim).map(|_| StandardNormal.sample(rng)).collect();
-        let eps = Tensor::from_vec(eps, (n, self.act_dim), &Device::Cpu)?;
-        let u = (mean + (log_std.exp()? * &eps)?)?;
-        let log_prob = squashed_gaussian_log_prob(&u, &eps, &log_std, TanhCorrection::Exact)?;
-        Ok((u.tanh()?, log_prob))
+        sample_squashed(mean, &log_std, TanhCorrection::Exact, rng)
     }
 }
 
@@ -287,8 +275,7 @@ impl Agent for CrossqAgent {
             self.actor_opt.step(&actor_loss.backward()?)?;
             losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
 
-            let gap = logp.detach().affine(1.0, self.target_entropy)?;
-            let alpha_loss = self.log_alpha.as_tensor().broadcast_mul(&gap)?.mean_all()?.neg()?;
+            let alpha_loss = temperature_loss(&self.log_alpha, &logp, self.target_entropy)?;
             self.alpha_opt.step(&alpha_loss.backward()?)?;
             losses.alpha_loss = Some(alpha_loss.to_scalar::<f32>()? as f64);
         }

@@ -17,7 +17,7 @@ use rand_distr::StandardNormal;
 
 use super::buffer::Batch;
 use super::config::{Algo, PpoConfig, TrainConfig};
-use super::nets::{batch_tensor, orthogonal};
+use super::nets::{batch_tensor, orthogonal, DenseStack};
 use super::{layer_sizes, Agent, Losses};
 use crate::numeric::dense::dense;
 use crate::numeric::inplace::Activation;
@@ -26,8 +26,9 @@ use crate::numeric::optim::Adam;
 /// gymnasium's `NormalizeObservation` epsilon and the clip CleanRL applies after it.
 const OBS_EPSILON: f64 = 1e-8;
 
-/// Dense layers with tanh between them and nothing after the last.
-struct TanhMlp(Vec<(Var, Var)>);
+/// Dense layers with tanh between them and nothing after the last; the parameters, their
+/// checkpoint names and updates are `DenseStack`'s, only the activation differs.
+struct TanhMlp(DenseStack);
 
 impl TanhMlp {
     fn new(sizes: &[usize], output_gain: f64, rng: &mut ChaCha8Rng) -> Result<TanhMlp> {
@@ -39,32 +40,19 @@ impl TanhMlp {
             let bias = Tensor::zeros(w[1], DType::F32, &Device::Cpu)?;
             layers.push((Var::from_tensor(&weight)?, Var::from_tensor(&bias)?));
         }
-        Ok(TanhMlp(layers))
+        Ok(TanhMlp(DenseStack::new(layers)))
     }
 
     fn forward(&self, x: &Tensor) -> Result<Tensor> {
+        let layers = self.0.layers();
         let mut h = x.clone();
-        for (i, (w, b)) in self.0.iter().enumerate() {
+        for (i, (w, b)) in layers.iter().enumerate() {
             h = dense(&h, w.as_tensor(), b.as_tensor(), Activation::Identity)?;
-            if i + 1 < self.0.len() {
+            if i + 1 < layers.len() {
                 h = h.tanh()?;
             }
         }
         Ok(h)
-    }
-
-    fn vars(&self) -> Vec<Var> {
-        self.0.iter().flat_map(|(w, b)| [w.clone(), b.clone()]).collect()
-    }
-
-    fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
-        self.0
-            .iter()
-            .enumerate()
-            .flat_map(|(i, (w, b))| {
-                [(format!("{prefix}.{i}.weight"), w.clone()), (format!("{prefix}.{i}.bias"), b.clone())]
-            })
-            .collect()
     }
 }
 
@@ -109,6 +97,41 @@ pub struct PpoLosses {
     pub clip_fraction: f64,
 }
 
+/// A running mean and variance per feature, merged batch by batch with the parallel update
+/// numpy's and gymnasium's `RunningMeanStd` use; it starts as 1e-4 of a sample with mean 0 and
+/// variance 1.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunningMeanStd {
+    /// Mean per feature.
+    pub mean: Vec<f64>,
+    /// Population variance per feature.
+    pub var: Vec<f64>,
+    /// Samples seen (plus the prior's 1e-4).
+    pub count: f64,
+}
+
+impl RunningMeanStd {
+    /// Statistics of `features` features, before any sample.
+    pub fn new(features: usize) -> RunningMeanStd {
+        RunningMeanStd { mean: vec![0.0; features], var: vec![1.0; features], count: 1e-4 }
+    }
+
+    /// Folds in a batch of samples, one row of `mean.len()` features each, in order.
+    pub fn update(&mut self, rows: &[&[f64]]) {
+        let n = rows.len() as f64;
+        let total = self.count + n;
+        for j in 0..self.mean.len() {
+            let batch_mean = rows.iter().map(|o| o[j]).sum::<f64>() / n;
+            let batch_var = rows.iter().map(|o| (o[j] - batch_mean).powi(2)).sum::<f64>() / n;
+            let delta = batch_mean - self.mean[j];
+            let m2 = self.var[j] * self.count + batch_var * n + delta * delta * self.count * n / total;
+            self.mean[j] += delta * n / total;
+            self.var[j] = m2 / total;
+        }
+        self.count = total;
+    }
+}
+
 /// PPO's policy and value networks, their optimisers and the observation statistics.
 pub struct PpoAgent {
     obs_dim: usize,
@@ -135,14 +158,15 @@ impl PpoAgent {
         let critic = TanhMlp::new(&layer_sizes(obs_dim, &cfg.hidden, 1), 1.0, rng)?;
         let actor = TanhMlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), 0.01, rng)?;
         let log_std = Var::from_tensor(&Tensor::zeros((1, act_dim), DType::F32, &Device::Cpu)?)?;
-        let mut actor_vars = actor.vars();
+        let mut actor_vars = actor.0.vars();
         actor_vars.push(log_std.clone());
         let mut actor_opt = Adam::new(actor_vars, cfg.actor_lr);
-        let mut critic_opt = Adam::new(critic.vars(), cfg.critic_lr);
+        let mut critic_opt = Adam::new(critic.0.vars(), cfg.critic_lr);
         actor_opt.eps = settings.adam_eps;
         critic_opt.eps = settings.adam_eps;
         let f64_var =
             |values: Vec<f64>| Var::from_tensor(&Tensor::from_vec(values.clone(), values.len(), &Device::Cpu)?);
+        let prior = RunningMeanStd::new(obs_dim);
         Ok(PpoAgent {
             obs_dim,
             act_dim,
@@ -151,9 +175,9 @@ impl PpoAgent {
             log_std,
             critic,
             // gymnasium's RunningMeanStd starts at mean 0, variance 1, count 1e-4.
-            obs_mean: f64_var(vec![0.0; obs_dim])?,
-            obs_var: f64_var(vec![1.0; obs_dim])?,
-            obs_count: f64_var(vec![1e-4])?,
+            obs_mean: f64_var(prior.mean)?,
+            obs_var: f64_var(prior.var)?,
+            obs_count: f64_var(vec![prior.count])?,
             actor_opt,
             critic_opt,
             base_actor_lr: cfg.actor_lr,
@@ -162,28 +186,21 @@ impl PpoAgent {
         })
     }
 
-    /// Folds a batch of raw observations (`n x obs_dim`, in order) into the running statistics,
-    /// with the parallel update numpy's and gymnasium's `RunningMeanStd` use.
+    /// Folds a batch of raw observations (`n x obs_dim`, in order) into the running statistics
+    /// (kept as f64 tensors, so checkpoints and exported policies carry them).
     pub fn observe(&mut self, raw: &[Vec<f64>]) -> Result<()> {
         if !self.normalize_observations || raw.is_empty() {
             return Ok(());
         }
-        let mut mean = self.obs_mean.as_tensor().to_vec1::<f64>()?;
-        let mut var = self.obs_var.as_tensor().to_vec1::<f64>()?;
-        let count = self.obs_count.as_tensor().to_vec1::<f64>()?[0];
-        let n = raw.len() as f64;
-        let total = count + n;
-        for j in 0..self.obs_dim {
-            let batch_mean = raw.iter().map(|o| o[j]).sum::<f64>() / n;
-            let batch_var = raw.iter().map(|o| (o[j] - batch_mean).powi(2)).sum::<f64>() / n;
-            let delta = batch_mean - mean[j];
-            let m2 = var[j] * count + batch_var * n + delta * delta * count * n / total;
-            mean[j] += delta * n / total;
-            var[j] = m2 / total;
-        }
-        self.obs_mean.set(&Tensor::from_vec(mean, self.obs_dim, &Device::Cpu)?)?;
-        self.obs_var.set(&Tensor::from_vec(var, self.obs_dim, &Device::Cpu)?)?;
-        self.obs_count.set(&Tensor::from_vec(vec![total], 1, &Device::Cpu)?)
+        let mut stats = RunningMeanStd {
+            mean: self.obs_mean.as_tensor().to_vec1::<f64>()?,
+            var: self.obs_var.as_tensor().to_vec1::<f64>()?,
+            count: self.obs_count.as_tensor().to_vec1::<f64>()?[0],
+        };
+        stats.update(&raw.iter().map(|o| o.as_slice()).collect::<Vec<_>>());
+        self.obs_mean.set(&Tensor::from_vec(stats.mean, self.obs_dim, &Device::Cpu)?)?;
+        self.obs_var.set(&Tensor::from_vec(stats.var, self.obs_dim, &Device::Cpu)?)?;
+        self.obs_count.set(&Tensor::from_vec(vec![stats.count], 1, &Device::Cpu)?)
     }
 
     /// Raw observations normalised by the running statistics and clipped, as the networks see
@@ -285,7 +302,7 @@ impl PpoAgent {
         // Global gradient-norm clipping over every trained parameter, as torch's
         // clip_grad_norm_ (the norm accumulates in f64 in a fixed order).
         let vars: Vec<Var> =
-            self.actor.vars().into_iter().chain([self.log_std.clone()]).chain(self.critic.vars()).collect();
+            self.actor.0.vars().into_iter().chain([self.log_std.clone()]).chain(self.critic.0.vars()).collect();
         let mut sum_sq = 0.0f64;
         for v in &vars {
             if let Some(g) = grads.get(v.as_tensor()) {
@@ -348,12 +365,12 @@ impl Agent for PpoAgent {
     }
 
     fn parameters(&self) -> Vec<(String, Var)> {
-        let mut out = self.actor.named_vars("actor.mean");
+        let mut out = self.actor.0.named_vars("actor.mean");
         out.push(("actor.log_std".into(), self.log_std.clone()));
         out.push(("actor.obs_mean".into(), self.obs_mean.clone()));
         out.push(("actor.obs_var".into(), self.obs_var.clone()));
         out.push(("actor.obs_count".into(), self.obs_count.clone()));
-        out.extend(self.critic.named_vars("critic"));
+        out.extend(self.critic.0.named_vars("critic"));
         out
     }
 

@@ -12,8 +12,9 @@ use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
 use super::{layer_sizes, Agent, Losses};
 use crate::numeric::optim::Adam;
 
-const LOG_STD_MIN: f64 = -20.0;
-const LOG_STD_MAX: f64 = 2.0;
+/// The policy's log-std is clamped to this range (SAC's and CrossQ's).
+pub(crate) const LOG_STD_MIN: f64 = -20.0;
+pub(crate) const LOG_STD_MAX: f64 = 2.0;
 
 struct ValueNet {
     net: Mlp,
@@ -69,6 +70,33 @@ pub(crate) fn squashed_gaussian_log_prob(
     (gaussian - squash)?.sum_keepdim(D::Minus1)
 }
 
+/// A reparameterised sample of the squashed Gaussian with `mean` and `log_std` (`[n, act_dim]`):
+/// (tanh(u), log pi(a|s)) with eps drawn from `rng`. SAC's and CrossQ's policy.
+pub(crate) fn sample_squashed(
+    mean: Tensor,
+    log_std: &Tensor,
+    correction: TanhCorrection,
+    rng: &mut ChaCha8Rng,
+) -> Result<(Tensor, Tensor)> {
+    let (n, act_dim) = mean.dims2()?;
+    let eps: Vec<f32> = (0..n * act_dim).map(|_| StandardNormal.sample(rng)).collect();
+    let eps = Tensor::from_vec(eps, (n, act_dim), &Device::Cpu)?;
+    let u = (mean + (log_std.exp()? * &eps)?)?;
+    let log_prob = squashed_gaussian_log_prob(&u, &eps, log_std, correction)?;
+    Ok((u.tanh()?, log_prob))
+}
+
+/// The temperature exp(log_alpha).
+pub(crate) fn temperature(log_alpha: &Var) -> Result<f64> {
+    Ok(log_alpha.as_tensor().exp()?.flatten_all()?.to_vec1::<f32>()?[0] as f64)
+}
+
+/// The temperature's loss, -log_alpha (log pi + target entropy), averaged over the batch.
+pub(crate) fn temperature_loss(log_alpha: &Var, log_prob: &Tensor, target_entropy: f64) -> Result<Tensor> {
+    let gap = log_prob.detach().affine(1.0, target_entropy)?;
+    log_alpha.as_tensor().broadcast_mul(&gap)?.mean_all()?.neg()
+}
+
 impl SacAgent {
     /// Builds the networks for `obs_dim`/`act_dim`, initialised from `rng`.
     pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
@@ -112,7 +140,7 @@ impl SacAgent {
 
     /// The current temperature.
     pub fn alpha(&self) -> Result<f64> {
-        Ok(self.log_alpha.as_tensor().exp()?.flatten_all()?.to_vec1::<f32>()?[0] as f64)
+        temperature(&self.log_alpha)
     }
 
     fn mean_log_std(&self, obs: &Tensor) -> Result<(Tensor, Tensor)> {
@@ -124,13 +152,8 @@ impl SacAgent {
 
     /// A reparameterised sample: (tanh(u), log pi(a|s)) with eps drawn from `rng`.
     fn sample(&self, obs: &Tensor, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
-        let n = obs.dims()[0];
         let (mean, log_std) = self.mean_log_std(obs)?;
-        let eps: Vec<f32> = (0..n * self.act_dim).map(|_| StandardNormal.sample(rng)).collect();
-        let eps = Tensor::from_vec(eps, (n, self.act_dim), &Device::Cpu)?;
-        let u = (mean + (log_std.exp()? * &eps)?)?;
-        let log_prob = squashed_gaussian_log_prob(&u, &eps, &log_std, self.tanh_correction)?;
-        Ok((u.tanh()?, log_prob))
+        sample_squashed(mean, &log_std, self.tanh_correction, rng)
     }
 
     fn critic_input(obs: &Tensor, action: &Tensor) -> Result<Tensor> {
@@ -190,8 +213,7 @@ impl Agent for SacAgent {
         losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
 
         if let Some(opt) = &mut self.alpha_opt {
-            let gap = logp.detach().affine(1.0, self.target_entropy)?;
-            let alpha_loss = self.log_alpha.as_tensor().broadcast_mul(&gap)?.mean_all()?.neg()?;
+            let alpha_loss = temperature_loss(&self.log_alpha, &logp, self.target_entropy)?;
             opt.step(&alpha_loss.backward()?)?;
             losses.alpha_loss = Some(alpha_loss.to_scalar::<f32>()? as f64);
         }

@@ -29,7 +29,7 @@ use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
 use super::{
     log_evaluation, progress_bar, save_budget_policy, Outcome, RunConfig, RunControl, RunSummary, POLICY_BUDGETS,
 };
-use crate::agents::ppo::{PpoBatch, PpoLosses};
+use crate::agents::ppo::{PpoBatch, PpoLosses, RunningMeanStd};
 use crate::agents::{Losses, PpoAgent, PpoConfig, TrainConfig};
 use crate::envs::{make, Env, VecEnv, VecEnvSnapshot};
 use crate::policy::to_space;
@@ -43,32 +43,6 @@ const RETURN_EPSILON: f64 = 1e-8;
 /// evaluation protocol's check against training seeds (`train_episode_seed`) covers PPO runs too.
 fn training_seeds(run_seed: u64, copy: usize, copies: usize, episode: u64) -> u64 {
     train_episode_seed(run_seed, episode * copies as u64 + copy as u64)
-}
-
-/// A scalar running mean and variance (numpy's parallel update, gymnasium's `RunningMeanStd`).
-#[derive(Debug, Clone, Copy, PartialEq)]
-struct RunningStat {
-    mean: f64,
-    var: f64,
-    count: f64,
-}
-
-impl RunningStat {
-    fn new() -> RunningStat {
-        RunningStat { mean: 0.0, var: 1.0, count: 1e-4 }
-    }
-
-    fn update(&mut self, xs: &[f64]) {
-        let n = xs.len() as f64;
-        let batch_mean = xs.iter().sum::<f64>() / n;
-        let batch_var = xs.iter().map(|x| (x - batch_mean).powi(2)).sum::<f64>() / n;
-        let total = self.count + n;
-        let delta = batch_mean - self.mean;
-        let m2 = self.var * self.count + batch_var * n + delta * delta * self.count * n / total;
-        self.mean += delta * n / total;
-        self.var = m2 / total;
-        self.count = total;
-    }
 }
 
 /// One rollout, time-major (`t * copies + i`).
@@ -99,7 +73,8 @@ struct OnPolicyTrainer {
     wall_offset: f64,
     metrics: Vec<MetricsRow>,
     returns: Vec<f64>,
-    return_stat: RunningStat,
+    /// Running statistics of the copies' discounted returns (one feature).
+    return_stat: RunningMeanStd,
     episode_returns: Vec<f64>,
     episode_lengths: Vec<u64>,
 }
@@ -160,7 +135,7 @@ impl OnPolicyTrainer {
             wall_offset: 0.0,
             metrics: Vec::new(),
             returns: vec![0.0; n],
-            return_stat: RunningStat::new(),
+            return_stat: RunningMeanStd::new(1),
             episode_returns: vec![0.0; n],
             episode_lengths: vec![0; n],
             settings,
@@ -315,9 +290,9 @@ impl OnPolicyTrainer {
             }
             let normalise = self.settings.normalize_rewards;
             if normalise {
-                self.return_stat.update(&self.returns);
+                self.return_stat.update(&self.returns.chunks(1).collect::<Vec<_>>());
             }
-            let scale = if normalise { (self.return_stat.var + RETURN_EPSILON).sqrt() } else { 1.0 };
+            let scale = if normalise { (self.return_stat.var[0] + RETURN_EPSILON).sqrt() } else { 1.0 };
             let clip = self.settings.clip_rewards;
             r.obs.extend_from_slice(&x);
             r.actions.extend_from_slice(&policy.actions);
@@ -447,8 +422,8 @@ impl OnPolicyTrainer {
         // One extra entry keeps the tensor non-empty when every copy has just reset.
         out.insert("actions".to_string(), floats(snapshot.actions.concat().into_iter().chain([0.0]).collect())?);
         out.insert("returns".to_string(), floats(self.returns.clone())?);
-        let s = self.return_stat;
-        out.insert("return_stat".to_string(), floats(vec![s.mean, s.var, s.count])?);
+        let s = &self.return_stat;
+        out.insert("return_stat".to_string(), floats(vec![s.mean[0], s.var[0], s.count])?);
         out.insert("episode_returns".to_string(), floats(self.episode_returns.clone())?);
         out.insert("episode_lengths".to_string(), ints(self.episode_lengths.iter().map(|&l| l as i64).collect())?);
         Ok(out)
@@ -485,7 +460,7 @@ impl OnPolicyTrainer {
             "the saved per-copy state does not fit {n} copies"
         );
         self.returns = returns;
-        self.return_stat = RunningStat { mean: stat[0], var: stat[1], count: stat[2] };
+        self.return_stat = RunningMeanStd { mean: vec![stat[0]], var: vec![stat[1]], count: stat[2] };
         self.episode_returns = episode_returns;
         self.episode_lengths = episode_lengths;
         Ok(VecEnvSnapshot { seed: ints("seed")?[0] as u64, episodes, actions })
@@ -498,14 +473,16 @@ mod tests {
 
     #[test]
     fn running_statistic_matches_the_two_pass_formula() {
-        let mut s = RunningStat::new();
-        s.update(&[1.0, 2.0]);
-        s.update(&[4.0]);
+        let mut s = RunningMeanStd::new(1);
+        s.update(&[&[1.0], &[2.0]]);
+        s.update(&[&[4.0]]);
         // The prior counts 1e-4 of a sample with mean 0 and variance 1.
         let count = 3.0 + 1e-4;
         let mean = 7.0 / count;
         let m2 = 1e-4 * (1.0 + mean * mean) + [1.0, 2.0, 4.0].iter().map(|x: &f64| (x - mean).powi(2)).sum::<f64>();
-        assert!((s.mean - mean).abs() < 1e-12 && (s.var - m2 / count).abs() < 1e-9 && (s.count - count).abs() < 1e-12);
+        assert!(
+            (s.mean[0] - mean).abs() < 1e-12 && (s.var[0] - m2 / count).abs() < 1e-9 && (s.count - count).abs() < 1e-12
+        );
     }
 
     #[test]
