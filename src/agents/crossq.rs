@@ -14,6 +14,7 @@ use super::config::{Algo, TanhCorrection, TrainConfig};
 use super::nets::{batch_tensor, scalar_var, DenseStack, Mlp, Output};
 use super::sac::{sample_squashed, temperature, temperature_loss, LOG_STD_MAX, LOG_STD_MIN};
 use super::{layer_sizes, Agent, Losses};
+use crate::numeric::batch_renorm::{batch_renorm, RenormLimits, RenormMode};
 use crate::numeric::dense::dense;
 use crate::numeric::inplace::Activation;
 use crate::numeric::optim::Adam;
@@ -61,37 +62,25 @@ impl BatchRenorm {
         } else {
             (self.scale.as_tensor().clone(), self.bias.as_tensor().clone())
         };
-        let (mean, var) = if train {
-            let mean = x.mean_keepdim(0)?;
-            let var = x.broadcast_sub(&mean)?.sqr()?.mean_keepdim(0)?;
-            let (batch_mean, batch_var) = (mean.detach(), var.detach());
-            let corrected = if steps >= self.warmup {
-                let running_std = (self.running_var.as_tensor().affine(1.0, EPSILON)?).sqrt()?.unsqueeze(0)?;
-                let std = batch_var.affine(1.0, EPSILON)?.sqrt()?;
-                let r = (std / &running_std)?.clamp(1.0 / R_MAX, R_MAX)?;
-                let d = batch_mean
-                    .broadcast_sub(&self.running_mean.as_tensor().unsqueeze(0)?)?
-                    .broadcast_div(&running_std)?
-                    .clamp(-D_MAX, D_MAX)?;
-                // (x - mean') / sqrt(var' + eps) with var' = var / r^2, mean' = mean - d sqrt(var) / r.
-                let corrected_var = var.broadcast_div(&r.sqr()?)?;
-                let corrected_mean = (&mean - (d * var.sqrt()? / &r)?)?;
-                (corrected_mean, corrected_var)
-            } else {
-                (mean, var)
-            };
-            let m = self.momentum;
-            let update = |running: &Var, batch: &Tensor| -> Result<()> {
-                running.set(&(running.as_tensor().affine(m, 0.0)? + batch.squeeze(0)?.affine(1.0 - m, 0.0)?)?)
-            };
-            update(&self.running_mean, &batch_mean)?;
-            update(&self.running_var, &batch_var)?;
-            corrected
-        } else {
-            (self.running_mean.as_tensor().unsqueeze(0)?, self.running_var.as_tensor().unsqueeze(0)?)
+        let mode = match (train, steps >= self.warmup) {
+            (false, _) => RenormMode::Running,
+            (true, false) => RenormMode::Batch,
+            (true, true) => RenormMode::Renorm,
         };
-        let normalised = x.broadcast_sub(&mean)?.broadcast_div(&var.affine(1.0, EPSILON)?.sqrt()?)?;
-        normalised.broadcast_mul(&scale)?.broadcast_add(&bias)
+        let running_mean = self.running_mean.as_tensor().to_vec1::<f32>()?;
+        let running_var = self.running_var.as_tensor().to_vec1::<f32>()?;
+        let limits = RenormLimits { eps: EPSILON, r_max: R_MAX, d_max: D_MAX };
+        let (y, batch) = batch_renorm(x, &scale, &bias, &running_mean, &running_var, mode, limits)?;
+        if let Some((batch_mean, batch_var)) = batch {
+            let m = self.momentum as f32;
+            let moved = |running: &[f32], batch: &[f32]| -> Vec<f32> {
+                running.iter().zip(batch).map(|(r, b)| r * m + b * (1.0 - m)).collect()
+            };
+            let f = running_mean.len();
+            self.running_mean.set(&Tensor::from_vec(moved(&running_mean, &batch_mean), f, &Device::Cpu)?)?;
+            self.running_var.set(&Tensor::from_vec(moved(&running_var, &batch_var), f, &Device::Cpu)?)?;
+        }
+        Ok(y)
     }
 
     fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {

@@ -7,6 +7,7 @@
 //! [`kernel_path::KernelPath`] (see [`matmul`]), and everything else here is plain Rust compiled
 //! for the baseline x86-64 target, which does not change with the CPU.
 pub(crate) mod allocator;
+pub mod batch_renorm;
 pub(crate) mod denormals;
 pub mod dense;
 pub(crate) mod inplace;
