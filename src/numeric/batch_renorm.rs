@@ -6,7 +6,9 @@
 //! CrossQ's sizes (512 rows of 512 features, six layers per update) those passes cost several
 //! times the matrix products (`cargo bench --bench agents`, crossq line). Here the forward pass is
 //! two column passes for the statistics and one for the output, the backward pass two more.
-//! Column sums run row by row in f64, one fixed order on every CPU.
+//! The statistics are summed in f64, the gradient sums in f32, all row by row: one fixed order
+//! on every CPU. Per-column constants are computed in f64, per-element work is f32 multiply-adds
+//! without divisions.
 //!
 //! With per-column batch mean mu, variance v and s = sqrt(v), and r, d held constant:
 //! mu_c = mu - d s / r, v_c = v / r^2, D = sqrt(v_c + eps), x^ = (x - mu_c) / D, y = scale x^ + bias.
@@ -95,11 +97,13 @@ impl CustomOp3 for BatchRenormOp {
         let x = contiguous(s1, l1, "batch_renorm")?;
         let (scale, bias) = (contiguous(s2, l2, "batch_renorm")?, contiguous(s3, l3, "batch_renorm")?);
         let c = &self.columns;
-        let mut y = Vec::with_capacity(x.len());
-        for row in x.chunks_exact(scale.len()) {
-            for (j, &v) in row.iter().enumerate() {
-                let xhat = (v as f64 - c.centre[j]) / c.divisor[j];
-                y.push((scale[j] as f64 * xhat + bias[j] as f64) as f32);
+        // y = (x - centre) * (scale / D) + bias, in f32 per element (column constants in f64 first).
+        let gain: Vec<f32> = scale.iter().zip(&c.divisor).map(|(&g, &d)| (g as f64 / d) as f32).collect();
+        let centre: Vec<f32> = c.centre.iter().map(|&m| m as f32).collect();
+        let mut y = vec![0f32; x.len()];
+        for (yr, xr) in y.chunks_exact_mut(scale.len()).zip(x.chunks_exact(scale.len())) {
+            for j in 0..yr.len() {
+                yr[j] = (xr[j] - centre[j]) * gain[j] + bias[j];
             }
         }
         Ok((CpuStorage::F32(y), l1.shape().clone()))
@@ -121,39 +125,41 @@ impl CustomOp3 for BatchRenormOp {
         let f = sv.len();
         let n = xv.len() / f;
         let c = &self.columns;
-        // dscale = sum g x^, dbias = sum g, per column.
-        let (mut dscale, mut dbias) = (vec![0f64; f], vec![0f64; f]);
+        let inv_divisor: Vec<f32> = c.divisor.iter().map(|&d| (1.0 / d) as f32).collect();
+        let centre: Vec<f32> = c.centre.iter().map(|&m| m as f32).collect();
+        // dscale = sum g x^, dbias = sum g, per column, summed row by row in f32.
+        let (mut dscale, mut dbias) = (vec![0f32; f], vec![0f32; f]);
         for (xr, gr) in xv.chunks_exact(f).zip(gv.chunks_exact(f)) {
             for j in 0..f {
-                let xhat = (xr[j] as f64 - c.centre[j]) / c.divisor[j];
-                dscale[j] += gr[j] as f64 * xhat;
-                dbias[j] += gr[j] as f64;
+                dscale[j] += gr[j] * ((xr[j] - centre[j]) * inv_divisor[j]);
+                dbias[j] += gr[j];
             }
         }
         let grad_x = if x.track_op() {
-            // Through the batch statistics: dL/dmu and dL/dv per column (see the module comment).
-            let (mut dmean, mut dvar) = (vec![0f64; f], vec![0f64; f]);
+            // dx = g scale / D + dL/dmu / n + dL/dv 2 (x - mu) / n, where dL/dmu and dL/dv are the
+            // gradients through the batch statistics (see the module comment), zero in `Running`.
+            let gain: Vec<f32> = sv.iter().zip(&inv_divisor).map(|(&g, &i)| g * i).collect();
+            let (mut shift, mut slope, mut mean) = (vec![0f32; f], vec![0f32; f], vec![0f32; f]);
             if self.from_batch {
+                let n = n as f64;
                 for j in 0..f {
                     let gamma = sv[j] as f64;
-                    let (sum_g, sum_gx) = (gamma * dbias[j], gamma * dscale[j]);
+                    let (sum_g, sum_gx) = (gamma * dbias[j] as f64, gamma * dscale[j] as f64);
                     let (divisor, r, d) = (c.divisor[j], c.r[j], c.d[j]);
                     let d_centre = -sum_g / divisor;
                     let d_divisor = -sum_gx / divisor;
                     let through_std =
                         if d != 0.0 && c.std[j] > 0.0 { d_centre * (-d / r) / (2.0 * c.std[j]) } else { 0.0 };
-                    dmean[j] = d_centre;
-                    dvar[j] = d_divisor / (2.0 * divisor * r * r) + through_std;
+                    let d_var = d_divisor / (2.0 * divisor * r * r) + through_std;
+                    shift[j] = (d_centre / n) as f32;
+                    slope[j] = (2.0 * d_var / n) as f32;
+                    mean[j] = c.mean[j] as f32;
                 }
             }
-            let mut gx = Vec::with_capacity(xv.len());
-            for (xr, gr) in xv.chunks_exact(f).zip(gv.chunks_exact(f)) {
+            let mut gx = vec![0f32; xv.len()];
+            for ((out, xr), gr) in gx.chunks_exact_mut(f).zip(xv.chunks_exact(f)).zip(gv.chunks_exact(f)) {
                 for j in 0..f {
-                    let mut v = gr[j] as f64 * sv[j] as f64 / c.divisor[j];
-                    if self.from_batch {
-                        v += dmean[j] / n as f64 + dvar[j] * 2.0 * (xr[j] as f64 - c.mean[j]) / n as f64;
-                    }
-                    gx.push(v as f32);
+                    out[j] = gr[j] * gain[j] + shift[j] + slope[j] * (xr[j] - mean[j]);
                 }
             }
             Some(Tensor::from_vec(gx, x.shape(), x.device())?)
@@ -161,9 +167,7 @@ impl CustomOp3 for BatchRenormOp {
             None
         };
         drop((xs, ss, gs));
-        let to_tensor =
-            |v: Vec<f64>| Tensor::from_vec(v.into_iter().map(|a| a as f32).collect::<Vec<_>>(), f, x.device());
-        Ok((grad_x, Some(to_tensor(dscale)?), Some(to_tensor(dbias)?)))
+        Ok((grad_x, Some(Tensor::from_vec(dscale, f, x.device())?), Some(Tensor::from_vec(dbias, f, x.device())?)))
     }
 }
 
