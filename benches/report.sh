@@ -26,6 +26,9 @@ runs=(
   # PPO with CleanRL's settings, 1M steps, with their policies; PPO and the branching DQN on Minitaur
   $r/{half-cheetah,hopper,walker2d}/ppo-seed{0,1,2}-1m
   $r/minitaur/ppo-8envs-seed{0,1,2}-2m $r/minitaur/dqn-seed0-300k $r/inverted-pendulum/dqn-seed0
+  # SAC on Minitaur with Freeman's reward (no energy cost), 500k; CrossQ with 256-wide critics, 100k
+  $r/minitaur/sac-energy0-seed0-500k
+  $r/{half-cheetah,ant}/crossq-256-seed{0,1,2}-100k
 )
 existing=()
 for d in "${runs[@]}"; do

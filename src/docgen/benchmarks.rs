@@ -89,3 +89,103 @@ pub(crate) fn python_speed(results: &Path) -> Result<String> {
     }
     Ok(out)
 }
+
+/// The newest `time-to-walk.csv` (`cargo bench --bench time_to_walk`): per algorithm and
+/// threshold, how many runs reached it and how long they took.
+pub(crate) fn time_to_walk(results: &Path) -> Result<String> {
+    let path = newest(results, "time-to-walk.csv")?;
+    let rows = read(&path)?;
+    let mut out = format!(
+        "From {} ({}).\n\n| algorithm | threshold | runs that reached it | training minutes, median (range) | env steps, median (range) | held-out return when reached, per run | falls when reached, per run |\n|---|---|---|---|---|---|---|\n",
+        source(&path),
+        comments(&path)?.join("; ")
+    );
+    let mut keys: Vec<(String, String)> = Vec::new();
+    for r in &rows {
+        let key = (r.text("algo").to_string(), r.text("threshold").to_string());
+        if !keys.contains(&key) {
+            keys.push(key);
+        }
+    }
+    let spread = |mut v: Vec<f64>, scale: f64, unit: &str| -> String {
+        if v.is_empty() {
+            return "–".into();
+        }
+        v.sort_by(f64::total_cmp);
+        let f = |x: f64| format!("{}{unit}", fixed(x / scale, 1));
+        let k = v.len();
+        let median = if k % 2 == 1 { v[k / 2] } else { 0.5 * (v[k / 2 - 1] + v[k / 2]) };
+        format!("{} ({} – {})", f(median), f(v[0]), f(v[k - 1]))
+    };
+    for (algo, threshold) in keys {
+        let runs: Vec<&super::csv_rows::Row> =
+            rows.iter().filter(|r| r.text("algo") == algo && r.text("threshold") == threshold).collect();
+        let hits: Vec<&&super::csv_rows::Row> = runs.iter().filter(|r| r.text("reached") == "true").collect();
+        let per_run = |f: &dyn Fn(&super::csv_rows::Row) -> String| -> String {
+            if hits.is_empty() {
+                "–".into()
+            } else {
+                hits.iter().map(|r| f(r)).collect::<Vec<_>>().join(", ")
+            }
+        };
+        let _ = writeln!(
+            out,
+            "| {algo} | {threshold} | {}/{} | {} | {} | {} | {} |",
+            hits.len(),
+            runs.len(),
+            spread(hits.iter().map(|r| r.num("training_s")).collect(), 60.0, ""),
+            spread(hits.iter().map(|r| r.num("step")).collect(), 1000.0, "k"),
+            per_run(&|r| format!(
+                "{} [{}, {}]",
+                fixed(r.num("heldout_return"), 2),
+                fixed(r.num("heldout_low"), 2),
+                fixed(r.num("heldout_high"), 2)
+            )),
+            per_run(&|r| format!("{}/{}", r.text("falls"), r.text("episodes"))),
+        );
+    }
+    let unreached: Vec<String> = rows
+        .iter()
+        .filter(|r| r.text("reached") != "true")
+        .map(|r| {
+            format!(
+                "{} seed {} ({}: {} steps, {} min)",
+                r.text("algo"),
+                r.text("seed"),
+                r.text("threshold"),
+                r.text("step"),
+                fixed(r.num("training_s") / 60.0, 1)
+            )
+        })
+        .collect();
+    if !unreached.is_empty() {
+        let _ = write!(out, "\nNot reached when the run stopped: {}.\n", unreached.join("; "));
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn time_to_walk_summarises_each_algorithm_and_threshold_and_names_unreached_runs() {
+        let dir = tempfile::tempdir().unwrap();
+        let results = dir.path().join("2026-01-02-some-cpu");
+        std::fs::create_dir_all(&results).unwrap();
+        let header = "algo,seed,threads,threshold,reached,step,training_s,heldout_return,heldout_low,heldout_high,speed,falls,episodes,controller_command,controller_matched,controller_return";
+        let rows = [
+            "ppo,0,1,return-10,true,800000,300.0,12.0,11.0,13.0,1.3,5,50,1.400,true,11.5",
+            "ppo,1,1,return-10,true,600000,240.0,10.5,10.0,11.0,1.1,2,50,1.200,true,10.2",
+            "ppo,2,1,return-10,false,2000000,900.0,,,,,,,,,",
+        ];
+        std::fs::write(results.join("time-to-walk.csv"), format!("# machine: test\n{header}\n{}\n", rows.join("\n")))
+            .unwrap();
+        let text = time_to_walk(dir.path()).unwrap();
+        assert!(text.contains("machine: test"), "{text}");
+        // Two of three reached it: the median of 4 and 5 minutes is 4.5.
+        assert!(text.contains("| ppo | return-10 | 2/3 | 4.5 (4.0 – 5.0) | 700.0k (600.0k – 800.0k) |"), "{text}");
+        assert!(text.contains("12.00 [11.00, 13.00], 10.50 [10.00, 11.00]") && text.contains("5/50, 2/50"), "{text}");
+        assert!(text.contains("ppo seed 2 (return-10: 2000000 steps, 15.0 min)"), "{text}");
+    }
+}

@@ -7,7 +7,9 @@ pub mod protocol;
 pub mod push;
 pub mod speed_grid;
 pub mod stats;
+pub mod walking;
 
 pub use protocol::{Protocol, DEFAULT_EPISODES};
 pub use push::Push;
 pub use speed_grid::{ControllerFamily, SpeedPoint};
+pub use walking::{HeldOutCheck, WalkingCheck};

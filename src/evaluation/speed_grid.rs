@@ -12,6 +12,11 @@ use crate::controller::command::SpeedProfile;
 use crate::controller::measure::GaitEpisode;
 use crate::envs::{make, EnvConfig};
 
+/// The grid every comparison uses: commanded multiples of `GRID_STEP` (m/s) up to the first that
+/// fails, or `GRID_MAX`.
+pub(crate) const GRID_STEP: f64 = 0.25;
+pub(crate) const GRID_MAX: f64 = 4.0;
+
 /// A speed works when no episode falls and the mean speed is within this share of the command.
 pub(crate) const TRACKING_TOLERANCE: f64 = 0.10;
 
@@ -47,6 +52,7 @@ impl SpeedPoint {
 
 /// Evaluates a controller of `env_config`'s env (Minitaur or Ant) under that config's reward and
 /// options, caching each commanded speed.
+#[derive(Clone)]
 pub struct ControllerFamily {
     env_config: EnvConfig,
     protocol: Protocol,
@@ -156,8 +162,17 @@ impl ControllerFamily {
     }
 }
 
+/// The best working grid point by mean return.
+pub(crate) fn best_point(grid: &[SpeedPoint]) -> Option<SpeedPoint> {
+    grid.iter()
+        .filter(|p| p.works())
+        .max_by(|a, b| super::stats::mean(&a.returns()).total_cmp(&super::stats::mean(&b.returns())))
+        .cloned()
+}
+
 /// The command that achieves `speed`, by linear interpolation of (achieved, commanded) over the
-/// grid's working points (the ramp from standing makes the achieved speed trail the command).
+/// grid's working points (the ramp from standing makes the achieved speed trail the command);
+/// an error below the slowest or above the fastest working point.
 pub(crate) fn command_for(grid: &[SpeedPoint], speed: f64) -> Result<f64, String> {
     let working: Vec<(f64, f64)> = grid.iter().take_while(|p| p.works()).map(|p| (p.achieved(), p.commanded)).collect();
     let Some(&(top, top_cmd)) = working.last() else {
@@ -170,8 +185,12 @@ pub(crate) fn command_for(grid: &[SpeedPoint], speed: f64) -> Result<f64, String
         return Err(format!("beyond the controller's range ({top:.2} m/s achieved at {top_cmd:.2} commanded)"));
     }
     let (a0, c0) = working[0];
-    if speed <= a0 {
-        return Ok(speed * c0 / a0);
+    // Below the grid the controller would be commanded towards standing still, where any policy
+    // that stands without paying for energy "beats" it: no comparison there.
+    if speed < a0 * (1.0 - 1e-9) {
+        return Err(format!(
+            "slower than the controller's slowest grid speed ({a0:.2} m/s achieved at {c0:.2} commanded)"
+        ));
     }
     for w in working.windows(2) {
         let ((a0, c0), (a1, c1)) = (w[0], w[1]);
@@ -201,7 +220,8 @@ mod tests {
     fn commands_interpolate_over_working_points_only() {
         let grid = vec![point(0.5, 0.45, false), point(1.0, 0.95, false), point(1.5, 1.0, true)];
         assert!((command_for(&grid, 0.7).unwrap() - 0.75).abs() < 1e-12);
-        assert!((command_for(&grid, 0.225).unwrap() - 0.25).abs() < 1e-12);
+        assert!((command_for(&grid, 0.45).unwrap() - 0.5).abs() < 1e-12);
+        assert!(command_for(&grid, 0.225).unwrap_err().contains("slower"));
         assert!(command_for(&grid, 0.98).unwrap_err().contains("beyond"));
         assert!(command_for(&grid, -0.1).unwrap_err().contains("forward"));
         assert!(command_for(&[point(0.5, 0.1, false)], 0.1).unwrap_err().contains("no speed"));

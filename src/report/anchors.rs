@@ -1,6 +1,8 @@
 //! Published returns kept as data in `baselines/published_returns.toml`, with their sources.
 use serde::Deserialize;
 
+use super::runs::Run;
+
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub(crate) struct Anchor {
@@ -15,6 +17,53 @@ pub(crate) struct Anchor {
     /// What the ± is taken over, when it is not seeds.
     pub(crate) spread: Option<String>,
     pub source: String,
+    /// The value is a mean of training-episode returns: the last this many episodes at `steps`
+    /// (Freeman's 50-episode rolling mean) ...
+    pub(crate) window_episodes: Option<usize>,
+    /// ... or the episodes of the last this many steps before `steps` (CleanRL's curves).
+    pub(crate) window_steps: Option<u64>,
+    /// Environment options the source trained with (e.g. `energy_weight = 0.0`); only our runs
+    /// with the same values are set beside it.
+    #[serde(default)]
+    pub(crate) options: toml::Table,
+}
+
+impl Anchor {
+    /// Whether the value is measured on training episodes, so that ours can be measured the same way.
+    pub(crate) fn is_training_measure(&self) -> bool {
+        self.window_episodes.is_some() || self.window_steps.is_some()
+    }
+
+    /// Whether `run` trained what the source trained: same env and algorithm, the shipped
+    /// settings, and the anchor's environment options.
+    pub(crate) fn matches(&self, run: &Run) -> bool {
+        let options = run.config.env.resolved_options().unwrap_or_default();
+        run.env() == self.env
+            && run.algo() == self.algo
+            && run.settings_label().is_empty()
+            && self.options.iter().all(|(k, v)| options.get(k).and_then(number) == number(v))
+    }
+
+    /// The run's mean training-episode return in the anchor's window at `steps`; None when the
+    /// run did not reach `steps` or the anchor is not a training measure.
+    pub(crate) fn measure(&self, run: &Run) -> Option<f64> {
+        if run.steps() < self.steps {
+            return None;
+        }
+        let before: Vec<(u64, f64)> = run.episodes().filter(|&(step, _)| step <= self.steps).collect();
+        let window: Vec<f64> = if let Some(n) = self.window_episodes {
+            before[before.len().saturating_sub(n)..].iter().map(|e| e.1).collect()
+        } else {
+            let w = self.window_steps?;
+            before.iter().filter(|e| e.0 + w > self.steps).map(|e| e.1).collect()
+        };
+        (!window.is_empty()).then(|| window.iter().sum::<f64>() / window.len() as f64)
+    }
+}
+
+/// An option value as a number (TOML integers and floats compare alike).
+fn number(v: &toml::Value) -> Option<f64> {
+    v.as_float().or_else(|| v.as_integer().map(|i| i as f64))
 }
 
 #[derive(Deserialize)]
@@ -72,6 +121,41 @@ pub(crate) fn published_curve(env: &str, algo: &str) -> Option<PublishedCurve> {
 
 #[cfg(test)]
 mod tests {
+    use crate::agents::Algo;
+    use crate::report::runs::tests::run;
+    use crate::train::metrics::MetricsRow;
+
+    fn episode(step: u64, ret: f64) -> MetricsRow {
+        MetricsRow { episode_return: Some(ret), ..MetricsRow::progress("episode", step, None, 0.0, 0.0) }
+    }
+
+    #[test]
+    fn training_measures_average_the_window_before_the_budget_of_matching_runs() {
+        let freeman = super::bundled_anchors().into_iter().find(|a| a.env == "minitaur" && a.algo == "sac").unwrap();
+        assert_eq!(freeman.window_episodes, Some(50));
+        let mut ours = run("minitaur", Algo::Sac, "", &[("energy_weight", "0")]);
+        // 100 episodes of 10k steps: returns 0, 1, ..., 99; the budget, 500k, ends episode 49.
+        ours.metrics = (0..100).map(|i| episode((i + 1) * 10_000, i as f64)).collect();
+        assert!(freeman.matches(&ours));
+        // The last 50 episodes at or before 500k: returns 0..=49.
+        assert_eq!(freeman.measure(&ours), Some(24.5));
+        // Another energy weight, other settings, another algorithm: not what the source trained.
+        assert!(!freeman.matches(&run("minitaur", Algo::Sac, "", &[])));
+        assert!(!freeman.matches(&run("minitaur", Algo::Sac, "batch_size=64", &[("energy_weight", "0")])));
+        assert!(!freeman.matches(&run("minitaur", Algo::Td3, "", &[("energy_weight", "0")])));
+        // A run that stopped before the budget has no value.
+        ours.metrics.truncate(40);
+        assert_eq!(freeman.measure(&ours), None);
+
+        let cleanrl = super::bundled_anchors().into_iter().find(|a| a.env == "hopper" && a.algo == "ppo").unwrap();
+        let mut ppo = run("hopper", Algo::Ppo, "", &[]);
+        ppo.metrics =
+            vec![episode(850_000, 100.0), episode(950_000, 10.0), episode(1_000_000, 20.0), episode(1_050_000, 1e6)];
+        // The episodes of the last 100k steps before 1M.
+        assert_eq!(cleanrl.measure(&ppo), Some(15.0));
+        assert!(!super::bundled_anchors().into_iter().find(|a| a.algo == "td3").unwrap().is_training_measure());
+    }
+
     #[test]
     fn bundled_anchors_parse_and_name_their_sources() {
         let a = super::bundled_anchors();

@@ -8,9 +8,7 @@ use crate::envs::EnvConfig;
 use crate::evaluation::stats;
 use crate::evaluation::{ControllerFamily, Protocol, Push, SpeedPoint};
 
-/// Grid of commanded speeds: multiples of `GRID_STEP` up to the first that fails, or `GRID_MAX`.
-pub(crate) const GRID_STEP: f64 = 0.25;
-pub(crate) const GRID_MAX: f64 = 4.0;
+pub(crate) use crate::evaluation::speed_grid::{best_point, GRID_MAX, GRID_STEP};
 
 /// Pushes of the robustness table (velocity change, m/s).
 pub(crate) const PUSH_LEVELS: [f64; 4] = [0.25, 0.5, 1.0, 1.5];
@@ -77,14 +75,6 @@ pub(crate) fn return_interval(point: &SpeedPoint) -> stats::Interval {
         stats::BOOTSTRAP_REPS,
         super::BOOTSTRAP_SEED,
     )
-}
-
-/// The best working grid point by mean return.
-pub(crate) fn best_point(grid: &[SpeedPoint]) -> Option<SpeedPoint> {
-    grid.iter()
-        .filter(|p| p.works())
-        .max_by(|a, b| stats::mean(&a.returns()).total_cmp(&stats::mean(&b.returns())))
-        .cloned()
 }
 
 /// Everything about the controller on one env. `rows`: the env's held-out rows (all under one

@@ -138,7 +138,7 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
         doc.heading(1, env.as_str());
         report.groups.extend(sections::learning_curves(&mut doc, out, env, env_groups)?);
         let rows = sections::held_out(&mut doc, env_groups, opts)?;
-        sections::published(&mut doc, env, &rows);
+        sections::published(&mut doc, env, &rows, env_groups);
         if crate::controller::baseline::baseline_env(env).is_ok() {
             if let Some(c) = sections::controller(&mut doc, out, env, env_groups, &rows, opts)? {
                 report.controllers.insert(env.clone(), c);

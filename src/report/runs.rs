@@ -227,12 +227,13 @@ pub(crate) fn find_runs(paths: &[PathBuf]) -> Result<Vec<Run>> {
 }
 
 #[cfg(test)]
-mod tests {
+pub(crate) mod tests {
     use super::*;
     use crate::agents::Algo;
     use crate::train::config::{build_config, split_pairs};
 
-    fn run(env: &str, algo: Algo, settings: &str, options: &[(&str, &str)]) -> Run {
+    /// A run of `env` and `algo` with hyperparameter overrides `settings` and env `options`, no metrics.
+    pub(crate) fn run(env: &str, algo: Algo, settings: &str, options: &[(&str, &str)]) -> Run {
         let pairs: Vec<(String, String)> = options.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
         let mut env_config = EnvConfig::new(env).with_overrides(&pairs).unwrap();
         env_config.options = env_config.resolved_options().unwrap();

@@ -3,7 +3,7 @@ use std::path::Path;
 
 use anyhow::Result;
 
-use super::anchors::{bundled_anchors, published_curve};
+use super::anchors::{bundled_anchors, published_curve, Anchor};
 use super::controller::{
     controller_pushes, controller_section, return_interval, ControllerSection, PushRow, GRID_STEP, PUSH_LEVELS,
 };
@@ -256,8 +256,34 @@ pub fn held_out(doc: &mut Document, groups: &[(&Group, &Vec<&Run>)], opts: &Repo
     Ok(rows)
 }
 
-/// Published results at our budgets, with a verdict from the two intervals.
-pub fn published(doc: &mut Document, env: &str, rows: &[BudgetRow]) {
+/// Our runs measured as a training-return anchor is: per matching group, each seed's value.
+fn ours_same_measure(anchor: &Anchor, groups: &[(&Group, &Vec<&Run>)]) -> String {
+    if !anchor.is_training_measure() {
+        return "–".into();
+    }
+    let mut parts = Vec::new();
+    for (g, runs) in groups {
+        let values: Vec<f64> = runs.iter().filter(|r| anchor.matches(r)).filter_map(|r| anchor.measure(r)).collect();
+        if values.is_empty() {
+            continue;
+        }
+        let each = values.iter().map(|&v| fmt_return(v)).collect::<Vec<_>>().join(", ");
+        parts.push(if values.len() == 1 {
+            format!("{}: {each} (1 seed)", g.label())
+        } else {
+            format!("{}: mean {} ({each}; {} seeds)", g.label(), fmt_return(stats::mean(&values)), values.len())
+        });
+    }
+    if parts.is_empty() {
+        "no run of ours at this budget with these options".into()
+    } else {
+        parts.join("; ")
+    }
+}
+
+/// Published results at our budgets, with a verdict from the two intervals; anchors measured on
+/// training episodes beside ours measured the same way.
+pub fn published(doc: &mut Document, env: &str, rows: &[BudgetRow], groups: &[(&Group, &Vec<&Run>)]) {
     let mut table = Vec::new();
     for r in rows.iter().filter(|r| r.seeds() > 0 && r.group.settings.is_empty()) {
         let Some(c) = published_curve(env, &r.group.algo) else { continue };
@@ -316,8 +342,13 @@ pub fn published(doc: &mut Document, env: &str, rows: &[BudgetRow]) {
                  PyBullet registers a reward threshold of 15 for the env (about 1.5 m/s held for 10 s).",
             );
         }
+        doc.paragraph(
+            "Where a source's number is a mean of training-episode returns (the stochastic policy while it \
+             learns), the last column measures our runs of that algorithm with the source's environment options \
+             the same way, per seed; held-out results are in the tables above.",
+        );
         doc.table(
-            &["algorithm", "steps", "return", "spread", "seeds", "source"],
+            &["algorithm", "steps", "return", "spread", "seeds", "source", "ours, same measure (per seed)"],
             anchors
                 .iter()
                 .map(|a| {
@@ -328,6 +359,7 @@ pub fn published(doc: &mut Document, env: &str, rows: &[BudgetRow]) {
                         a.std.map_or("–".into(), fmt_return),
                         a.seeds.map_or("not stated".into(), |s| s.to_string()),
                         format!("{}{}", a.source, a.spread.as_ref().map_or(String::new(), |s| format!("; ± over {s}"))),
+                        ours_same_measure(a, groups),
                     ]
                 })
                 .collect(),

@@ -101,6 +101,44 @@ pub struct RunControl {
     /// run in two halves on both cores (`numeric::second_core`); results are the same bit for
     /// bit. 0 or 1: the training thread alone (parallel runs, e.g. a sweep's jobs).
     pub threads: usize,
+    /// Called after every in-training evaluation (after its metrics row is written); returning
+    /// `true` finishes the run there, as reaching `target_return` does. The time it takes counts
+    /// in the run's wall time.
+    pub on_evaluation: Option<EvaluationHook>,
+}
+
+/// What an [`EvaluationHook`] sees.
+pub struct EvaluationEvent<'a> {
+    /// Environment steps done.
+    pub step: u64,
+    /// The run's wall time (s) when the evaluation finished, as in `metrics.csv`.
+    pub wall_time: f64,
+    /// The evaluation just done.
+    pub evaluation: &'a Evaluation,
+    /// The agent, as trained so far.
+    pub agent: &'a dyn Agent,
+}
+
+/// A caller's check after each evaluation, e.g. held-out episodes against a threshold
+/// (`benches/time_to_walk.rs`). Returns whether to finish the run.
+#[derive(Clone)]
+#[allow(clippy::type_complexity)]
+pub struct EvaluationHook(pub std::sync::Arc<dyn Fn(&EvaluationEvent<'_>) -> Result<bool> + Send + Sync>);
+
+impl std::fmt::Debug for EvaluationHook {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str("EvaluationHook")
+    }
+}
+
+impl RunControl {
+    /// Runs the hook, if any, on an evaluation just logged.
+    fn after_evaluation(&self, step: u64, wall_time: f64, evaluation: &Evaluation, agent: &dyn Agent) -> Result<bool> {
+        match &self.on_evaluation {
+            Some(hook) => (hook.0)(&EvaluationEvent { step, wall_time, evaluation, agent }),
+            None => Ok(false),
+        }
+    }
 }
 
 /// Every agent acts in [-1, 1]^n mapped onto the action space's bounds (the branching DQN's
@@ -343,8 +381,10 @@ impl Trainer {
             None => None,
         };
 
+        let mut hook_done = false;
         let outcome = loop {
-            let solved = control.target_return.is_some_and(|t| last_eval.as_ref().is_some_and(|e| e.mean() >= t));
+            let solved =
+                hook_done || control.target_return.is_some_and(|t| last_eval.as_ref().is_some_and(|e| e.mean() >= t));
             if self.step >= cfg.total_steps || solved {
                 break Outcome::Finished;
             }
@@ -422,6 +462,7 @@ impl Trainer {
                 best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
                 let row = MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset));
+                let wall_time = row.wall_time;
                 log_evaluation(
                     &self.run_dir,
                     &mut self.metrics,
@@ -431,6 +472,7 @@ impl Trainer {
                     self.agent.as_ref(),
                     self.seed,
                 )?;
+                hook_done = control.after_evaluation(self.step, wall_time, &e, self.agent.as_ref())?;
                 last_eval = Some(e);
             }
             bar.set_position(self.step);

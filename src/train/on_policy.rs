@@ -170,8 +170,10 @@ impl OnPolicyTrainer {
         let eval_episodes = self.cfg().eval_episodes;
         let mut next_checkpoint = (self.step / checkpoint_every + 1) * checkpoint_every;
 
+        let mut hook_done = false;
         let outcome = loop {
-            let solved = control.target_return.is_some_and(|t| last_eval.as_ref().is_some_and(|e| e.mean() >= t));
+            let solved =
+                hook_done || control.target_return.is_some_and(|t| last_eval.as_ref().is_some_and(|e| e.mean() >= t));
             if self.step >= total || solved {
                 break Outcome::Finished;
             }
@@ -194,6 +196,7 @@ impl OnPolicyTrainer {
                 best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
                 let row = MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset));
+                let wall_time = row.wall_time;
                 log_evaluation(
                     &self.run_dir,
                     &mut self.metrics,
@@ -203,6 +206,7 @@ impl OnPolicyTrainer {
                     &self.agent,
                     self.run.seed,
                 )?;
+                hook_done = control.after_evaluation(self.step, wall_time, &e, &self.agent)?;
                 last_eval = Some(e);
             }
             bar.set_position(self.step);
