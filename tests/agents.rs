@@ -21,6 +21,8 @@ fn run_seed(algo: Algo, seed: u64) -> (f64, f64, u64) {
     let run = dir.path().join("run");
     let s = train::train(EnvConfig::new("inverted-pendulum"), cfg, seed, &run, None, false, &control).unwrap();
     assert!(s.steps <= BUDGET);
+    // Finished early or at the budget, the run keeps its actor at the step it reached.
+    assert!(run.join(format!("policies/step-{}.safetensors", s.steps)).is_file(), "no policy at step {}", s.steps);
     let rows = locobench::train::metrics::read(&run.join("metrics.csv")).unwrap();
     let first = rows.iter().find_map(|r| (r.kind == "eval").then_some(r.eval_mean).flatten()).unwrap();
     (first, s.best_eval_mean.unwrap(), s.steps)

@@ -484,6 +484,11 @@ impl Trainer {
             }
         };
         bar.finish_and_clear();
+        // A run finished early (target_return, an evaluation hook) keeps its actor at the step
+        // it reached, as the on-policy loop does; budgets and the full budget are saved above.
+        if outcome == Outcome::Finished && !POLICY_BUDGETS.contains(&self.step) && self.step != cfg.total_steps {
+            save_budget_policy(&self.run_dir, self.step, self.agent.as_ref())?;
+        }
         let checkpoint = self.save(need_reset, wall(self.wall_offset))?;
         metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
         drop(recorder);
