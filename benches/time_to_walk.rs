@@ -24,14 +24,16 @@
 //! Without `--bench` (as `cargo test --all-targets` runs it): PPO, one seed, 4096 steps, 2
 //! held-out episodes, to test the whole path.
 use std::collections::VecDeque;
-use std::path::{Path, PathBuf};
+use std::path::PathBuf;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use locobench::agents::Algo;
 use locobench::envs::EnvConfig;
+use locobench::evaluation::stats::quantile;
 use locobench::evaluation::{HeldOutCheck, Protocol, WalkingCheck, DEFAULT_EPISODES};
+use locobench::io::write_bytes_atomic;
 use locobench::policy::AgentPolicy;
 use locobench::train::config::build_config;
 use locobench::train::provenance::Stretch;
@@ -137,11 +139,16 @@ fn passes(threshold: usize, c: &HeldOutCheck, controller_best: f64) -> bool {
     }
 }
 
-fn check_row(algo: &str, seed: u64, step: u64, training_s: f64, eval_mean: f64, c: &HeldOutCheck) -> String {
-    let (command, matched, controller_return) = match &c.controller {
+/// The controller a check was compared with, as CSV fields (empty when there was none).
+fn controller_fields(c: &HeldOutCheck) -> (String, String, String) {
+    match &c.controller {
         Ok(k) => (format!("{:.3}", k.command), k.matched.to_string(), format!("{:.4}", k.mean_return)),
-        Err(_) => (String::new(), String::new(), String::new()),
-    };
+        Err(_) => Default::default(),
+    }
+}
+
+fn check_row(algo: &str, seed: u64, step: u64, training_s: f64, eval_mean: f64, c: &HeldOutCheck) -> String {
+    let (command, matched, controller_return) = controller_fields(c);
     format!(
         "{algo},{seed},{step},{training_s:.1},{eval_mean:.4},{:.4},{:.4},{:.4},{:.4},{},{},{command},{matched},{controller_return},{}",
         c.mean_return,
@@ -195,10 +202,7 @@ fn result_rows(algo: &str, seed: u64, threads: usize, s: &RunState) -> Vec<Strin
         rows.push(match &s.hits[t] {
             Some(h) => {
                 let c = &h.check;
-                let (command, matched, ret) = match &c.controller {
-                    Ok(k) => (format!("{:.3}", k.command), k.matched.to_string(), format!("{:.4}", k.mean_return)),
-                    Err(_) => Default::default(),
-                };
+                let (command, matched, ret) = controller_fields(c);
                 format!(
                     "{algo},{seed},{threads},{name},true,{},{:.1},{:.4},{:.4},{:.4},{:.4},{},{},{command},{matched},{ret}",
                     h.step, h.training_s, c.mean_return, c.return_interval.low, c.return_interval.high, c.speed, c.falls, c.episodes
@@ -208,12 +212,6 @@ fn result_rows(algo: &str, seed: u64, threads: usize, s: &RunState) -> Vec<Strin
         });
     }
     rows
-}
-
-fn write_atomic(path: &Path, text: &str) -> Result<()> {
-    let tmp = path.with_extension("tmp");
-    std::fs::write(&tmp, text).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, path).with_context(|| format!("renaming {}", tmp.display()))
 }
 
 fn summarize(results: &[(String, u64, RunState)]) {
@@ -232,9 +230,7 @@ fn summarize(results: &[(String, u64, RunState)]) {
                     return "-".into();
                 }
                 v.sort_by(f64::total_cmp);
-                let k = v.len();
-                let median = if k % 2 == 1 { v[k / 2] } else { 0.5 * (v[k / 2 - 1] + v[k / 2]) };
-                format!("{:.1}{unit} - {median:.1}{unit} - {:.1}{unit}", v[0], v[k - 1])
+                format!("{:.1}{unit} - {:.1}{unit} - {:.1}{unit}", v[0], quantile(&v, 0.5), v[v.len() - 1])
             };
             println!(
                 "{algo:<6} {name:<14} {:>8} {:>24} {:>28}",
@@ -262,8 +258,8 @@ fn write_results(o: &Options, header: &str, threads: usize, results: &mut [(Stri
             checks += &(row.clone() + "\n");
         }
     }
-    write_atomic(&o.out.join("time-to-walk.csv"), &summary)?;
-    write_atomic(&o.out.join("checks.csv"), &checks)
+    write_bytes_atomic(&o.out.join("time-to-walk.csv"), summary.as_bytes())?;
+    write_bytes_atomic(&o.out.join("checks.csv"), checks.as_bytes())
 }
 
 fn main() -> Result<()> {

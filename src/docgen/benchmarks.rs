@@ -5,6 +5,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Context, Result};
 
 use super::csv_rows::{comments, read};
+use crate::evaluation::stats::quantile;
 use crate::report::format::fixed;
 
 /// The newest `benches/results/<date>-<machine>/<file>`: directories sort by their date prefix.
@@ -113,9 +114,7 @@ pub(crate) fn time_to_walk(results: &Path) -> Result<String> {
         }
         v.sort_by(f64::total_cmp);
         let f = |x: f64| format!("{}{unit}", fixed(x / scale, 1));
-        let k = v.len();
-        let median = if k % 2 == 1 { v[k / 2] } else { 0.5 * (v[k / 2 - 1] + v[k / 2]) };
-        format!("{} ({} – {})", f(median), f(v[0]), f(v[k - 1]))
+        format!("{} ({} – {})", f(quantile(&v, 0.5)), f(v[0]), f(v[v.len() - 1]))
     };
     for (algo, threshold) in keys {
         let runs: Vec<&super::csv_rows::Row> =

@@ -44,7 +44,7 @@ pub fn iqm(xs: &[f64]) -> f64 {
 
 /// The q-quantile (0..=1) of sorted values with linear interpolation between order statistics
 /// (numpy's default).
-pub(crate) fn quantile(sorted: &[f64], q: f64) -> f64 {
+pub fn quantile(sorted: &[f64], q: f64) -> f64 {
     if sorted.is_empty() {
         return f64::NAN;
     }

@@ -14,9 +14,9 @@
 //! mu_c = mu - d s / r, v_c = v / r^2, D = sqrt(v_c + eps), x^ = (x - mu_c) / D, y = scale x^ + bias.
 //! Before renormalisation starts r = 1 and d = 0 (plain batch normalisation); in evaluation mode
 //! the running statistics replace mu_c and v_c and carry no gradient.
-use candle_core::{bail, CpuStorage, CustomOp3, Layout, Result, Shape, Storage, Tensor};
+use candle_core::{bail, CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 
-use super::inplace::contiguous;
+use super::inplace::{contiguous, cpu_contiguous};
 
 /// How a pass normalises.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -55,13 +55,6 @@ struct Columns {
 struct BatchRenormOp {
     columns: Columns,
     from_batch: bool,
-}
-
-fn f32_slice<'a>(storage: &'a Storage, layout: &Layout) -> Result<&'a [f32]> {
-    match storage {
-        Storage::Cpu(s) => contiguous(s, layout, "batch_renorm"),
-        _ => bail!("batch_renorm: only CPU tensors are supported"),
-    }
 }
 
 /// Column means and (biased) variances of row-major `[n, f]` data, summed row by row in f64.
@@ -121,7 +114,11 @@ impl CustomOp3 for BatchRenormOp {
         let (xs, xl) = x.storage_and_layout();
         let (ss, sl) = scale.storage_and_layout();
         let (gs, gl) = grad.storage_and_layout();
-        let (xv, sv, gv) = (f32_slice(&xs, xl)?, f32_slice(&ss, sl)?, f32_slice(&gs, gl)?);
+        let (xv, sv, gv) = (
+            cpu_contiguous(&xs, xl, "batch_renorm")?,
+            cpu_contiguous(&ss, sl, "batch_renorm")?,
+            cpu_contiguous(&gs, gl, "batch_renorm")?,
+        );
         let f = sv.len();
         let n = xv.len() / f;
         let c = &self.columns;
@@ -205,7 +202,7 @@ pub fn batch_renorm(
         (columns, None)
     } else {
         let (xs, xl) = x.storage_and_layout();
-        let (mean, var) = column_stats(f32_slice(&xs, xl)?, f);
+        let (mean, var) = column_stats(cpu_contiguous(&xs, xl, "batch_renorm")?, f);
         drop(xs);
         let std: Vec<f64> = var.iter().map(|v| v.sqrt()).collect();
         let (mut r, mut d) = (vec![1f64; f], vec![0f64; f]);

@@ -11,9 +11,9 @@
 //! rows of the batch for outputs and input gradients, by output units for weight gradients),
 //! handed to [`second_core::join`]. The cut depends only on the sizes, never on whether a helper
 //! thread exists, so results are the same with one thread or two.
-use candle_core::{bail, CpuStorage, CustomOp3, Layout, Result, Shape, Storage, Tensor};
+use candle_core::{bail, CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 
-use super::inplace::{contiguous, Activation};
+use super::inplace::{contiguous, cpu_contiguous, Activation};
 use super::kernel_path::{self, KernelPath};
 use super::matmul::{matmul, Strided};
 use super::second_core;
@@ -123,13 +123,6 @@ fn input_grad(path: KernelPath, gp: &[f32], w: &[f32], gx: &mut [f32], inp: usiz
     matmul(path, (rows, inp, out), gx, inp, false, Strided::rows(gp, out), Strided::rows(w, inp));
 }
 
-fn f32_slice<'a>(storage: &'a Storage, layout: &Layout) -> Result<&'a [f32]> {
-    match storage {
-        Storage::Cpu(s) => contiguous(s, layout, "dense"),
-        _ => bail!("dense: only CPU tensors are supported"),
-    }
-}
-
 impl CustomOp3 for Dense {
     fn name(&self) -> &'static str {
         "dense"
@@ -191,8 +184,9 @@ impl CustomOp3 for Dense {
         let (ws, wl) = w.storage_and_layout();
         let (ys, yl) = y.storage_and_layout();
         let (gs, gl) = grad.storage_and_layout();
-        let (xv, wv, yv) = (f32_slice(&xs, xl)?, f32_slice(&ws, wl)?, f32_slice(&ys, yl)?);
-        let gv = f32_slice(&gs, gl)?;
+        let (xv, wv, yv) =
+            (cpu_contiguous(&xs, xl, "dense")?, cpu_contiguous(&ws, wl, "dense")?, cpu_contiguous(&ys, yl, "dense")?);
+        let gv = cpu_contiguous(&gs, gl, "dense")?;
         // gradient before the activation (a select, not a branch, so that it vectorises)
         let path = self.path;
         let gp: Vec<f32> = match self.act {

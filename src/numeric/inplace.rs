@@ -6,7 +6,7 @@
 //! replaces.
 use std::cell::RefCell;
 
-use candle_core::{bail, CpuStorage, InplaceOp2, Layout, Result};
+use candle_core::{bail, CpuStorage, InplaceOp2, Layout, Result, Storage};
 
 fn contiguous_mut<'a>(storage: &'a mut CpuStorage, layout: &Layout, what: &str) -> Result<&'a mut [f32]> {
     let Some((start, end)) = layout.contiguous_offsets() else { bail!("{what}: destination tensor is not contiguous") };
@@ -21,6 +21,14 @@ pub(super) fn contiguous<'a>(storage: &'a CpuStorage, layout: &Layout, what: &st
     match storage {
         CpuStorage::F32(data) => Ok(&data[start..end]),
         _ => bail!("{what}: only f32 tensors are supported"),
+    }
+}
+
+/// A tensor's storage as contiguous f32 values on the CPU (what the backward passes read).
+pub(super) fn cpu_contiguous<'a>(storage: &'a Storage, layout: &Layout, what: &str) -> Result<&'a [f32]> {
+    match storage {
+        Storage::Cpu(s) => contiguous(s, layout, what),
+        _ => bail!("{what}: only CPU tensors are supported"),
     }
 }
 

@@ -131,16 +131,6 @@ impl std::fmt::Debug for EvaluationHook {
     }
 }
 
-impl RunControl {
-    /// Runs the hook, if any, on an evaluation just logged.
-    fn after_evaluation(&self, step: u64, wall_time: f64, evaluation: &Evaluation, agent: &dyn Agent) -> Result<bool> {
-        match &self.on_evaluation {
-            Some(hook) => (hook.0)(&EvaluationEvent { step, wall_time, evaluation, agent }),
-            None => Ok(false),
-        }
-    }
-}
-
 /// Every agent acts in [-1, 1]^n mapped onto the action space's bounds (the branching DQN's
 /// levels are spread over them), so an unbounded action dimension is refused up front.
 pub(crate) fn check_bounded_actions(env: &str, space: &crate::envs::BoxSpace, algo: crate::agents::Algo) -> Result<()> {
@@ -175,28 +165,34 @@ fn save_budget_policy(run_dir: &Path, step: u64, agent: &dyn Agent) -> Result<()
     checkpoint::save_actor(&budget_policy_path(run_dir, step), agent)
 }
 
-/// Appends an evaluation's row, rewrites `metrics.csv`, and logs the row to the recording, with a
-/// rollout of the policy at every `record_every`-th evaluation.
+/// Appends an evaluation's row (`row` with `evaluation`'s figures), rewrites `metrics.csv`, logs
+/// the row to the recording, with a rollout of the policy at every `control.record_every`-th
+/// evaluation, and runs `control`'s evaluation hook. Returns whether the hook finishes the run.
+#[allow(clippy::too_many_arguments)]
 fn log_evaluation(
     run_dir: &Path,
     metrics: &mut Vec<MetricsRow>,
     row: MetricsRow,
+    evaluation: &Evaluation,
     recorder: Option<&mut TrainingRecorder>,
-    record_every: u64,
+    control: &RunControl,
     agent: &dyn Agent,
     run_seed: u64,
-) -> Result<()> {
-    let step = row.step;
-    metrics.push(row);
+) -> Result<bool> {
+    let (step, wall_time) = (row.step, row.wall_time);
+    metrics.push(row.with_evaluation(evaluation));
     metrics::write(&run_dir.join("metrics.csv"), metrics)?;
     if let Some(r) = recorder {
         r.curves(metrics.last().expect("just pushed"))?;
         let evaluations = metrics.iter().filter(|m| m.kind == "eval").count() as u64;
-        if (evaluations - 1).is_multiple_of(record_every.max(1)) {
+        if (evaluations - 1).is_multiple_of(control.record_every.max(1)) {
             r.evaluation_rollout(agent, step, run_seed)?;
         }
     }
-    Ok(())
+    match &control.on_evaluation {
+        Some(hook) => (hook.0)(&EvaluationEvent { step, wall_time, evaluation, agent }),
+        None => Ok(false),
+    }
 }
 
 /// The commit this binary was built from (build.rs), not whatever the source tree holds now.
@@ -462,17 +458,16 @@ impl Trainer {
                 best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
                 let row = MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset));
-                let wall_time = row.wall_time;
-                log_evaluation(
+                hook_done = log_evaluation(
                     &self.run_dir,
                     &mut self.metrics,
-                    row.with_evaluation(&e),
+                    row,
+                    &e,
                     recorder.as_mut(),
-                    control.record_every,
+                    control,
                     self.agent.as_ref(),
                     self.seed,
                 )?;
-                hook_done = control.after_evaluation(self.step, wall_time, &e, self.agent.as_ref())?;
                 last_eval = Some(e);
             }
             bar.set_position(self.step);

@@ -196,17 +196,16 @@ impl OnPolicyTrainer {
                 best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
                 let row = MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset));
-                let wall_time = row.wall_time;
-                log_evaluation(
+                hook_done = log_evaluation(
                     &self.run_dir,
                     &mut self.metrics,
-                    row.with_evaluation(&e),
+                    row,
+                    &e,
                     recorder.as_mut(),
-                    control.record_every,
+                    control,
                     &self.agent,
                     self.run.seed,
                 )?;
-                hook_done = control.after_evaluation(self.step, wall_time, &e, &self.agent)?;
                 last_eval = Some(e);
             }
             bar.set_position(self.step);
