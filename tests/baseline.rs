@@ -291,3 +291,33 @@ fn ant_rows_at_1_0_m_per_s() {
         assert!(speed >= 0.95, "seed {seed}: {speed:.3} m/s from 10 s on");
     }
 }
+
+/// A planar model cannot turn: its heading stays +x even when its torso pitches past vertical
+/// (a cheetah running on its back still runs forwards), while a free-floating base's yaw is read
+/// from its orientation.
+#[test]
+fn heading_is_fixed_for_planar_models_and_read_for_free_bases() {
+    let mut cheetah = make(&locobench::envs::EnvConfig::new("half-cheetah")).unwrap();
+    cheetah.reset(Some(0)).unwrap();
+    let nq = cheetah.data().model().nq();
+    let nv = cheetah.data().model().nv();
+    for pitch in [0.0, 1.0, 2.0, 3.0, -2.5] {
+        let mut qpos = vec![0.0; nq];
+        (qpos[0], qpos[1], qpos[2]) = (1.5, 0.3, pitch);
+        cheetah.set_state(&qpos, &vec![0.0; nv]).unwrap();
+        let (xy, yaw) = base_pose(cheetah.as_ref());
+        assert_eq!(yaw, 0.0, "pitch {pitch}");
+        assert!((xy[0] - 1.5).abs() < 1e-12, "pitch {pitch}: x {}", xy[0]);
+    }
+
+    let mut ant = make(&locobench::envs::EnvConfig::new("ant")).unwrap();
+    ant.reset(Some(0)).unwrap();
+    let mut qpos = ant.data().model().qpos0().to_vec();
+    let nv = ant.data().model().nv();
+    for yaw in [0.5f64, -2.0] {
+        // free joint quaternion (w, x, y, z) for a turn about the vertical
+        (qpos[3], qpos[4], qpos[5], qpos[6]) = ((yaw / 2.0).cos(), 0.0, 0.0, (yaw / 2.0).sin());
+        ant.set_state(&qpos, &vec![0.0; nv]).unwrap();
+        assert!((base_pose(ant.as_ref()).1 - yaw).abs() < 1e-9, "yaw {yaw}");
+    }
+}

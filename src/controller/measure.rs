@@ -56,11 +56,15 @@ pub(crate) fn mean_cost_of_transport(episodes: &[GaitEpisode]) -> f64 {
     }
 }
 
-/// Position (x, y) and yaw of the floating base (the model's first body).
+/// Position (x, y) and yaw of the base (the model's first body). A planar model (HalfCheetah,
+/// Hopper, Walker2d) cannot turn: its heading is +x whatever its pitch. Reading yaw from its
+/// orientation would give pi once the torso pitches past vertical, and a cheetah running on its
+/// back would be measured as running backwards.
 pub fn base_pose(env: &dyn Env) -> ([f64; 2], f64) {
     let d = env.data();
     let (p, r) = (&d.xpos()[3..6], &d.xmat()[9..18]);
-    ([p[0], p[1]], r[3].atan2(r[0]))
+    let yaw = if d.model().body_is_free(1) { r[3].atan2(r[0]) } else { 0.0 };
+    ([p[0], p[1]], yaw)
 }
 
 struct GaitObserver<'a> {

@@ -271,6 +271,15 @@ impl Model {
     pub fn body_mass(&self) -> &[f64] {
         self.slice_f64(self.raw().body_mass, self.nbody())
     }
+    /// Whether `body` hangs from its parent by a free joint (six degrees of freedom), so it can
+    /// turn about the vertical; planar models (a slide-slide-hinge root) cannot.
+    pub fn body_is_free(&self, body: usize) -> bool {
+        let r = self.raw();
+        let (first, count) =
+            (self.slice_i32(r.body_jntadr, self.nbody())[body], self.slice_i32(r.body_jntnum, self.nbody())[body]);
+        let types = self.slice_i32(r.jnt_type, self.njnt());
+        count > 0 && (first..first + count).any(|j| types[j as usize] == sys::mjtJoint__mjJNT_FREE as i32)
+    }
     /// Parent body of each body (the world body is its own parent).
     pub fn body_parent(&self) -> &[i32] {
         self.slice_i32(self.raw().body_parentid, self.nbody())
