@@ -6,12 +6,25 @@ Importing the package registers every environment with Gymnasium::
     import locobench
 
     env = gym.make("locobench/Minitaur-v0", randomize_dynamics=False, reward={"drift": 0.5})
+    envs = gym.make_vec("locobench/Minitaur-v0", num_envs=8)   # stepped in Rust, on every core
 """
 from locobench._core import env_names_ as _env_names
+from locobench._core import episode_seed
 from locobench.envs import ENV_IDS, LocobenchEnv, register_envs
 from locobench.policies import Controller, TrainedPolicy, load_policy
+from locobench.vector import LocobenchVectorEnv
 
-__all__ = ["ENV_IDS", "LocobenchEnv", "Controller", "TrainedPolicy", "load_policy", "env_names", "register_envs"]
+__all__ = [
+    "ENV_IDS",
+    "LocobenchEnv",
+    "LocobenchVectorEnv",
+    "episode_seed",
+    "Controller",
+    "TrainedPolicy",
+    "load_policy",
+    "env_names",
+    "register_envs",
+]
 
 
 def env_names():

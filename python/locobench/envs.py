@@ -112,4 +112,9 @@ def register_envs():
     """Registers every locobench env with Gymnasium (done on import)."""
     for name, env_id in ENV_IDS.items():
         if env_id not in gym.registry:
-            gym.register(id=env_id, entry_point="locobench.envs:LocobenchEnv", kwargs={"name": name})
+            gym.register(
+                id=env_id,
+                entry_point="locobench.envs:LocobenchEnv",
+                vector_entry_point="locobench.vector:LocobenchVectorEnv",
+                kwargs={"name": name},
+            )

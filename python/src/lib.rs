@@ -6,7 +6,7 @@ use std::sync::Mutex;
 
 use locobench::controller::baseline::{baseline_controller_for, baseline_env, parse_gait, RAMP_TIME};
 use locobench::controller::command::{Command, SpeedProfile};
-use locobench::envs::{env_names, make, reward_weight_option, EnvConfig};
+use locobench::envs::{env_names, make, reward_weight_option, EnvConfig, VecEnv};
 use locobench::policy::Policy;
 use locobench::runtime::Runtime;
 use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
@@ -42,12 +42,7 @@ impl PyEnv {
     #[new]
     #[pyo3(signature = (name, options = Vec::new(), reward = Vec::new()))]
     fn new(name: &str, options: Vec<(String, String)>, reward: Vec<(String, f64)>) -> PyResult<Self> {
-        let mut pairs = options;
-        for (term, weight) in reward {
-            let option = reward_weight_option(name, &term).map_err(value_error)?;
-            pairs.push((option.to_string(), weight.to_string()));
-        }
-        let config = EnvConfig::new(name).with_overrides(&pairs).map_err(value_error)?;
+        let config = env_config(name, options, reward)?;
         let env = make(&config).map_err(value_error)?;
         Ok(PyEnv { env: Mutex::new(env), config })
     }
@@ -148,6 +143,84 @@ impl PyEnv {
         let info = info_dict(py, &s.info, false)?;
         Ok((s.observation, s.reward, s.terminated, s.truncated, info))
     }
+}
+
+/// The env's configuration from option pairs (`key`, TOML text) and reward weights by term name.
+fn env_config(name: &str, options: Vec<(String, String)>, reward: Vec<(String, f64)>) -> PyResult<EnvConfig> {
+    let mut pairs = options;
+    for (term, weight) in reward {
+        let option = reward_weight_option(name, &term).map_err(value_error)?;
+        pairs.push((option.to_string(), weight.to_string()));
+    }
+    EnvConfig::new(name).with_overrides(&pairs).map_err(value_error)
+}
+
+/// N copies of one environment stepped together in Rust with automatic reset (Gymnasium's
+/// "same-step" mode), split over `threads` threads with the GIL released; the numbers do not
+/// depend on the thread count.
+#[pyclass(name = "VecEnv", module = "locobench._core")]
+struct PyVecEnv {
+    // A pyclass must be Sync; the lock is only ever taken by the thread holding the object.
+    envs: Mutex<VecEnv>,
+}
+
+impl PyVecEnv {
+    fn envs(&self) -> std::sync::MutexGuard<'_, VecEnv> {
+        self.envs.lock().unwrap_or_else(|poisoned| poisoned.into_inner())
+    }
+}
+
+/// (observations, rewards, terminated, truncated, final observations, infos) of a vector step.
+type VecStepResult<'py> =
+    (Vec<Vec<f64>>, Vec<f64>, Vec<bool>, Vec<bool>, Vec<Option<Vec<f64>>>, Vec<Bound<'py, PyDict>>);
+
+#[pymethods]
+impl PyVecEnv {
+    #[new]
+    #[pyo3(signature = (name, copies, threads, options = Vec::new(), reward = Vec::new()))]
+    fn new(
+        name: &str,
+        copies: usize,
+        threads: usize,
+        options: Vec<(String, String)>,
+        reward: Vec<(String, f64)>,
+    ) -> PyResult<Self> {
+        if threads == 0 {
+            return Err(value_error("threads must be at least 1"));
+        }
+        let config = env_config(name, options, reward)?;
+        let envs = VecEnv::new(&config, copies, threads).map_err(value_error)?;
+        Ok(PyVecEnv { envs: Mutex::new(envs) })
+    }
+
+    #[getter]
+    fn num_envs(&self) -> usize {
+        self.envs().len()
+    }
+
+    /// Starts an episode in every copy (copy `i` from `episode_seed(seed, i, 0)`); returns the
+    /// first observations.
+    fn reset(&self, py: Python<'_>, seed: u64) -> PyResult<Vec<Vec<f64>>> {
+        let envs = &self.envs;
+        py.detach(|| envs.lock().unwrap_or_else(|p| p.into_inner()).reset(seed)).map_err(value_error)
+    }
+
+    /// Steps every copy with its action and resets the copies whose episode ended (their next
+    /// episode from `episode_seed(seed, i, k)`). Where a copy's episode ended, its observation is
+    /// the new episode's first, its final observation the ended one's last, and its info that of
+    /// the ended episode's last step.
+    fn step<'py>(&self, py: Python<'py>, actions: Vec<Vec<f64>>) -> PyResult<VecStepResult<'py>> {
+        let envs = &self.envs;
+        let s = py.detach(|| envs.lock().unwrap_or_else(|p| p.into_inner()).step(&actions)).map_err(value_error)?;
+        let infos = s.infos.iter().map(|info| info_dict(py, info, false)).collect::<PyResult<Vec<_>>>()?;
+        Ok((s.observations, s.rewards, s.terminated, s.truncated, s.final_observations, infos))
+    }
+}
+
+/// The reset seed of episode `episode` of copy `copy` after a vector reset with `seed`.
+#[pyfunction]
+fn episode_seed(seed: u64, copy: usize, episode: u64) -> u64 {
+    locobench::envs::episode_seed(seed, copy, episode)
 }
 
 /// (observation, reward, terminated, truncated, info), as Gymnasium's `step` returns.
@@ -302,6 +375,8 @@ fn env_names_() -> Vec<&'static str> {
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     locobench::runtime::configure_process();
     m.add_class::<PyEnv>()?;
+    m.add_class::<PyVecEnv>()?;
+    m.add_function(wrap_pyfunction!(episode_seed, m)?)?;
     m.add_class::<PyController>()?;
     m.add_class::<PyTrainedPolicy>()?;
     m.add_function(wrap_pyfunction!(env_names_, m)?)?;

@@ -1,0 +1,114 @@
+"""The vector env: Gymnasium's same-step autoreset, per-copy seeds, and the same numbers on any
+thread count."""
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.vector import AutoresetMode
+
+import locobench
+
+
+def rollout(envs, seed, steps, action_seed=0):
+    """Observations, rewards, ends and final observations of `steps` random steps."""
+    rng = np.random.default_rng(action_seed)
+    obs, _ = envs.reset(seed=seed)
+    out = [obs]
+    for _ in range(steps):
+        a = rng.uniform(-1, 1, size=envs.action_space.shape).astype(np.float32)
+        obs, reward, terminated, truncated, info = envs.step(a)
+        final = info.get("final_obs", np.full(envs.num_envs, None, dtype=object))
+        out += [obs, reward, terminated, truncated]
+        out += [f if f is not None else np.zeros(0) for f in final]
+    return out
+
+
+def test_make_vec_builds_the_rust_vector_env_in_same_step_mode():
+    envs = gym.make_vec("locobench/Hopper-v5", num_envs=3, reset_noise_scale=0.01)
+    assert isinstance(envs.unwrapped, locobench.LocobenchVectorEnv)
+    assert envs.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP
+    assert envs.observation_space.shape == (3, 11) and envs.action_space.shape == (3, 3)
+    assert envs.observation_space.dtype == np.float64 and envs.action_space.dtype == np.float32
+    obs, info = envs.reset(seed=0)
+    assert obs.shape == (3, 11) and info == {}
+    obs, reward, terminated, truncated, info = envs.step(np.zeros((3, 3), dtype=np.float32))
+    assert obs.shape == (3, 11) and reward.shape == (3,) and reward.dtype == np.float64
+    assert terminated.dtype == bool and truncated.dtype == bool
+    assert info["reward_terms"]["forward"].shape == (3,) and info["_reward_terms"].all()
+
+
+def test_each_copy_is_the_single_env_with_its_episode_seeds():
+    """Copy i replays a single env reset with episode_seed(seed, i, k) for its k-th episode,
+    including across the automatic reset (a 5-step time limit)."""
+    envs = locobench.LocobenchVectorEnv("half-cheetah", num_envs=3, threads=2, max_episode_steps=5)
+    single = locobench.LocobenchEnv("half-cheetah", max_episode_steps=5)
+    seed = 11
+    obs, _ = envs.reset(seed=seed)
+    actions = np.random.default_rng(1).uniform(-1, 1, size=(7, 3, 6)).astype(np.float32)
+    expected = []
+    for i in range(3):
+        o, _ = single.reset(seed=locobench.episode_seed(seed, i, 0))
+        copy = [(o, None, None, None)]
+        for t in range(7):
+            o, r, term, trunc, _ = single.step(actions[t, i])
+            last = o
+            if term or trunc:
+                o, _ = single.reset(seed=locobench.episode_seed(seed, i, 1))
+            copy.append((o, r, trunc, last if trunc else None))
+        expected.append(copy)
+    for i in range(3):
+        np.testing.assert_array_equal(obs[i], expected[i][0][0])
+    for t in range(7):
+        obs, reward, terminated, truncated, info = envs.step(actions[t])
+        for i in range(3):
+            o, r, trunc, last = expected[i][t + 1]
+            np.testing.assert_array_equal(obs[i], o)
+            assert reward[i] == r and truncated[i] == trunc and not terminated[i]
+            if last is None:
+                assert "final_obs" not in info or info["final_obs"][i] is None
+            else:
+                assert info["_final_obs"][i] and info["_final_info"][i]
+                np.testing.assert_array_equal(info["final_obs"][i], last)
+                assert info["final_info"]["_reward_terms"][i]
+
+
+def test_same_numbers_on_one_thread_and_two():
+    one = rollout(locobench.LocobenchVectorEnv("hopper", num_envs=4, threads=1), seed=5, steps=60)
+    two = rollout(locobench.LocobenchVectorEnv("hopper", num_envs=4, threads=2), seed=5, steps=60)
+    assert len(one) == len(two)
+    for a, b in zip(one, two):
+        np.testing.assert_array_equal(a, b)
+    other = rollout(locobench.LocobenchVectorEnv("hopper", num_envs=4, threads=2), seed=6, steps=60)
+    assert not np.array_equal(one[0], other[0])
+
+
+def test_unseeded_resets_continue_deterministically_from_the_last_seed():
+    a = locobench.LocobenchVectorEnv("inverted-pendulum", num_envs=2)
+    b = locobench.LocobenchVectorEnv("inverted-pendulum", num_envs=2)
+    first_a, _ = a.reset(seed=3)
+    first_b, _ = b.reset(seed=3)
+    np.testing.assert_array_equal(first_a, first_b)
+    second_a, _ = a.reset()
+    second_b, _ = b.reset()
+    np.testing.assert_array_equal(second_a, second_b)
+    assert not np.array_equal(first_a, second_a)
+
+
+def test_bad_input_is_refused_with_a_message():
+    envs = locobench.LocobenchVectorEnv("hopper", num_envs=2)
+    envs.reset(seed=0)
+    with pytest.raises(ValueError, match="shape"):
+        envs.step(np.zeros((3, 3)))
+    bad = np.zeros((2, 3))
+    bad[1, 2] = np.nan
+    with pytest.raises(ValueError, match="copy 1"):
+        envs.step(bad)
+    with pytest.raises(TypeError):
+        envs.step(np.array([["a"] * 3] * 2))
+    with pytest.raises(ValueError, match="seed"):
+        envs.reset(seed=-1)
+    with pytest.raises(ValueError, match="num_envs"):
+        locobench.LocobenchVectorEnv("hopper", num_envs=0)
+    with pytest.raises(ValueError, match="threads"):
+        locobench.LocobenchVectorEnv("hopper", num_envs=2, threads=0)
+    with pytest.raises(ValueError, match="no_such_option"):
+        locobench.LocobenchVectorEnv("hopper", num_envs=2, no_such_option=1)
