@@ -170,18 +170,29 @@ pub(crate) fn best_point(grid: &[SpeedPoint]) -> Option<SpeedPoint> {
         .cloned()
 }
 
+/// The grid's working range: its points up to the first where the controller falls or loses
+/// track.
+pub(crate) fn working_points(grid: &[SpeedPoint]) -> impl Iterator<Item = &SpeedPoint> {
+    grid.iter().take_while(|p| p.works())
+}
+
+/// Whether `speed` is faster than the controller achieves anywhere in its working range.
+pub(crate) fn beyond_range(grid: &[SpeedPoint], speed: f64) -> bool {
+    working_points(grid).last().is_some_and(|top| speed > top.achieved() * (1.0 + 1e-9))
+}
+
 /// The command that achieves `speed`, by linear interpolation of (achieved, commanded) over the
 /// grid's working points (the ramp from standing makes the achieved speed trail the command);
 /// an error below the slowest or above the fastest working point.
 pub(crate) fn command_for(grid: &[SpeedPoint], speed: f64) -> Result<f64, String> {
-    let working: Vec<(f64, f64)> = grid.iter().take_while(|p| p.works()).map(|p| (p.achieved(), p.commanded)).collect();
+    let working: Vec<(f64, f64)> = working_points(grid).map(|p| (p.achieved(), p.commanded)).collect();
     let Some(&(top, top_cmd)) = working.last() else {
         return Err("the controller works at no speed of the grid".into());
     };
     if speed.is_nan() || speed <= 0.0 {
         return Err(format!("the policy does not move forward ({speed:.3} m/s)"));
     }
-    if speed > top * (1.0 + 1e-9) {
+    if beyond_range(grid, speed) {
         return Err(format!("beyond the controller's range ({top:.2} m/s achieved at {top_cmd:.2} commanded)"));
     }
     let (a0, c0) = working[0];

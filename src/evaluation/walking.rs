@@ -6,7 +6,9 @@
 use anyhow::Result;
 
 use super::protocol::Protocol;
-use super::speed_grid::{best_point, command_for, ControllerFamily, SpeedPoint, GRID_MAX, GRID_STEP};
+use super::speed_grid::{
+    best_point, beyond_range, command_for, working_points, ControllerFamily, SpeedPoint, GRID_MAX, GRID_STEP,
+};
 use super::stats;
 use crate::envs::{make, EnvConfig};
 use crate::policy::Policy;
@@ -74,7 +76,7 @@ impl WalkingCheck {
 
     /// The fastest speed the controller achieves without falling or losing track (m/s).
     pub fn controller_top_speed(&self) -> Option<f64> {
-        self.grid.iter().take_while(|p| p.works()).map(|p| p.achieved()).last()
+        working_points(&self.grid).map(|p| p.achieved()).last()
     }
 
     /// Plays the held-out episodes with `policy` and compares it with the controller.
@@ -89,7 +91,7 @@ impl WalkingCheck {
             stats::BOOTSTRAP_REPS,
             0,
         );
-        let beyond = self.controller_top_speed().is_some_and(|top| speed > top);
+        let beyond = beyond_range(&self.grid, speed);
         let controller = if beyond {
             best_point(&self.grid)
                 .map(|p| ControllerComparison {
