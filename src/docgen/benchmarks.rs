@@ -8,18 +8,29 @@ use super::csv_rows::{comments, read};
 use crate::evaluation::stats::quantile;
 use crate::report::format::fixed;
 
-/// The newest `benches/results/<date>-<machine>/<file>`: directories sort by their date prefix.
+/// The newest `benches/results/<date>-<machine>/<file>`: only directories named for a date
+/// (`YYYY-MM-DD-...`) count, and they sort by that date, then by name (the generated text names
+/// the one it quotes).
 fn newest(results: &Path, file: &str) -> Result<PathBuf> {
     let mut dirs: Vec<PathBuf> = std::fs::read_dir(results)
         .with_context(|| format!("reading {}", results.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.file_name().and_then(|n| n.to_str()).is_some_and(is_dated))
         .filter(|p| p.join(file).is_file())
         .collect();
     dirs.sort();
     match dirs.pop() {
         Some(d) => Ok(d.join(file)),
-        None => bail!("no {file} under {}: run bash benches/speed.sh", results.display()),
+        None => bail!("no {file} under a dated directory of {}: run bash benches/speed.sh", results.display()),
     }
+}
+
+/// `YYYY-MM-DD-<machine>`.
+fn is_dated(name: &str) -> bool {
+    let b = name.as_bytes();
+    b.len() > 11
+        && b[..10].iter().enumerate().all(|(i, c)| if i == 4 || i == 7 { *c == b'-' } else { c.is_ascii_digit() })
+        && b[10] == b'-'
 }
 
 fn duration(ns: f64) -> String {
@@ -31,10 +42,11 @@ fn duration(ns: f64) -> String {
 }
 
 /// How a generated section names its source: the newest file of that name in the dated result
-/// directories (the file's own comment line names machine and commit).
+/// directories, by its path (the file's own comment line names machine and commit).
 fn source(path: &Path) -> String {
-    let file = path.file_name().map_or(String::new(), |f| f.to_string_lossy().to_string());
-    format!("the newest benches/results/<date>-<machine>/{file}")
+    let name =
+        |p: Option<&Path>| p.and_then(|p| p.file_name()).map_or(String::new(), |f| f.to_string_lossy().to_string());
+    format!("benches/results/{}/{}, the newest of its name", name(path.parent()), name(Some(path)))
 }
 
 /// Every criterion measurement of the newest `speed.csv`, one table per group.
@@ -186,5 +198,24 @@ mod tests {
         assert!(text.contains("| ppo | return-10 | 2/3 | 4.5 (4.0 – 5.0) | 700.0k (600.0k – 800.0k) |"), "{text}");
         assert!(text.contains("12.00 [11.00, 13.00], 10.50 [10.00, 11.00]") && text.contains("5/50, 2/50"), "{text}");
         assert!(text.contains("ppo seed 2 (return-10: 2000000 steps, 15.0 min)"), "{text}");
+    }
+
+    #[test]
+    fn newest_takes_the_latest_dated_directory_and_the_text_names_it() {
+        let dir = tempfile::tempdir().unwrap();
+        for (sub, has) in
+            [("2026-01-02-b-cpu", true), ("2026-01-03-a-cpu", true), ("2026-01-04-c-cpu", false), ("zebra", true)]
+        {
+            std::fs::create_dir_all(dir.path().join(sub)).unwrap();
+            if has {
+                std::fs::write(dir.path().join(sub).join("speed.csv"), "x").unwrap();
+            }
+        }
+        let path = newest(dir.path(), "speed.csv").unwrap();
+        assert!(path.ends_with("2026-01-03-a-cpu/speed.csv"), "{}", path.display());
+        assert_eq!(source(&path), "benches/results/2026-01-03-a-cpu/speed.csv, the newest of its name");
+        let err = newest(dir.path(), "memory.md").unwrap_err().to_string();
+        assert!(err.contains("memory.md"), "{err}");
+        assert!(!is_dated("2026-1-03-x") && !is_dated("2026-01-03") && is_dated("2026-01-03-x"));
     }
 }
