@@ -47,3 +47,46 @@ fn ant_energy_of_a_control_step_is_the_sum_over_its_physics_steps() {
         }
     }
 }
+
+/// Every MuJoCo env reports its motors' work the same way, so a cost of transport exists for
+/// each: HalfCheetah's checked by hand (power = |gear x action x joint velocity| summed over the
+/// physics steps), the others present and positive once the robot moves.
+#[test]
+fn every_env_reports_the_motors_work() {
+    let cheetah = |frame_skip: usize| {
+        let cfg = EnvConfig::new("half-cheetah")
+            .with_overrides(&[
+                ("frame_skip".into(), frame_skip.to_string()),
+                ("reset_noise_scale".into(), "0.0".into()),
+            ])
+            .unwrap();
+        make(&cfg).unwrap()
+    };
+    let (mut coarse, mut fine) = (cheetah(5), cheetah(1));
+    coarse.reset(Some(1)).unwrap();
+    fine.reset(Some(1)).unwrap();
+    let action = [0.7, -0.3, 0.5, -0.9, 0.4, -0.6];
+    let gear = [120.0, 90.0, 60.0, 120.0, 60.0, 30.0];
+    for control_step in 0..10 {
+        let energy = coarse.step(&action).unwrap().info.metric("mechanical_energy").unwrap();
+        let mut by_hand = 0.0;
+        for _ in 0..5 {
+            // qvel: rootx, rootz, rooty, then the six joints in motor order.
+            let d = fine.data();
+            let power: f64 = (0..6).map(|j| (gear[j] * action[j] * d.qvel()[3 + j]).abs()).sum();
+            by_hand += power * d.model().timestep();
+            fine.step(&action).unwrap();
+        }
+        assert!(
+            (energy - by_hand).abs() <= 1e-9 * (1.0 + by_hand),
+            "control step {control_step}: reported {energy}, by hand {by_hand}"
+        );
+    }
+    for name in ["hopper", "walker2d", "humanoid", "inverted-pendulum", "ant", "minitaur"] {
+        let mut env = make(&EnvConfig::new(name)).unwrap();
+        env.reset(Some(0)).unwrap();
+        let action: Vec<f64> = env.spec().action_space.high.iter().map(|h| 0.5 * h).collect();
+        let total: f64 = (0..3).map(|_| env.step(&action).unwrap().info.metric("mechanical_energy").unwrap()).sum();
+        assert!(total > 0.0 && total.is_finite(), "{name}: {total}");
+    }
+}

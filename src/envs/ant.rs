@@ -133,11 +133,7 @@ impl Task for AntTask {
         let healthy = self.is_healthy(sim);
         let contact_cost = self.opts.contact_cost_weight * self.clipped_contact_forces(sim).map(|f| f * f).sum::<f64>();
         let mut metrics = locomotion_metrics(sim, velocity);
-        metrics.extend([
-            ("dy", after[1] - before.xy[1]),
-            ("dz", sim.data.qpos()[2] - before.z),
-            ("mechanical_energy", sim.last_mechanical_energy),
-        ]);
+        metrics.extend([("dy", after[1] - before.xy[1]), ("dz", sim.data.qpos()[2] - before.z)]);
         Ok(legged_step(&self.weights, velocity[0], healthy, action, contact_cost, metrics))
     }
 }

@@ -59,9 +59,13 @@ impl<T: Task> Env for MujocoEnv<T> {
             StepOutcome::BlewUp(step) => return Ok(step),
         };
         let outcome = self.task.after(&mut self.core.sim, &before, &start.action, self.core.spec.dt)?;
+        let mut metrics = outcome.metrics;
+        // Every task reports the motors' work, integrated over the physics steps, so a cost of
+        // transport is measured the same way on every env.
+        metrics.push(("mechanical_energy", self.core.sim.last_mechanical_energy));
         let info = Info {
             reward_terms: outcome.reward_terms,
-            metrics: outcome.metrics,
+            metrics,
             clipped_actions: start.clipped,
             unstable: false,
             warnings,
