@@ -41,33 +41,39 @@ fn bench(c: &mut Criterion) {
     group.measurement_time(Duration::from_secs(8)).warm_up_time(Duration::from_secs(2)).sample_size(20);
     // CrossQ's critics are a setting of their own: 256 and 512 wide are what two cores afford
     // (the paper's are 2048 wide); 256 is the width of SAC's, for the same-compute comparison.
+    // The branching DQN runs at its own defaults (512-256 torso, batch 64), three levels for each
+    // of the 6 action dimensions.
     let cases = [
-        (Algo::Td3, vec![400, 300], None),
-        (Algo::Sac, vec![256, 256], None),
-        (Algo::Ddpg, vec![400, 300], None),
-        (Algo::Crossq, vec![256, 256], Some(256)),
-        (Algo::Crossq, vec![256, 256], Some(512)),
+        (Algo::Td3, vec![400, 300], None, BATCH),
+        (Algo::Sac, vec![256, 256], None, BATCH),
+        (Algo::Ddpg, vec![400, 300], None, BATCH),
+        (Algo::Crossq, vec![256, 256], Some(256), BATCH),
+        (Algo::Crossq, vec![256, 256], Some(512), BATCH),
+        (Algo::Dqn, vec![512, 256], None, 64),
     ];
-    for (algo, hidden, critic_width) in cases {
+    for (algo, hidden, critic_width, batch_size) in cases {
         let mut cfg = TrainConfig::defaults(algo);
         cfg.hidden = hidden.clone();
-        cfg.batch_size = BATCH;
+        cfg.batch_size = batch_size;
         let mut label = format!("{}-{}", hidden[0], hidden[1]);
         if let (Some(c), Some(width)) = (cfg.crossq.as_mut(), critic_width) {
             c.critic_hidden = vec![width, width];
             label += &format!(", critics {width}-{width},");
         }
         let mut agent = make_agent(&cfg, OBS, ACT, &mut rng).unwrap();
-        let mut batch = Batch::new(BATCH, OBS, ACT);
+        let mut batch = Batch::new(batch_size, OBS, ACT);
         group.throughput(Throughput::Elements(1));
         for threads in [1, 2] {
             let _runtime = locobench::runtime::Runtime::enter(threads);
-            group.bench_function(format!("{}/update {label} batch {BATCH}, {threads} thread(s)", algo.name()), |b| {
-                b.iter(|| {
-                    buf.sample_into(&mut batch, &mut rng);
-                    black_box(agent.update(&batch, &mut rng).unwrap());
-                })
-            });
+            group.bench_function(
+                format!("{}/update {label} batch {batch_size}, {threads} thread(s)", algo.name()),
+                |b| {
+                    b.iter(|| {
+                        buf.sample_into(&mut batch, &mut rng);
+                        black_box(agent.update(&batch, &mut rng).unwrap());
+                    })
+                },
+            );
         }
         if critic_width == Some(512) {
             continue; // acting does not involve the critics: measured once
