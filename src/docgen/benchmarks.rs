@@ -79,6 +79,42 @@ pub fn memory(results: &Path) -> Result<String> {
     Ok(format!("From {}: {}", source(&path), text.trim()))
 }
 
+/// The newest `vec-env.csv` (`cargo bench --bench env_step -- "vec_env|env.step"`): env steps
+/// per second of one env and of the vector env's copies on one and two threads, and how close
+/// two threads come to twice one env.
+pub(crate) fn vector_env(results: &Path) -> Result<String> {
+    let path = newest(results, "vec-env.csv")?;
+    let rows = read(&path)?;
+    let mut out = format!(
+        "From {} ({}).\n\n| env | one env (steps/s) | copies | on 1 thread (steps/s) | on 2 threads (steps/s) | 2 threads / (2 x one env) |\n|---|---|---|---|---|---|\n",
+        source(&path),
+        comments(&path)?.join("; ")
+    );
+    for single in rows.iter().filter(|r| r.text("benchmark").ends_with("/env.step")) {
+        let env = single.text("benchmark").trim_end_matches("/env.step");
+        let one = 1e9 / single.num("mean_ns");
+        // "<env>/<copies> copies, <threads> thread(s)"
+        let vector = |threads: usize| {
+            rows.iter().find_map(|r| {
+                let rest = r.text("benchmark").strip_prefix(env)?.strip_prefix('/')?;
+                let (copies, tail) = rest.split_once(" copies, ")?;
+                let copies: f64 = copies.parse().ok()?;
+                (tail == format!("{threads} thread(s)")).then(|| (copies, copies * 1e9 / r.num("mean_ns")))
+            })
+        };
+        let (Some((copies, one_thread)), Some((_, two_threads))) = (vector(1), vector(2)) else { continue };
+        let _ = writeln!(
+            out,
+            "| {env} | {} | {copies} | {} | {} | {:.2} |",
+            fixed(one, 0),
+            fixed(one_thread, 0),
+            fixed(two_threads, 0),
+            two_threads / (2.0 * one)
+        );
+    }
+    Ok(out)
+}
+
 /// The newest `python-speed.csv` (`python python/bench_speed.py`).
 pub(crate) fn python_speed(results: &Path) -> Result<String> {
     let path = newest(results, "python-speed.csv")?;
@@ -198,6 +234,22 @@ mod tests {
         assert!(text.contains("| ppo | return-10 | 2/3 | 4.5 (4.0 – 5.0) | 700.0k (600.0k – 800.0k) |"), "{text}");
         assert!(text.contains("12.00 [11.00, 13.00], 10.50 [10.00, 11.00]") && text.contains("5/50, 2/50"), "{text}");
         assert!(text.contains("ppo seed 2 (return-10: 2000000 steps, 15.0 min)"), "{text}");
+    }
+
+    #[test]
+    fn vector_env_rates_come_from_the_mean_times_per_step() {
+        let dir = tempfile::tempdir().unwrap();
+        let results = dir.path().join("2026-01-02-some-cpu");
+        std::fs::create_dir_all(&results).unwrap();
+        let csv = "# machine: test\ngroup,benchmark,mean_ns,low_ns,high_ns\n\
+                   \"env_step\",\"hopper/env.step\",50000,49000,51000\n\
+                   \"vec_env\",\"hopper/16 copies, 1 thread(s)\",800000,1,1\n\
+                   \"vec_env\",\"hopper/16 copies, 2 thread(s)\",500000,1,1\n";
+        std::fs::write(results.join("vec-env.csv"), csv).unwrap();
+        let text = vector_env(dir.path()).unwrap();
+        // one env: 1e9 / 50000 = 20000/s; 16 copies: 16e9 / 800000 = 20000/s and 16e9 / 500000 = 32000/s
+        assert!(text.contains("| hopper | 20000 | 16 | 20000 | 32000 | 0.80 |"), "{text}");
+        assert!(text.contains("machine: test"), "{text}");
     }
 
     #[test]

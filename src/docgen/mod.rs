@@ -52,6 +52,11 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
             name: "time-to-walk",
             text: benchmarks::time_to_walk(&root.join(BENCH_RESULTS_DIR))?,
         },
+        Section {
+            file: "docs/benchmarks.md",
+            name: "vector-env",
+            text: benchmarks::vector_env(&root.join(BENCH_RESULTS_DIR))?,
+        },
         Section { file: "docs/environments.md", name: "envs", text: envs::table()? },
         Section {
             file: "docs/python.md",
