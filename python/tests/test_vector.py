@@ -95,6 +95,8 @@ def test_unseeded_resets_continue_deterministically_from_the_last_seed():
 
 def test_bad_input_is_refused_with_a_message():
     envs = locobench.LocobenchVectorEnv("hopper", num_envs=2)
+    with pytest.raises(ValueError, match="before reset"):
+        envs.step(np.zeros((2, 3)))
     envs.reset(seed=0)
     with pytest.raises(ValueError, match="shape"):
         envs.step(np.zeros((3, 3)))
