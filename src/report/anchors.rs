@@ -22,6 +22,10 @@ pub(crate) struct Anchor {
     pub(crate) window_episodes: Option<usize>,
     /// ... or the episodes of the last this many steps before `steps` (CleanRL's curves).
     pub(crate) window_steps: Option<u64>,
+    /// The value is a deterministic evaluation over this many episodes at `steps`; ours is the
+    /// run's own in-training evaluation there (the first at or after `steps`, within one
+    /// evaluation interval).
+    pub(crate) evaluation_episodes: Option<usize>,
     /// Environment options the source trained with (e.g. `energy_weight = 0.0`); only our runs
     /// with the same values are set beside it.
     #[serde(default)]
@@ -29,26 +33,35 @@ pub(crate) struct Anchor {
 }
 
 impl Anchor {
-    /// Whether the value is measured on training episodes, so that ours can be measured the same way.
-    pub(crate) fn is_training_measure(&self) -> bool {
-        self.window_episodes.is_some() || self.window_steps.is_some()
+    /// Whether the source says how its value was measured (a window of training episodes, or a
+    /// deterministic evaluation), so that ours can be measured the same way.
+    pub(crate) fn is_measurable(&self) -> bool {
+        self.window_episodes.is_some() || self.window_steps.is_some() || self.evaluation_episodes.is_some()
     }
 
-    /// Whether `run` trained what the source trained: same env and algorithm, the shipped
-    /// settings, and the anchor's environment options.
-    pub(crate) fn matches(&self, run: &Run) -> bool {
+    /// Same env, algorithm and environment options as the source; the agent's settings may
+    /// differ (CrossQ with narrower critics than the paper's), and then say so where shown.
+    pub(crate) fn comparable(&self, run: &Run) -> bool {
         let options = run.config.env.resolved_options().unwrap_or_default();
         run.env() == self.env
             && run.algo() == self.algo
-            && run.settings_label().is_empty()
             && self.options.iter().all(|(k, v)| options.get(k).and_then(number) == number(v))
     }
 
-    /// The run's mean training-episode return in the anchor's window at `steps`; None when the
-    /// run did not reach `steps` or the anchor is not a training measure.
+    /// The run's value measured as the source's: its mean training-episode return in the
+    /// anchor's window at `steps`, or its in-training evaluation at `steps`; None when the run did
+    /// not reach `steps` or the source does not say how it measured.
     pub(crate) fn measure(&self, run: &Run) -> Option<f64> {
         if run.steps() < self.steps {
             return None;
+        }
+        if self.evaluation_episodes.is_some() {
+            let interval = run.config.train.eval_every.max(1);
+            return run
+                .metrics
+                .iter()
+                .filter(|r| r.kind == "eval" && r.step >= self.steps && r.step < self.steps + interval)
+                .find_map(|r| r.eval_mean);
         }
         let before: Vec<(u64, f64)> = run.episodes().filter(|&(step, _)| step <= self.steps).collect();
         let window: Vec<f64> = if let Some(n) = self.window_episodes {
@@ -136,13 +149,14 @@ mod tests {
         let mut ours = run("minitaur", Algo::Sac, "", &[("energy_weight", "0")]);
         // 100 episodes of 10k steps: returns 0, 1, ..., 99; the budget, 500k, ends episode 49.
         ours.metrics = (0..100).map(|i| episode((i + 1) * 10_000, i as f64)).collect();
-        assert!(freeman.matches(&ours));
+        assert!(freeman.comparable(&ours));
         // The last 50 episodes at or before 500k: returns 0..=49.
         assert_eq!(freeman.measure(&ours), Some(24.5));
-        // Another energy weight, other settings, another algorithm: not what the source trained.
-        assert!(!freeman.matches(&run("minitaur", Algo::Sac, "", &[])));
-        assert!(!freeman.matches(&run("minitaur", Algo::Sac, "batch_size=64", &[("energy_weight", "0")])));
-        assert!(!freeman.matches(&run("minitaur", Algo::Td3, "", &[("energy_weight", "0")])));
+        // Another energy weight or another algorithm: not comparable. Other agent settings are
+        // (the report names them).
+        assert!(!freeman.comparable(&run("minitaur", Algo::Sac, "", &[])));
+        assert!(!freeman.comparable(&run("minitaur", Algo::Td3, "", &[("energy_weight", "0")])));
+        assert!(freeman.comparable(&run("minitaur", Algo::Sac, "batch_size=64", &[("energy_weight", "0")])));
         // A run that stopped before the budget has no value.
         ours.metrics.truncate(40);
         assert_eq!(freeman.measure(&ours), None);
@@ -153,7 +167,34 @@ mod tests {
             vec![episode(850_000, 100.0), episode(950_000, 10.0), episode(1_000_000, 20.0), episode(1_050_000, 1e6)];
         // The episodes of the last 100k steps before 1M.
         assert_eq!(cleanrl.measure(&ppo), Some(15.0));
-        assert!(!super::bundled_anchors().into_iter().find(|a| a.algo == "td3").unwrap().is_training_measure());
+        assert!(!super::bundled_anchors().into_iter().find(|a| a.algo == "td3").unwrap().is_measurable());
+    }
+
+    fn evaluation(step: u64, mean: f64) -> MetricsRow {
+        MetricsRow { eval_mean: Some(mean), ..MetricsRow::progress("eval", step, None, 0.0, 0.0) }
+    }
+
+    #[test]
+    fn evaluation_measures_take_the_runs_own_evaluation_at_the_budget_whatever_its_settings() {
+        let crossq = super::bundled_anchors()
+            .into_iter()
+            .find(|a| a.env == "half-cheetah" && a.algo == "crossq" && a.steps == 100_000)
+            .unwrap();
+        assert_eq!(crossq.evaluation_episodes, Some(10));
+        let mut ours = run("half-cheetah", Algo::Crossq, "critic_hidden=[256, 256]", &[]);
+        ours.config.train.eval_every = 5000;
+        ours.metrics =
+            vec![evaluation(95_000, 1.0), episode(99_000, 7.0), evaluation(100_000, 2.0), evaluation(105_000, 3.0)];
+        // Narrower critics than the source's: comparable (the report names the setting).
+        assert!(crossq.comparable(&ours) && !ours.settings_label().is_empty());
+        assert_eq!(crossq.measure(&ours), Some(2.0));
+        // A run evaluated off the mark (PPO evaluates at rollout boundaries) gives the first
+        // evaluation past it, within one interval.
+        ours.metrics = vec![evaluation(98_304, 1.0), evaluation(102_400, 4.0)];
+        assert_eq!(crossq.measure(&ours), Some(4.0));
+        ours.metrics = vec![evaluation(98_304, 1.0), evaluation(110_000, 4.0)];
+        assert_eq!(crossq.measure(&ours), None);
+        assert!(!crossq.comparable(&run("ant", Algo::Crossq, "", &[])));
     }
 
     #[test]

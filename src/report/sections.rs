@@ -256,22 +256,24 @@ pub fn held_out(doc: &mut Document, groups: &[(&Group, &Vec<&Run>)], opts: &Repo
     Ok(rows)
 }
 
-/// Our runs measured as a training-return anchor is: per matching group, each seed's value.
+/// Our runs measured as the anchor was: per comparable group, each seed's value; a group with
+/// other settings than the shipped ones says which.
 fn ours_same_measure(anchor: &Anchor, groups: &[(&Group, &Vec<&Run>)]) -> String {
-    if !anchor.is_training_measure() {
+    if !anchor.is_measurable() {
         return "–".into();
     }
     let mut parts = Vec::new();
     for (g, runs) in groups {
-        let values: Vec<f64> = runs.iter().filter(|r| anchor.matches(r)).filter_map(|r| anchor.measure(r)).collect();
+        let values: Vec<f64> = runs.iter().filter(|r| anchor.comparable(r)).filter_map(|r| anchor.measure(r)).collect();
         if values.is_empty() {
             continue;
         }
+        let name = if g.settings.is_empty() { g.label() } else { format!("{} ({})", g.label(), g.settings) };
         let each = values.iter().map(|&v| fmt_return(v)).collect::<Vec<_>>().join(", ");
         parts.push(if values.len() == 1 {
-            format!("{}: {each} (1 seed)", g.label())
+            format!("{name}: {each} (1 seed)")
         } else {
-            format!("{}: mean {} ({each}; {} seeds)", g.label(), fmt_return(stats::mean(&values)), values.len())
+            format!("{name}: mean {} ({each}; {} seeds)", fmt_return(stats::mean(&values)), values.len())
         });
     }
     if parts.is_empty() {
@@ -343,9 +345,11 @@ pub fn published(doc: &mut Document, env: &str, rows: &[BudgetRow], groups: &[(&
             );
         }
         doc.paragraph(
-            "Where a source's number is a mean of training-episode returns (the stochastic policy while it \
-             learns), the last column measures our runs of that algorithm with the source's environment options \
-             the same way, per seed; held-out results are in the tables above.",
+            "Where a source says how its number was measured (a mean of training-episode returns, the stochastic \
+             policy while it learns; or a deterministic evaluation at the budget), the last column measures our \
+             runs of that algorithm with the source's environment options the same way, per seed (a deterministic \
+             evaluation: the run's own in-training evaluation there), naming the settings where they differ from our \
+             shipped ones; held-out results are in the tables above.",
         );
         doc.table(
             &["algorithm", "steps", "return", "spread", "seeds", "source", "ours, same measure (per seed)"],
