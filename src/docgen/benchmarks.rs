@@ -9,8 +9,7 @@ use crate::evaluation::stats::quantile;
 use crate::report::format::fixed;
 
 /// The newest `benches/results/<date>-<machine>/<file>`: only directories named for a date
-/// (`YYYY-MM-DD-...`) count, and they sort by that date, then by name (the generated text names
-/// the one it quotes).
+/// (`YYYY-MM-DD-...`) count, and they sort by that date, then by name.
 fn newest(results: &Path, file: &str) -> Result<PathBuf> {
     let mut dirs: Vec<PathBuf> = std::fs::read_dir(results)
         .with_context(|| format!("reading {}", results.display()))?
@@ -42,18 +41,22 @@ fn duration(ns: f64) -> String {
 }
 
 /// How a generated section names its source: the newest file of that name in the dated result
-/// directories, by its path (the file's own comment line names machine and commit).
+/// directories (the file's own comment line names machine and commit; docs carry no dates).
 fn source(path: &Path) -> String {
-    let name =
-        |p: Option<&Path>| p.and_then(|p| p.file_name()).map_or(String::new(), |f| f.to_string_lossy().to_string());
-    format!("benches/results/{}/{}, the newest of its name", name(path.parent()), name(Some(path)))
+    let file = path.file_name().map_or(String::new(), |f| f.to_string_lossy().to_string());
+    format!("the newest benches/results/<date>-<machine>/{file}")
+}
+
+/// "From <source> (<the file's comment lines>)." : the first line of a section quoting a CSV.
+fn quoting(path: &Path) -> Result<String> {
+    Ok(format!("From {} ({}).", source(path), comments(path)?.join("; ")))
 }
 
 /// Every criterion measurement of the newest `speed.csv`, one table per group.
 pub fn speed(results: &Path) -> Result<String> {
     let path = newest(results, "speed.csv")?;
     let rows = read(&path)?;
-    let mut out = format!("From {} ({}).\n", source(&path), comments(&path)?.join("; "));
+    let mut out = quoting(&path)? + "\n";
     let mut group = String::new();
     for r in &rows {
         if r.text("group") != group {
@@ -85,11 +88,7 @@ pub fn memory(results: &Path) -> Result<String> {
 pub(crate) fn vector_env(results: &Path) -> Result<String> {
     let path = newest(results, "vec-env.csv")?;
     let rows = read(&path)?;
-    let mut out = format!(
-        "From {} ({}).\n\n| env | one env (steps/s) | copies | on 1 thread (steps/s) | on 2 threads (steps/s) | 2 threads / (2 x one env) |\n|---|---|---|---|---|---|\n",
-        source(&path),
-        comments(&path)?.join("; ")
-    );
+    let mut out = quoting(&path)? + "\n\n| env | one env (steps/s) | copies | on 1 thread (steps/s) | on 2 threads (steps/s) | 2 threads / (2 x one env) |\n|---|---|---|---|---|---|\n";
     for single in rows.iter().filter(|r| r.text("benchmark").ends_with("/env.step")) {
         let env = single.text("benchmark").trim_end_matches("/env.step");
         let one = 1e9 / single.num("mean_ns");
@@ -119,11 +118,7 @@ pub(crate) fn vector_env(results: &Path) -> Result<String> {
 pub(crate) fn python_speed(results: &Path) -> Result<String> {
     let path = newest(results, "python-speed.csv")?;
     let rows = read(&path)?;
-    let mut out = format!(
-        "From {} ({}).\n\n| env | locobench through Gymnasium (steps/s) | raw binding (steps/s) | looped in Rust (steps/s) | binding overhead per step | Gymnasium's own env (steps/s) |\n|---|---|---|---|---|---|\n",
-        source(&path),
-        comments(&path)?.join("; ")
-    );
+    let mut out = quoting(&path)? + "\n\n| env | locobench through Gymnasium (steps/s) | raw binding (steps/s) | looped in Rust (steps/s) | binding overhead per step | Gymnasium's own env (steps/s) |\n|---|---|---|---|---|---|\n";
     for r in &rows {
         let _ = writeln!(
             out,
@@ -144,11 +139,7 @@ pub(crate) fn python_speed(results: &Path) -> Result<String> {
 pub(crate) fn time_to_walk(results: &Path) -> Result<String> {
     let path = newest(results, "time-to-walk.csv")?;
     let rows = read(&path)?;
-    let mut out = format!(
-        "From {} ({}).\n\n| algorithm | threshold | runs that reached it | training minutes, median (range) | env steps, median (range) | held-out return when reached, per run | falls when reached, per run |\n|---|---|---|---|---|---|---|\n",
-        source(&path),
-        comments(&path)?.join("; ")
-    );
+    let mut out = quoting(&path)? + "\n\n| algorithm | threshold | runs that reached it | training minutes, median (range) | env steps, median (range) | held-out return when reached, per run | falls when reached, per run |\n|---|---|---|---|---|---|---|\n";
     let mut keys: Vec<(String, String)> = Vec::new();
     for r in &rows {
         let key = (r.text("algo").to_string(), r.text("threshold").to_string());
@@ -253,7 +244,7 @@ mod tests {
     }
 
     #[test]
-    fn newest_takes_the_latest_dated_directory_and_the_text_names_it() {
+    fn newest_takes_the_latest_dated_directory() {
         let dir = tempfile::tempdir().unwrap();
         for (sub, has) in
             [("2026-01-02-b-cpu", true), ("2026-01-03-a-cpu", true), ("2026-01-04-c-cpu", false), ("zebra", true)]
@@ -265,7 +256,7 @@ mod tests {
         }
         let path = newest(dir.path(), "speed.csv").unwrap();
         assert!(path.ends_with("2026-01-03-a-cpu/speed.csv"), "{}", path.display());
-        assert_eq!(source(&path), "benches/results/2026-01-03-a-cpu/speed.csv, the newest of its name");
+        assert_eq!(source(&path), "the newest benches/results/<date>-<machine>/speed.csv");
         let err = newest(dir.path(), "memory.md").unwrap_err().to_string();
         assert!(err.contains("memory.md"), "{err}");
         assert!(!is_dated("2026-1-03-x") && !is_dated("2026-01-03") && is_dated("2026-01-03-x"));
