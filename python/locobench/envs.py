@@ -44,6 +44,25 @@ def _toml_value(key, value):
     raise TypeError(f"option {key}: {value!r} is not a bool, number, string or list")
 
 
+def _core_arguments(options, reward):
+    """Env options as (key, TOML text) pairs and reward weights as (term, weight) pairs, as the
+    Rust side takes them."""
+    pairs = [(k, _toml_value(k, v)) for k, v in options.items()]
+    weights = [(str(t), float(w)) for t, w in (reward or {}).items()]
+    return pairs, weights
+
+
+def _float64_actions(actions, shape, what, hint=""):
+    """``actions`` as float64 after checking they are numeric (TypeError) and of ``shape``
+    (ValueError), the messages naming ``what``."""
+    a = np.asarray(actions)
+    if a.dtype.kind not in "fiu":
+        raise TypeError(f"{what} dtype {a.dtype} is not numeric")
+    if a.shape != shape:
+        raise ValueError(f"{what} shape {a.shape}, expected {shape}{hint}")
+    return a.astype(np.float64)
+
+
 class LocobenchEnv(gym.Env):
     """A locobench environment (Rust and MuJoCo underneath) with Gymnasium's API.
 
@@ -60,10 +79,8 @@ class LocobenchEnv(gym.Env):
         if render_mode is not None:
             raise ValueError(_NO_RENDERING.format(render_mode))
         self.render_mode = None
-        pairs = list(_option_pairs or [])
-        pairs += [(k, _toml_value(k, v)) for k, v in options.items()]
-        weights = [(str(t), float(w)) for t, w in (reward or {}).items()]
-        self._core = _core.Env(name, pairs, weights)
+        pairs, weights = _core_arguments(options, reward)
+        self._core = _core.Env(name, list(_option_pairs or []) + pairs, weights)
         self.name = self._core.name
         low, high = self._core.observation_bounds
         self.observation_space = spaces.Box(np.array(low), np.array(high), dtype=np.float64)
@@ -86,12 +103,8 @@ class LocobenchEnv(gym.Env):
         return np.asarray(obs, dtype=np.float64), info
 
     def step(self, action):
-        a = np.asarray(action)
-        if a.dtype.kind not in "fiu":
-            raise TypeError(f"action dtype {a.dtype} is not numeric")
-        if a.shape != self.action_space.shape:
-            raise ValueError(f"action shape {a.shape}, expected {self.action_space.shape}")
-        obs, reward, terminated, truncated, info = self._core.step(a.astype(np.float64).ravel().tolist())
+        a = _float64_actions(action, self.action_space.shape, "action")
+        obs, reward, terminated, truncated, info = self._core.step(a.ravel().tolist())
         return np.asarray(obs, dtype=np.float64), float(reward), bool(terminated), bool(truncated), info
 
     def set_state(self, qpos, qvel):

@@ -7,7 +7,7 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from locobench import _core
-from locobench.envs import _NO_RENDERING, LocobenchEnv, _toml_value
+from locobench.envs import _NO_RENDERING, LocobenchEnv, _core_arguments, _float64_actions
 
 
 class LocobenchVectorEnv(VectorEnv):
@@ -36,8 +36,7 @@ class LocobenchVectorEnv(VectorEnv):
         if not isinstance(threads, numbers.Integral) or threads < 1:
             raise ValueError(f"threads must be a positive integer, not {threads!r}")
         single = LocobenchEnv(name, reward=reward, **options)
-        pairs = [(k, _toml_value(k, v)) for k, v in options.items()]
-        weights = [(str(t), float(w)) for t, w in (reward or {}).items()]
+        pairs, weights = _core_arguments(options, reward)
         self._core = _core.VecEnv(name, int(num_envs), int(threads), pairs, weights)
         self.name = single.name
         self.num_envs = int(num_envs)
@@ -72,12 +71,8 @@ class LocobenchVectorEnv(VectorEnv):
         return int(np.random.default_rng(self._seed).integers(0, 2**63 - 1))
 
     def step(self, actions):
-        a = np.asarray(actions)
-        if a.dtype.kind not in "fiu":
-            raise TypeError(f"actions dtype {a.dtype} is not numeric")
-        if a.shape != self.action_space.shape:
-            raise ValueError(f"actions shape {a.shape}, expected {self.action_space.shape} (num_envs, action dim)")
-        obs, rewards, terminated, truncated, final_obs, step_infos = self._core.step(a.astype(np.float64).tolist())
+        a = _float64_actions(actions, self.action_space.shape, "actions", " (num_envs, action dim)")
+        obs, rewards, terminated, truncated, final_obs, step_infos = self._core.step(a.tolist())
         infos = {}
         for i, info in enumerate(step_infos):
             if final_obs[i] is None:
