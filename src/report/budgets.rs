@@ -63,14 +63,20 @@ pub(crate) fn policy_at(run: &Run, budget: u64) -> Result<PolicySource, String> 
     })
 }
 
-/// The budgets a set of runs is reported at: each standard budget some run reached, and the last
-/// step of each run that reached none (short runs), so that every run appears in some row.
+/// The budgets a set of runs is reported at: each standard budget some run reached; the full
+/// budget of each run trained to one off the standard list (e.g. 500k, where a published result
+/// sits) and kept its actor there; and the last step of each run that reached no standard budget
+/// (short runs), so that every run appears in some row.
 pub fn budgets(runs: &[&Run]) -> Vec<u64> {
     let mut out: Vec<u64> = POLICY_BUDGETS.iter().copied().filter(|&b| runs.iter().any(|r| reached(r) >= b)).collect();
     for r in runs {
         let last = reached(r);
         if last < POLICY_BUDGETS[0] && last > 0 {
             out.push(last);
+        }
+        let full = r.config.train.total_steps;
+        if last >= full && budget_policy_path(&r.dir, full).is_file() {
+            out.push(full);
         }
     }
     out.sort_unstable();
@@ -88,5 +94,24 @@ mod tests {
         assert_eq!(shipped_step(&root.join("minitaur-td3")), Some(1_000_000));
         assert_eq!(shipped_step(&root.join("minitaur-sac")), Some(300_000));
         assert_eq!(shipped_step(&root), None);
+    }
+
+    #[test]
+    fn a_full_budget_off_the_standard_list_gets_a_row_when_its_policy_was_kept() {
+        let dir = std::env::temp_dir().join(format!("locobench-budgets-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut run = crate::report::runs::tests::run("minitaur", crate::agents::Algo::Sac, "total_steps=500000", &[]);
+        run.dir = dir.clone();
+        run.metrics = vec![crate::train::metrics::MetricsRow { kind: "episode", step: 500_000, ..Default::default() }];
+        // Reached 500k but kept no actor there: only the standard budgets it passed.
+        assert_eq!(budgets(&[&run]), vec![100_000, 300_000]);
+        let file = budget_policy_path(&dir, 500_000);
+        std::fs::create_dir_all(file.parent().unwrap()).unwrap();
+        std::fs::write(&file, b"").unwrap();
+        assert_eq!(budgets(&[&run]), vec![100_000, 300_000, 500_000]);
+        // A run stopped before its full budget gets no row there.
+        run.metrics = vec![crate::train::metrics::MetricsRow { kind: "episode", step: 400_000, ..Default::default() }];
+        assert_eq!(budgets(&[&run]), vec![100_000, 300_000]);
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
