@@ -117,7 +117,13 @@ pub fn curves(report: &Path) -> Result<String> {
             } else {
                 "inside"
             };
-            (format!("{} ± {} ({})", fmt_return(pm), fmt_return(ps), r.text("published_seeds")), verdict.to_string())
+            // Columns absent from reports written before the column existed read as "".
+            let verdict = if r.text("published_other_settings") == "true" {
+                format!("{verdict} (ours with other agent settings than the source's)")
+            } else {
+                verdict.to_string()
+            };
+            (format!("{} ± {} ({})", fmt_return(pm), fmt_return(ps), r.text("published_seeds")), verdict)
         };
         let _ = writeln!(
             out,

@@ -2,7 +2,7 @@
 use std::collections::BTreeMap;
 use std::fmt::Write as _;
 
-use super::anchors::published_curve;
+use super::anchors::{bundled_anchors, published_curve};
 use super::controller::{return_interval, ControllerSection};
 use super::heldout::BudgetRow;
 use super::runs::{Group, Run};
@@ -70,7 +70,7 @@ pub(crate) fn controller_csv(sections: &BTreeMap<String, ControllerSection>) -> 
 pub(crate) fn curves_csv(envs: &BTreeMap<String, Vec<(&Group, &Vec<&Run>)>>) -> String {
     let mut csv = String::from(
         "env,policy,algo,step,seeds,seed_values,evaluation_episodes,mean,sample_std,low,high,published_mean,\
-         published_std,published_seeds\n",
+         published_std,published_seeds,published_other_settings\n",
     );
     for (env, groups) in envs {
         for (g, runs) in groups {
@@ -87,10 +87,11 @@ pub(crate) fn curves_csv(envs: &BTreeMap<String, Vec<(&Group, &Vec<&Run>)>>) -> 
                 let sd = if values.len() > 1 { stats::sample_std(&values) } else { f64::NAN };
                 let published = published_curve(env, &g.algo)
                     .filter(|_| g.is_default_setting())
-                    .and_then(|c| c.at(mark).map(|(m, s)| (m, s, c.seeds)));
-                let (pm, ps, pn) = match published {
-                    Some((m, s, n)) => (m.to_string(), s.to_string(), n.to_string()),
-                    None => (String::new(), String::new(), String::new()),
+                    .and_then(|c| c.at(mark).map(|(m, s)| (m, s, c.seeds.to_string())))
+                    .or_else(|| evaluation_anchor(g, runs, mark));
+                let (pm, ps, pn, other_settings) = match published {
+                    Some((m, s, n)) => (m.to_string(), s.to_string(), n, !g.settings.is_empty()),
+                    None => (String::new(), String::new(), String::new(), false),
                 };
                 let mut episodes: Vec<usize> = runs.iter().map(|r| r.config.train.eval_episodes).collect();
                 episodes.dedup();
@@ -100,7 +101,7 @@ pub(crate) fn curves_csv(envs: &BTreeMap<String, Vec<(&Group, &Vec<&Run>)>>) -> 
                 let seeds = seeds.iter().map(|s| s.to_string()).collect::<Vec<_>>().join(" ");
                 let _ = writeln!(
                     csv,
-                    "{env},{},{},{mark},{},{seeds},{episodes},{},{sd},{},{},{pm},{ps},{pn}",
+                    "{env},{},{},{mark},{},{seeds},{episodes},{},{sd},{},{},{pm},{ps},{pn},{other_settings}",
                     g.label().replace(',', ";"),
                     g.algo,
                     values.len(),
@@ -112,6 +113,19 @@ pub(crate) fn curves_csv(envs: &BTreeMap<String, Vec<(&Group, &Vec<&Run>)>>) -> 
         }
     }
     csv
+}
+
+/// A published deterministic evaluation at `mark` that these runs can stand beside where no
+/// published curve covers them (CrossQ's 100k and 300k): same env, algorithm and environment
+/// options (`Anchor::comparable`; an anchor naming no options holds for the default reward).
+/// The agent's settings may differ, and the table then says so.
+fn evaluation_anchor(g: &Group, runs: &[&Run], mark: u64) -> Option<(f64, f64, String)> {
+    bundled_anchors()
+        .into_iter()
+        .filter(|a| a.steps == mark && a.evaluation_episodes.is_some() && a.env == g.env && a.algo == g.algo)
+        .filter(|a| !a.options.is_empty() || g.reward == "default reward")
+        .find(|a| runs.iter().all(|r| a.comparable(r)))
+        .and_then(|a| Some((a.value, a.std?, a.seeds.map_or(String::new(), |n| n.to_string()))))
 }
 
 /// Each learned budget row beside the controller commanded to its speed, on the same episodes.
@@ -154,4 +168,47 @@ pub(crate) fn versus_controller_csv(
         }
     }
     csv
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::agents::Algo;
+    use crate::report::runs::tests::run;
+
+    fn eval_row(step: u64, mean: f64) -> crate::train::metrics::MetricsRow {
+        crate::train::metrics::MetricsRow { kind: "eval", step, eval_mean: Some(mean), ..Default::default() }
+    }
+
+    #[test]
+    fn curves_take_published_evaluations_where_no_curve_covers_the_runs_and_say_when_settings_differ() {
+        let mut crossq = run("half-cheetah", Algo::Crossq, "critic_hidden=[256, 256]", &[]);
+        crossq.metrics = vec![eval_row(100_000, 7000.0), eval_row(200_000, 8000.0)];
+        let group = crossq.group();
+        let runs = vec![&crossq];
+        let envs = BTreeMap::from([("half-cheetah".to_string(), vec![(&group, &runs)])]);
+        let csv = curves_csv(&envs);
+        let rows: Vec<&str> = csv.lines().collect();
+        assert!(rows[0].ends_with("published_mean,published_std,published_seeds,published_other_settings"));
+        // 100k: CrossQ's published deterministic evaluation (2048-wide critics), ours narrower.
+        assert!(rows[1].contains(",100000,") && rows[1].ends_with(",8112,896,10,true"), "{}", rows[1]);
+        // 200k: no published value there.
+        assert!(rows[2].contains(",200000,") && rows[2].ends_with(",,,,false"), "{}", rows[2]);
+        // Another reward than the default: not beside the source's.
+        let mut drift = run("half-cheetah", Algo::Crossq, "", &[("ctrl_cost_weight", "0.5")]);
+        drift.metrics = vec![eval_row(100_000, 7000.0)];
+        assert_eq!(evaluation_anchor(&drift.group(), &[&drift], 100_000), None);
+        // The default settings: beside it, with nothing to flag.
+        let mut plain = run("half-cheetah", Algo::Crossq, "", &[]);
+        plain.metrics = vec![eval_row(100_000, 7000.0)];
+        let (g, rs) = (plain.group(), vec![&plain]);
+        let csv = curves_csv(&BTreeMap::from([("half-cheetah".to_string(), vec![(&g, &rs)])]));
+        assert!(csv.lines().nth(1).unwrap().ends_with(",8112,896,10,false"));
+        // TD3 keeps its published curve.
+        let mut td3 = run("half-cheetah", Algo::Td3, "", &[]);
+        td3.metrics = vec![eval_row(100_000, 5000.0)];
+        let (g, rs) = (td3.group(), vec![&td3]);
+        let csv = curves_csv(&BTreeMap::from([("half-cheetah".to_string(), vec![(&g, &rs)])]));
+        assert!(csv.lines().nth(1).unwrap().ends_with(",5514,554,10,false"));
+    }
 }
