@@ -82,6 +82,24 @@ fn sweep_then_report_evaluates_every_run_at_its_budget_beside_the_controller() {
     // from both seeds' policies, 2 episodes each; no budget row borrows from another.
     assert_eq!(md.matches("| 240 | 2 of 2 | 2 |").count(), 4, "{md}");
     assert!(!md.contains("| 100k |"), "no run reached 100k: no such row");
+    // Only the rows trained under the controller's reward (drift 0) stand beside it, each with
+    // its own numbers: the speed in versus_controller.csv is the held-out row's.
+    let csv = |file: &str| -> Vec<Vec<String>> {
+        std::fs::read_to_string(report.join(file))
+            .unwrap()
+            .lines()
+            .skip(1)
+            .map(|l| l.split(',').map(str::to_string).collect())
+            .collect()
+    };
+    let (versus, held_out) = (csv("versus_controller.csv"), csv("held_out.csv"));
+    let policies: Vec<&str> = versus.iter().map(|v| v[1].as_str()).collect();
+    assert_eq!(policies, ["sac-drift0", "td3-drift0"], "{versus:?}");
+    for v in &versus {
+        // held_out.csv: env,policy,budget,...,speed at column 15; versus: env,policy,budget,seeds,speed
+        let h = held_out.iter().find(|h| h[1] == v[1] && h[2] == v[2]).unwrap();
+        assert_eq!(h[15], v[4], "{} at {}: held-out speed {} against {}", v[1], v[2], h[15], v[4]);
+    }
     let svgs: Vec<String> = std::fs::read_dir(&report)
         .unwrap()
         .filter_map(|e| e.ok())

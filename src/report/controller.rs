@@ -77,12 +77,13 @@ pub(crate) fn return_interval(point: &SpeedPoint) -> stats::Interval {
     )
 }
 
-/// Everything about the controller on one env. `rows`: the env's held-out rows (all under one
-/// env config, `env_config`); `push_rows`: for each RL row to push, its index and its episodes
-/// under each push level (computed by the caller, which holds the policies).
+/// Everything about the controller on one env, run under `env_config`. `rows`: the env's
+/// held-out rows; those with a policy for which `compared` holds (trained under `env_config`'s
+/// options and reward) are matched, and `MatchedRow::row` indexes `rows`.
 pub(crate) fn controller_section(
     env_config: &EnvConfig,
     rows: &[BudgetRow],
+    compared: impl Fn(&BudgetRow) -> bool,
     protocol: &Protocol,
     seed: u64,
     threads: usize,
@@ -91,15 +92,14 @@ pub(crate) fn controller_section(
     family.threads = threads;
     let grid = family.sweep(GRID_STEP, GRID_MAX)?;
     let best = best_point(&grid);
-    let commands: Vec<(f64, Option<Push>)> = rows
-        .iter()
-        .filter(|r| r.seeds() > 0)
-        .filter_map(|r| crate::evaluation::speed_grid::command_for(&grid, r.speed()).ok())
+    let matchable = || rows.iter().enumerate().filter(|(_, r)| r.seeds() > 0 && compared(r));
+    let commands: Vec<(f64, Option<Push>)> = matchable()
+        .filter_map(|(_, r)| crate::evaluation::speed_grid::command_for(&grid, r.speed()).ok())
         .map(|c| (c, None))
         .collect();
     family.prefetch(&commands)?;
     let mut matched = Vec::new();
-    for (i, row) in rows.iter().enumerate().filter(|(_, r)| r.seeds() > 0) {
+    for (i, row) in matchable() {
         let rl_speed = row.speed();
         let controller = family.matched(&grid, rl_speed)?;
         let beats_matched = controller.as_ref().ok().map(|c| improvement(row, c, seed ^ i as u64));

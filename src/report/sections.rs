@@ -388,7 +388,7 @@ pub fn controller(
         r.env_config.as_ref().is_none_or(|c| c.resolved_options().ok().as_ref() == Some(&env_config.options))
     };
     let comparable: Vec<BudgetRow> = rows.iter().filter(|r| same_env(r)).cloned().collect();
-    let mut section = controller_section(&env_config, &comparable, &opts.protocol, BOOTSTRAP_SEED, opts.threads)?;
+    let mut section = controller_section(&env_config, rows, same_env, &opts.protocol, BOOTSTRAP_SEED, opts.threads)?;
 
     doc.heading(2, "Controller across commanded speeds");
     doc.table(
@@ -445,7 +445,7 @@ pub fn controller(
             .matched
             .iter()
             .map(|m| {
-                let r = &comparable[m.row];
+                let r = &rows[m.row];
                 let p = |e: &Option<super::heldout::Estimate>| {
                     e.map_or("–".into(), |e| format!("{} (over {})", interval(e.interval, |v| fixed(v, 2)), e.over))
                 };
@@ -484,7 +484,7 @@ pub fn controller(
     }
 
     if opts.push_episodes > 0 {
-        section.pushes = pushes(groups, &comparable, &env_config, &section, opts)?;
+        section.pushes = pushes(groups, rows, &env_config, &section, opts)?;
         doc.heading(2, "Pushes");
         let mut header = vec!["policy".to_string(), "speed m/s".to_string(), "episodes per level".to_string()];
         header.extend(PUSH_LEVELS.iter().map(|dv| format!("survived, Δv {dv} m/s (95% CI)")));
@@ -507,7 +507,7 @@ pub fn controller(
 }
 
 /// Push survival of the controller (at its best speed and at each pushed row's speed) and of
-/// each group's largest-budget row.
+/// each group's largest-budget row among those compared with the controller.
 fn pushes(
     groups: &[(&Group, &Vec<&Run>)],
     rows: &[BudgetRow],
@@ -522,7 +522,10 @@ fn pushes(
     let pushed_rows: Vec<(usize, &Group, &Vec<&Run>)> = groups
         .iter()
         .filter_map(|(g, rs)| {
-            rows.iter().enumerate().rfind(|(_, r)| &r.group == *g && r.seeds() > 0).map(|(i, _)| (i, *g, *rs))
+            rows.iter()
+                .enumerate()
+                .rfind(|(i, r)| &r.group == *g && section.matched.iter().any(|m| m.row == *i))
+                .map(|(i, _)| (i, *g, *rs))
         })
         .collect();
     let matched_speed = |i: usize| {
