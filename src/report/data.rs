@@ -123,7 +123,7 @@ fn evaluation_anchor(g: &Group, runs: &[&Run], mark: u64) -> Option<(f64, f64, S
     bundled_anchors()
         .into_iter()
         .filter(|a| a.steps == mark && a.evaluation_episodes.is_some() && a.env == g.env && a.algo == g.algo)
-        .filter(|a| !a.options.is_empty() || g.reward == "default reward")
+        .filter(|a| !a.options.is_empty() || g.has_default_reward())
         .find(|a| runs.iter().all(|r| a.comparable(r)))
         .and_then(|a| Some((a.value, a.std?, a.seeds.map_or(String::new(), |n| n.to_string()))))
 }

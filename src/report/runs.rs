@@ -12,6 +12,9 @@ pub(crate) fn is_reward_weight(key: &str) -> bool {
     key.ends_with("_weight") || key == "healthy_reward"
 }
 
+/// `Run::reward_label` of a run with the env's default reward weights.
+const DEFAULT_REWARD: &str = "default reward";
+
 /// A run directory, loaded: its configuration and metrics.
 #[derive(Debug, Clone)]
 pub struct Run {
@@ -47,7 +50,7 @@ impl Run {
     }
 
     /// Reward weights that differ from the environment's defaults, e.g. `drift=0.25`, or
-    /// `default reward`.
+    /// `DEFAULT_REWARD`.
     pub(crate) fn reward_label(&self) -> String {
         let defaults = EnvConfig::new(self.env()).resolved_options().unwrap_or_default();
         let mut changed: Vec<String> = self
@@ -60,7 +63,7 @@ impl Run {
             .collect();
         changed.sort();
         if changed.is_empty() {
-            "default reward".into()
+            DEFAULT_REWARD.into()
         } else {
             changed.join(",")
         }
@@ -156,15 +159,20 @@ impl Group {
             return self.variant.clone();
         }
         let mut label = self.algo.clone();
-        if self.reward != "default reward" {
+        if !self.has_default_reward() {
             label += &format!(" ({})", self.reward);
         }
         label
     }
 
+    /// Trained with the env's default reward weights.
+    pub(crate) fn has_default_reward(&self) -> bool {
+        self.reward == DEFAULT_REWARD
+    }
+
     /// Shipped settings and the env's default reward: what published curves are comparable with.
     pub(crate) fn is_default_setting(&self) -> bool {
-        self.settings.is_empty() && self.reward == "default reward"
+        self.settings.is_empty() && self.has_default_reward()
     }
 
     /// Algorithm, reward and settings in full.

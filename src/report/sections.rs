@@ -387,7 +387,7 @@ pub fn controller(
     let same_env = |r: &BudgetRow| {
         r.env_config.as_ref().is_none_or(|c| c.resolved_options().ok().as_ref() == Some(&env_config.options))
     };
-    let comparable: Vec<BudgetRow> = rows.iter().filter(|r| same_env(r)).cloned().collect();
+    let comparable: Vec<&BudgetRow> = rows.iter().filter(|r| same_env(r)).collect();
     let mut section = controller_section(&env_config, rows, same_env, &opts.protocol, BOOTSTRAP_SEED, opts.threads)?;
 
     doc.heading(2, "Controller across commanded speeds");
@@ -521,12 +521,7 @@ fn pushes(
     // Each group's largest-budget row, and the controller at its speed.
     let pushed_rows: Vec<(usize, &Group, &Vec<&Run>)> = groups
         .iter()
-        .filter_map(|(g, rs)| {
-            rows.iter()
-                .enumerate()
-                .rfind(|(i, r)| &r.group == *g && section.matched.iter().any(|m| m.row == *i))
-                .map(|(i, _)| (i, *g, *rs))
-        })
+        .filter_map(|(g, rs)| section.matched.iter().rev().find(|m| &rows[m.row].group == *g).map(|m| (m.row, *g, *rs)))
         .collect();
     let matched_speed = |i: usize| {
         section.matched.iter().find(|m| m.row == i).and_then(|m| m.controller.as_ref().ok()).map(|c| c.commanded)
@@ -571,7 +566,7 @@ fn speed_charts(
     out: &Path,
     env: &str,
     section: &ControllerSection,
-    rows: &[BudgetRow],
+    rows: &[&BudgetRow],
 ) -> Result<()> {
     type Measure = fn(&[crate::controller::measure::GaitEpisode]) -> (f64, f64, f64);
     let ret: Measure = |eps| {
@@ -664,7 +659,7 @@ pub(crate) fn training_returns(
 /// A short file name for a group: algorithm, then a hash of its reward and settings when they
 /// differ from the defaults (the label says what they are).
 fn file_stem(g: &Group) -> String {
-    if g.settings.is_empty() && g.reward == "default reward" {
+    if g.is_default_setting() {
         return g.algo.clone();
     }
     let text = format!("{}|{}", g.reward, g.settings);
