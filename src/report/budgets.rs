@@ -98,8 +98,8 @@ mod tests {
 
     #[test]
     fn a_full_budget_off_the_standard_list_gets_a_row_when_its_policy_was_kept() {
-        let dir = std::env::temp_dir().join(format!("locobench-budgets-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&dir);
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().to_path_buf();
         let mut run = crate::report::runs::tests::run("minitaur", crate::agents::Algo::Sac, "total_steps=500000", &[]);
         run.dir = dir.clone();
         run.metrics = vec![crate::train::metrics::MetricsRow { kind: "episode", step: 500_000, ..Default::default() }];
@@ -112,6 +112,5 @@ mod tests {
         // A run stopped before its full budget gets no row there.
         run.metrics = vec![crate::train::metrics::MetricsRow { kind: "episode", step: 400_000, ..Default::default() }];
         assert_eq!(budgets(&[&run]), vec![100_000, 300_000]);
-        std::fs::remove_dir_all(&dir).unwrap();
     }
 }
