@@ -2,8 +2,9 @@
 //! gradient updates/s (batch 256, one update after another) and environment steps/s while
 //! training (one update per step, the real `locobench train` loop, after the warm-up).
 //!
-//! `cargo bench --bench throughput -- --roofline` instead prints the TD3 update's matmul GFLOP/s
-//! against one core's measured matmul peak, and `-- --matmul` the GFLOP/s of every kernel path
+//! `cargo bench --bench throughput -- --roofline [--algo td3|sac] [--threads 1|2]` instead prints
+//! the update's matmul GFLOP/s against the FP32 peak of the cores used (an FMA loop at the kernel
+//! path's vector width, see `fma_peak_gflops`) and against gemm's 1024^3 rate, and `-- --matmul` the GFLOP/s of every kernel path
 //! (`numeric::kernel_path`) on the update's products. `LOCOBENCH_KERNELS` picks the path the
 //! other modes run on; each JSON line names it.
 //!
@@ -104,7 +105,7 @@ fn mlp_flops(sizes: &[usize], batch: usize, skip_first: bool) -> f64 {
     layers.map(|w| 2.0 * (batch * w[0] * w[1]) as f64).sum()
 }
 
-/// Matmul FLOPs of one TD3 update at these sizes (about 0.8 GFLOP): target
+/// Matmul FLOPs of one TD3 update at these sizes (about 0.75 GFLOP): target
 /// actor + two target critics forward; two critics forward and backward (weight gradients, and
 /// input gradients past the first layer); every second update the actor step (actor forward,
 /// critic 0 forward and its input gradients down to the action, actor backward).
@@ -118,9 +119,23 @@ fn td3_update_flops() -> f64 {
     targets + critic_step + actor_step / 2.0
 }
 
+/// Matmul FLOPs of one SAC 256-256 update (about 0.37 GFLOP): the actor (mean and log-std
+/// heads) samples next actions, two target critics forward; two critics forward and backward;
+/// every update the actor step (actor forward, both critics forward and their input gradients
+/// down to the action, actor backward).
+fn sac_update_flops() -> f64 {
+    let actor = [OBS, 256, 256, 2 * ACT];
+    let critic = [OBS + ACT, 256, 256, 1];
+    let (a, c) = (mlp_flops(&actor, BATCH, false), mlp_flops(&critic, BATCH, false));
+    let targets = a + 2.0 * c;
+    let critic_step = 2.0 * (c + c + mlp_flops(&critic, BATCH, true));
+    let actor_step = a + 2.0 * (c + c) + a + mlp_flops(&actor, BATCH, true);
+    targets + critic_step + actor_step
+}
+
 /// Single-thread f32 matmul rate of the gemm library candle uses, on a large square product:
-/// the practical peak of one core, the roofline the TD3 update is measured against.
-fn matmul_peak_gflops() -> Result<f64> {
+/// a practical peak of one core, printed beside the FMA peak.
+fn gemm_1024_gflops() -> Result<f64> {
     let _runtime = locobench::runtime::Runtime::enter(1);
     use candle_core::{Device, Tensor};
     let n = 1024;
@@ -135,6 +150,118 @@ fn matmul_peak_gflops() -> Result<f64> {
     Ok(reps as f64 * 2.0 * (n * n * n) as f64 / started.elapsed().as_secs_f64() / 1e9)
 }
 
+/// The FP32 peak of one core at the vector width `path` computes with: a loop of independent
+/// fused multiply-adds on registers, more chains than latency x FMA ports on current x86 cores,
+/// so that nothing but the FMA units limits it; FLOPs = chains x lanes x 2 per iteration. The
+/// library path is measured at the widest width the CPU has (gemm uses it); the portable path
+/// is one scalar FMA per term, whose peak is not what limits it, so it gets the widest width too.
+fn fma_peak_gflops(path: locobench::numeric::KernelPath) -> f64 {
+    use locobench::numeric::KernelPath;
+    let wide = if path == KernelPath::Avx2 { KernelPath::Avx2 } else { KernelPath::best_exact() };
+    let (lanes, chains) = match wide {
+        KernelPath::Avx512 => (16, fma_chains::CHAINS_512),
+        KernelPath::Avx2 => (8, fma_chains::CHAINS_256),
+        _ => return f64::NAN,
+    };
+    let iters = 10_000_000usize;
+    let run = || {
+        // SAFETY: `best_exact` and the Avx2 path (forced only where supported) have the features.
+        unsafe {
+            if wide == KernelPath::Avx512 {
+                fma_chains::avx512(iters)
+            } else {
+                fma_chains::avx2(iters)
+            }
+        }
+    };
+    run();
+    (0..3)
+        .map(|_| {
+            let started = Instant::now();
+            run();
+            (iters * chains * lanes * 2) as f64 / started.elapsed().as_secs_f64() / 1e9
+        })
+        .fold(0.0, f64::max)
+}
+
+/// Register-only FMA loops in assembly (a compiler may spill accumulators to the stack, which
+/// would measure store forwarding instead of the FMA units): `CHAINS` independent
+/// `acc += m * c` per iteration, accumulators zeroed first.
+mod fma_chains {
+    use std::arch::asm;
+
+    /// Independent accumulators per iteration (AVX2 has 16 registers: 14 + the two inputs).
+    pub const CHAINS_512: usize = 16;
+    pub const CHAINS_256: usize = 14;
+
+    /// # Safety
+    /// The CPU has AVX-512F.
+    #[target_feature(enable = "avx512f")]
+    pub unsafe fn avx512(iters: usize) {
+        let (m, c) = (std::hint::black_box(0.999_999f32), std::hint::black_box(1e-6f32));
+        // SAFETY: registers only; the caller checked the feature.
+        unsafe {
+            asm!(
+                "vbroadcastss zmm16, dword ptr [{m}]",
+                "vbroadcastss zmm17, dword ptr [{c}]",
+                "vxorps zmm0, zmm0, zmm0", "vxorps zmm1, zmm1, zmm1", "vxorps zmm2, zmm2, zmm2", "vxorps zmm3, zmm3, zmm3",
+                "vxorps zmm4, zmm4, zmm4", "vxorps zmm5, zmm5, zmm5", "vxorps zmm6, zmm6, zmm6", "vxorps zmm7, zmm7, zmm7",
+                "vxorps zmm8, zmm8, zmm8", "vxorps zmm9, zmm9, zmm9", "vxorps zmm10, zmm10, zmm10", "vxorps zmm11, zmm11, zmm11",
+                "vxorps zmm12, zmm12, zmm12", "vxorps zmm13, zmm13, zmm13", "vxorps zmm14, zmm14, zmm14", "vxorps zmm15, zmm15, zmm15",
+                "2:",
+                "vfmadd231ps zmm0, zmm16, zmm17", "vfmadd231ps zmm1, zmm16, zmm17", "vfmadd231ps zmm2, zmm16, zmm17",
+                "vfmadd231ps zmm3, zmm16, zmm17", "vfmadd231ps zmm4, zmm16, zmm17", "vfmadd231ps zmm5, zmm16, zmm17",
+                "vfmadd231ps zmm6, zmm16, zmm17", "vfmadd231ps zmm7, zmm16, zmm17", "vfmadd231ps zmm8, zmm16, zmm17",
+                "vfmadd231ps zmm9, zmm16, zmm17", "vfmadd231ps zmm10, zmm16, zmm17", "vfmadd231ps zmm11, zmm16, zmm17",
+                "vfmadd231ps zmm12, zmm16, zmm17", "vfmadd231ps zmm13, zmm16, zmm17", "vfmadd231ps zmm14, zmm16, zmm17",
+                "vfmadd231ps zmm15, zmm16, zmm17",
+                "dec {n}",
+                "jnz 2b",
+                m = in(reg) &m,
+                c = in(reg) &c,
+                n = inout(reg) iters => _,
+                out("zmm0") _, out("zmm1") _, out("zmm2") _, out("zmm3") _, out("zmm4") _, out("zmm5") _,
+                out("zmm6") _, out("zmm7") _, out("zmm8") _, out("zmm9") _, out("zmm10") _, out("zmm11") _,
+                out("zmm12") _, out("zmm13") _, out("zmm14") _, out("zmm15") _, out("zmm16") _, out("zmm17") _,
+                options(nostack, readonly),
+            );
+        }
+    }
+
+    /// # Safety
+    /// The CPU has AVX2 and FMA.
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn avx2(iters: usize) {
+        let (m, c) = (std::hint::black_box(0.999_999f32), std::hint::black_box(1e-6f32));
+        // SAFETY: registers only; the caller checked the features.
+        unsafe {
+            asm!(
+                "vbroadcastss ymm14, dword ptr [{m}]",
+                "vbroadcastss ymm15, dword ptr [{c}]",
+                "vxorps ymm0, ymm0, ymm0", "vxorps ymm1, ymm1, ymm1", "vxorps ymm2, ymm2, ymm2", "vxorps ymm3, ymm3, ymm3",
+                "vxorps ymm4, ymm4, ymm4", "vxorps ymm5, ymm5, ymm5", "vxorps ymm6, ymm6, ymm6", "vxorps ymm7, ymm7, ymm7",
+                "vxorps ymm8, ymm8, ymm8", "vxorps ymm9, ymm9, ymm9", "vxorps ymm10, ymm10, ymm10", "vxorps ymm11, ymm11, ymm11",
+                "vxorps ymm12, ymm12, ymm12", "vxorps ymm13, ymm13, ymm13",
+                "2:",
+                "vfmadd231ps ymm0, ymm14, ymm15", "vfmadd231ps ymm1, ymm14, ymm15", "vfmadd231ps ymm2, ymm14, ymm15",
+                "vfmadd231ps ymm3, ymm14, ymm15", "vfmadd231ps ymm4, ymm14, ymm15", "vfmadd231ps ymm5, ymm14, ymm15",
+                "vfmadd231ps ymm6, ymm14, ymm15", "vfmadd231ps ymm7, ymm14, ymm15", "vfmadd231ps ymm8, ymm14, ymm15",
+                "vfmadd231ps ymm9, ymm14, ymm15", "vfmadd231ps ymm10, ymm14, ymm15", "vfmadd231ps ymm11, ymm14, ymm15",
+                "vfmadd231ps ymm12, ymm14, ymm15", "vfmadd231ps ymm13, ymm14, ymm15",
+                "dec {n}",
+                "jnz 2b",
+                m = in(reg) &m,
+                c = in(reg) &c,
+                n = inout(reg) iters => _,
+                out("ymm0") _, out("ymm1") _, out("ymm2") _, out("ymm3") _, out("ymm4") _, out("ymm5") _,
+                out("ymm6") _, out("ymm7") _, out("ymm8") _, out("ymm9") _, out("ymm10") _, out("ymm11") _,
+                out("ymm12") _, out("ymm13") _, out("ymm14") _, out("ymm15") _,
+                options(nostack, readonly),
+            );
+        }
+    }
+}
+
 /// GFLOP/s of each kernel path this CPU supports on the products of a TD3 400-300 critic update
 /// at batch 256 (forward, weight gradient, input gradient of the 400 -> 300 layer, and the
 /// 23 -> 400 first layer), one thread.
@@ -144,11 +271,17 @@ fn matmul_paths() -> Result<()> {
     let _runtime = locobench::runtime::Runtime::enter(1);
     // (name, (m, n, k), A read transposed, B read transposed)
     type Product = (&'static str, (usize, usize, usize), bool, bool);
-    let shapes: [Product; 4] = [
-        ("forward 256x300x400 (x W^T)", (BATCH, 300, 400), false, true),
-        ("weight grad 300x400x256 (g^T x)", (300, 400, BATCH), true, false),
-        ("input grad 256x400x300 (g W)", (BATCH, 400, 300), false, false),
-        ("forward 256x400x23 (x W^T)", (BATCH, 400, OBS + ACT), false, true),
+    let shapes: [Product; 10] = [
+        ("TD3 forward 256x300x400 (x W^T)", (BATCH, 300, 400), false, true),
+        ("TD3 weight grad 300x400x256 (g^T x)", (300, 400, BATCH), true, false),
+        ("TD3 input grad 256x400x300 (g W)", (BATCH, 400, 300), false, false),
+        ("TD3 forward 256x400x23 (x W^T)", (BATCH, 400, OBS + ACT), false, true),
+        ("TD3 critic output 256x1x300 (x W^T)", (BATCH, 1, 300), false, true),
+        ("SAC forward 256x256x256 (x W^T)", (BATCH, 256, 256), false, true),
+        ("SAC weight grad 256x256x256 (g^T x)", (256, 256, BATCH), true, false),
+        ("SAC input grad 256x256x256 (g W)", (BATCH, 256, 256), false, false),
+        ("SAC action grad 256x23x256 (g W)", (BATCH, OBS + ACT, 256), false, false),
+        ("SAC actor heads 256x12x256 (x W^T)", (BATCH, 2 * ACT, 256), false, true),
     ];
     println!(
         "| product | {} |",
@@ -179,20 +312,29 @@ fn matmul_paths() -> Result<()> {
 }
 
 fn main() -> Result<()> {
+    // candle's pools on one thread, as the CLI runs them (before any candle call)
+    locobench::runtime::configure_process();
     if std::env::args().any(|a| a == "--matmul") {
         return matmul_paths();
     }
     if std::env::args().any(|a| a == "--roofline") {
-        let peak = matmul_peak_gflops()?;
-        let flops = td3_update_flops() / 1e9;
-        let ups = updates_per_second(Algo::Td3, arg("--updates").map(|v| v.parse()).transpose()?.unwrap_or(300))?;
+        let algo = Algo::parse(&arg("--algo").unwrap_or_else(|| "td3".into()))?;
+        let flops = match algo {
+            Algo::Td3 => td3_update_flops(),
+            Algo::Sac => sac_update_flops(),
+            _ => anyhow::bail!("--roofline measures td3 or sac"),
+        } / 1e9;
+        let path = locobench::numeric::kernel_path::active();
+        let (peak, gemm) = (fma_peak_gflops(path), gemm_1024_gflops()?);
+        let ups = updates_per_second(algo, arg("--updates").map(|v| v.parse()).transpose()?.unwrap_or(300))?;
+        let cores = threads() as f64;
         println!(
-            "{{\"matmul_peak_gflops\": {peak:.1}, \"td3_gflop_per_update\": {flops:.3}, \"threads\": {}, \"kernels\": \"{}\", \"td3_updates_per_s\": {ups:.1}, \"td3_gflops\": {:.1}, \"fraction_of_one_core_peak\": {:.2}, \"fraction_of_peak_of_cores_used\": {:.2}}}",
+            "{{\"algo\": \"{}\", \"threads\": {}, \"kernels\": \"{path}\", \"fma_peak_gflops_per_core\": {peak:.1}, \"gemm_1024_gflops_one_core\": {gemm:.1}, \"gflop_per_update\": {flops:.3}, \"updates_per_s\": {ups:.1}, \"gflops\": {:.1}, \"fraction_of_fma_peak_of_cores_used\": {:.2}, \"fraction_of_gemm_rate_of_cores_used\": {:.2}}}",
+            algo.name(),
             threads(),
-            locobench::numeric::kernel_path::active(),
             ups * flops,
-            ups * flops / peak,
-            ups * flops / (peak * threads() as f64)
+            ups * flops / (peak * cores),
+            ups * flops / (gemm * cores)
         );
         return Ok(());
     }

@@ -9,9 +9,11 @@
 //!
 //! The loops are those of Goto and van de Geijn ("Anatomy of High-Performance Matrix
 //! Multiplication", ACM TOMS 34(3), 2008): `k` is cut into chunks of [`K_CHUNK`] terms, a chunk of
-//! A is packed into row tiles and a chunk of B into column panels so that the innermost loop
-//! reads two contiguous streams from cache, and a register tile (8 rows by three vectors with
-//! AVX-512, 6 rows by two with AVX2) takes one chunk at a time. Cutting `k` keeps the order exact because a tile carries its partial
+//! B is packed into column panels so that the innermost loop reads its vectors from one
+//! contiguous stream in L1, and a register tile (8 rows by three vectors with AVX-512, 6 rows by
+//! two with AVX2) takes one chunk at a time. A is not packed: each term of a tile needs only one
+//! broadcast element per row, which the tile reads where it lies (packing A measured at a sixth of
+//! a TD3 update, mostly in per-term copies of a few floats). Cutting `k` keeps the order exact because a tile carries its partial
 //! result into the next chunk through C (a stored f32 is the value itself), rather than summing
 //! chunks computed from zero as BLAS libraries do. The `gemm` crate remains available as
 //! [`KernelPath::Library`] and is the reference the tests compare with.
@@ -86,30 +88,28 @@ pub fn matmul(
         return;
     }
     SCRATCH.with(|scratch| {
-        let (a_pack, b_pack) = &mut *scratch.borrow_mut();
+        let b_pack = &mut *scratch.borrow_mut();
         for p0 in (0..k).step_by(K_CHUNK) {
             let kc = K_CHUNK.min(k - p0);
-            pack_a(a, m, p0, kc, tile_rows, a_pack);
             for j0 in (0..n).step_by(panel) {
                 let cols = panel.min(n - j0);
-                pack_b(b, p0, kc, j0, cols, panel, b_pack);
-                for (t, i0) in (0..m).step_by(tile_rows).enumerate() {
+                pack_b(b, p0, kc, j0, cols, panel, path != KernelPath::Portable, b_pack);
+                for i0 in (0..m).step_by(tile_rows) {
                     let rows = tile_rows.min(m - i0);
                     let c = &mut dst[i0 * dst_stride + j0..];
                     assert!(c.len() >= (rows - 1) * dst_stride + cols);
-                    let a_tile = &a_pack[t * tile_rows * kc..(t + 1) * tile_rows * kc];
-                    // SAFETY: the CPU has the path's features (asserted above); the packed tiles
-                    // hold kc terms of tile_rows rows and `panel` columns, and c holds `rows` rows
-                    // of `cols` elements at `dst_stride` (asserted).
+                    // A is read where it lies: rows i0.., terms p0.. (within bounds by `holds`).
+                    let a_tile = a.data[i0 * a.row_stride + p0 * a.col_stride..].as_ptr();
+                    // SAFETY: the CPU has the path's features (asserted above); A holds rows
+                    // i0..i0+rows and terms p0..p0+kc at its strides (`holds`), the packed panel
+                    // kc terms of `panel` columns, and c `rows` rows of `cols` elements at
+                    // `dst_stride` (asserted).
                     unsafe {
                         tile(
-                            rows,
-                            cols,
-                            kc,
-                            a_tile.as_ptr(),
+                            Tile { rows, cols, kc },
+                            (a_tile, a.row_stride, a.col_stride),
                             b_pack.as_ptr(),
-                            c.as_mut_ptr(),
-                            dst_stride,
+                            (c.as_mut_ptr(), dst_stride),
                             accumulate || p0 > 0,
                         )
                     };
@@ -135,83 +135,120 @@ struct Geometry {
 const PORTABLE: Geometry = Geometry { tile_rows: 6, panel: 16 };
 
 thread_local! {
-    /// Packed chunks of A (row tiles) and B (one column panel), reused between calls.
-    static SCRATCH: RefCell<(Vec<f32>, Vec<f32>)> = const { RefCell::new((Vec::new(), Vec::new())) };
+    /// The packed column panel of B, reused between calls.
+    static SCRATCH: RefCell<Vec<f32>> = const { RefCell::new(Vec::new()) };
 }
 
-/// Terms p0..p0+kc of every row of A, as consecutive tiles of `tile_rows` rows stored term by
-/// term (`tile[p * tile_rows + r]`); rows past m are zero.
-fn pack_a(a: Strided, m: usize, p0: usize, kc: usize, tile_rows: usize, out: &mut Vec<f32>) {
-    let tiles = m.div_ceil(tile_rows);
-    out.clear();
-    out.resize(tiles * tile_rows * kc, 0.0);
-    for (t, tile) in out.chunks_exact_mut(tile_rows * kc).enumerate() {
-        let (first, rows) = (t * tile_rows, tile_rows.min(m - t * tile_rows));
-        if a.row_stride == 1 {
-            // A^T stored row-major (a weight gradient's g^T): each term's rows are contiguous.
-            for (p, dst) in tile.chunks_exact_mut(tile_rows).enumerate() {
-                let start = (p0 + p) * a.col_stride + first;
-                dst[..rows].copy_from_slice(&a.data[start..start + rows]);
-            }
-        } else {
-            // Each packed term gathers one element of `rows` rows, which stay in L1 across
-            // consecutive terms; the writes are sequential.
-            let last = (first + rows - 1) * a.row_stride + (p0 + kc - 1) * a.col_stride;
-            assert!(last < a.data.len());
-            for (p, dst) in tile.chunks_exact_mut(tile_rows).enumerate() {
-                let base = first * a.row_stride + (p0 + p) * a.col_stride;
-                for (r, d) in dst[..rows].iter_mut().enumerate() {
-                    // SAFETY: base + r * row_stride <= last < len (asserted above).
-                    *d = unsafe { *a.data.get_unchecked(base + r * a.row_stride) };
+/// Terms p0..p0+kc of columns j0..j0+cols of B, row by row, `panel` wide (zeros past cols).
+/// `avx`: the CPU has AVX (every vector path), so a transposed weight is packed by 8 x 8 blocks
+/// in registers; the packed values are the same either way.
+#[allow(clippy::too_many_arguments)]
+fn pack_b(b: Strided, p0: usize, kc: usize, j0: usize, cols: usize, panel: usize, avx: bool, out: &mut Vec<f32>) {
+    // every element is written below, so the buffer is only resized, not cleared
+    out.resize(kc * panel, 0.0);
+    if cols < panel {
+        out.chunks_exact_mut(panel).for_each(|row| row[cols..].fill(0.0));
+    }
+    if b.col_stride == 1 {
+        for (p, row) in out.chunks_exact_mut(panel).enumerate() {
+            let start = (p0 + p) * b.row_stride + j0;
+            row[..cols].copy_from_slice(&b.data[start..start + cols]);
+        }
+        return;
+    }
+    // A transposed weight: each packed row gathers one term of `cols` weight rows.
+    let last = (j0 + cols - 1) * b.col_stride + (p0 + kc - 1) * b.row_stride;
+    assert!(last < b.data.len());
+    let (mut j_done, mut p_done) = (0, 0);
+    #[cfg(target_arch = "x86_64")]
+    if avx && b.row_stride == 1 {
+        (j_done, p_done) = (cols / 8 * 8, kc / 8 * 8);
+        // SAFETY: the caller's path implies AVX; every element read is at most `last` (asserted)
+        // and every write is inside `out` (kc rows of `panel`).
+        unsafe {
+            transpose_blocks(b.data.as_ptr().add(j0 * b.col_stride + p0), b.col_stride, j_done, p_done, panel, out)
+        };
+    }
+    // whatever the blocks left: columns past j_done for every term, terms past p_done below it
+    for (p, row) in out.chunks_exact_mut(panel).enumerate() {
+        let base = (p0 + p) * b.row_stride + j0 * b.col_stride;
+        let first = if p < p_done { j_done } else { 0 };
+        for (j, dst) in row[..cols].iter_mut().enumerate().skip(first) {
+            // SAFETY: base + j * col_stride <= last < len (asserted above).
+            *dst = unsafe { *b.data.get_unchecked(base + j * b.col_stride) };
+        }
+    }
+}
+
+/// `out[p * panel + j] = src[j * stride + p]` for `j < cols`, `p < terms`, both multiples of 8:
+/// 8 rows of 8 terms loaded, transposed in registers, stored as 8 rows of the panel.
+///
+/// # Safety
+/// The CPU has AVX; src holds `cols` rows of `terms` at `stride`; out holds `terms` rows of `panel`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx")]
+unsafe fn transpose_blocks(src: *const f32, stride: usize, cols: usize, terms: usize, panel: usize, out: &mut [f32]) {
+    use std::arch::x86_64::*;
+    let dst = out.as_mut_ptr();
+    // SAFETY: (whole body) within the bounds the caller guarantees.
+    unsafe {
+        for j in (0..cols).step_by(8) {
+            for p in (0..terms).step_by(8) {
+                let row = |i: usize| _mm256_loadu_ps(src.add((j + i) * stride + p));
+                let (r0, r1, r2, r3, r4, r5, r6, r7) = (row(0), row(1), row(2), row(3), row(4), row(5), row(6), row(7));
+                let (t0, t1) = (_mm256_unpacklo_ps(r0, r1), _mm256_unpackhi_ps(r0, r1));
+                let (t2, t3) = (_mm256_unpacklo_ps(r2, r3), _mm256_unpackhi_ps(r2, r3));
+                let (t4, t5) = (_mm256_unpacklo_ps(r4, r5), _mm256_unpackhi_ps(r4, r5));
+                let (t6, t7) = (_mm256_unpacklo_ps(r6, r7), _mm256_unpackhi_ps(r6, r7));
+                let (u0, u1) = (_mm256_shuffle_ps::<0x44>(t0, t2), _mm256_shuffle_ps::<0xEE>(t0, t2));
+                let (u2, u3) = (_mm256_shuffle_ps::<0x44>(t1, t3), _mm256_shuffle_ps::<0xEE>(t1, t3));
+                let (u4, u5) = (_mm256_shuffle_ps::<0x44>(t4, t6), _mm256_shuffle_ps::<0xEE>(t4, t6));
+                let (u6, u7) = (_mm256_shuffle_ps::<0x44>(t5, t7), _mm256_shuffle_ps::<0xEE>(t5, t7));
+                let columns = [
+                    _mm256_permute2f128_ps::<0x20>(u0, u4),
+                    _mm256_permute2f128_ps::<0x20>(u1, u5),
+                    _mm256_permute2f128_ps::<0x20>(u2, u6),
+                    _mm256_permute2f128_ps::<0x20>(u3, u7),
+                    _mm256_permute2f128_ps::<0x31>(u0, u4),
+                    _mm256_permute2f128_ps::<0x31>(u1, u5),
+                    _mm256_permute2f128_ps::<0x31>(u2, u6),
+                    _mm256_permute2f128_ps::<0x31>(u3, u7),
+                ];
+                for (i, column) in columns.into_iter().enumerate() {
+                    _mm256_storeu_ps(dst.add((p + i) * panel + j), column);
                 }
             }
         }
     }
 }
 
-/// Terms p0..p0+kc of columns j0..j0+cols of B, row by row, `panel` wide (zeros past cols).
-fn pack_b(b: Strided, p0: usize, kc: usize, j0: usize, cols: usize, panel: usize, out: &mut Vec<f32>) {
-    out.clear();
-    out.resize(kc * panel, 0.0);
-    if b.col_stride == 1 {
-        for (p, row) in out.chunks_exact_mut(panel).enumerate() {
-            let start = (p0 + p) * b.row_stride + j0;
-            row[..cols].copy_from_slice(&b.data[start..start + cols]);
-        }
-    } else {
-        // A transposed weight: each packed row gathers one term of `cols` weight rows, which stay
-        // in L1 across consecutive terms; the writes are sequential.
-        let last = (j0 + cols - 1) * b.col_stride + (p0 + kc - 1) * b.row_stride;
-        assert!(last < b.data.len());
-        for (p, row) in out.chunks_exact_mut(panel).enumerate() {
-            let base = (p0 + p) * b.row_stride + j0 * b.col_stride;
-            for (j, dst) in row[..cols].iter_mut().enumerate() {
-                // SAFETY: base + j * col_stride <= last < len (asserted above).
-                *dst = unsafe { *b.data.get_unchecked(base + j * b.col_stride) };
-            }
-        }
-    }
-}
-
-/// `rows x cols` of C (row stride `c_stride`), starting from C's values when `load_c` and from
-/// zero otherwise, plus `kc` terms of a packed A tile times a packed B panel.
-type TileKernel = unsafe fn(usize, usize, usize, *const f32, *const f32, *mut f32, usize, bool);
-
-/// One element at a time, in the order every path follows.
-///
-/// SAFETY (caller): as for [`TileKernel`]: the packed operands hold kc terms, C its tile.
-#[allow(clippy::too_many_arguments)]
-unsafe fn portable_tile(
+/// The sizes of one register tile's work: `rows` rows of C (at most the path's tile rows) by
+/// `cols` columns (at most its panel), over `kc` terms.
+#[derive(Clone, Copy)]
+struct Tile {
     rows: usize,
     cols: usize,
     kc: usize,
-    a: *const f32,
+}
+
+/// A tile's A operand where it lies: element (r, p) at `ptr + r * row_stride + p * col_stride`.
+type TileA = (*const f32, usize, usize);
+
+/// Adds `kc` terms of A times a packed B panel (`panel` floats per term) to `rows x cols` of C
+/// (pointer and row stride), starting from C's values when `load_c` and from zero otherwise.
+type TileKernel = unsafe fn(Tile, TileA, *const f32, (*mut f32, usize), bool);
+
+/// One element at a time, in the order every path follows.
+///
+/// SAFETY (caller): as for [`TileKernel`]: A and the packed panel hold kc terms, C its tile.
+unsafe fn portable_tile(
+    Tile { rows, cols, kc }: Tile,
+    (a, a_rs, a_cs): TileA,
     b: *const f32,
-    c: *mut f32,
-    c_stride: usize,
+    (c, c_stride): (*mut f32, usize),
     load_c: bool,
 ) {
-    let Geometry { tile_rows, panel } = PORTABLE;
+    let panel = PORTABLE.panel;
     // SAFETY: forwarded from the caller.
     unsafe {
         for r in 0..rows {
@@ -219,7 +256,7 @@ unsafe fn portable_tile(
                 let out = c.add(r * c_stride + j);
                 let mut acc = if load_c { *out } else { 0.0 };
                 for p in 0..kc {
-                    acc = (*a.add(p * tile_rows + r)).mul_add(*b.add(p * panel + j), acc);
+                    acc = (*a.add(r * a_rs + p * a_cs)).mul_add(*b.add(p * panel + j), acc);
                 }
                 *out = acc;
             }
@@ -236,7 +273,7 @@ macro_rules! vector_kernels {
         mod $module {
             use std::arch::x86_64::*;
 
-            use super::Geometry;
+            use super::{Geometry, Tile, TileA};
 
             const W: usize = $width;
             const TILE_ROWS: usize = $tile_rows;
@@ -250,13 +287,10 @@ macro_rules! vector_kernels {
             #[target_feature(enable = $feature)]
             #[allow(clippy::too_many_arguments)]
             pub(super) unsafe fn tile(
-                rows: usize,
-                cols: usize,
-                kc: usize,
-                a: *const f32,
+                Tile { rows, cols, kc }: Tile,
+                a: TileA,
                 b: *const f32,
-                c: *mut f32,
-                c_stride: usize,
+                c: (*mut f32, usize),
                 load_c: bool,
             ) {
                 let vectors = cols.div_ceil(W);
@@ -266,14 +300,14 @@ macro_rules! vector_kernels {
                 // SAFETY: forwarded from the caller.
                 unsafe {
                     match rows {
-                        8 => by_vectors::<8>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
-                        7 => by_vectors::<7>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
-                        6 => by_vectors::<6>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
-                        5 => by_vectors::<5>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
-                        4 => by_vectors::<4>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
-                        3 => by_vectors::<3>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
-                        2 => by_vectors::<2>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
-                        _ => by_vectors::<1>(vectors, full, kc, a, b, c, c_stride, load_c, mask),
+                        8 => by_vectors::<8>(vectors, full, kc, a, b, c, load_c, mask),
+                        7 => by_vectors::<7>(vectors, full, kc, a, b, c, load_c, mask),
+                        6 => by_vectors::<6>(vectors, full, kc, a, b, c, load_c, mask),
+                        5 => by_vectors::<5>(vectors, full, kc, a, b, c, load_c, mask),
+                        4 => by_vectors::<4>(vectors, full, kc, a, b, c, load_c, mask),
+                        3 => by_vectors::<3>(vectors, full, kc, a, b, c, load_c, mask),
+                        2 => by_vectors::<2>(vectors, full, kc, a, b, c, load_c, mask),
+                        _ => by_vectors::<1>(vectors, full, kc, a, b, c, load_c, mask),
                     }
                 }
             }
@@ -284,22 +318,21 @@ macro_rules! vector_kernels {
                 vectors: usize,
                 full: bool,
                 kc: usize,
-                a: *const f32,
+                a: TileA,
                 b: *const f32,
-                c: *mut f32,
-                c_stride: usize,
+                c: (*mut f32, usize),
                 load_c: bool,
                 mask: $mask,
             ) {
                 // SAFETY: forwarded from `tile`.
                 unsafe {
                     match (vectors, full) {
-                        (3, true) => rows_tile::<R, 3, true>(kc, a, b, c, c_stride, load_c, mask),
-                        (3, false) => rows_tile::<R, 3, false>(kc, a, b, c, c_stride, load_c, mask),
-                        (2, true) => rows_tile::<R, 2, true>(kc, a, b, c, c_stride, load_c, mask),
-                        (2, false) => rows_tile::<R, 2, false>(kc, a, b, c, c_stride, load_c, mask),
-                        (_, true) => rows_tile::<R, 1, true>(kc, a, b, c, c_stride, load_c, mask),
-                        (_, false) => rows_tile::<R, 1, false>(kc, a, b, c, c_stride, load_c, mask),
+                        (3, true) => rows_tile::<R, 3, true>(kc, a, b, c, load_c, mask),
+                        (3, false) => rows_tile::<R, 3, false>(kc, a, b, c, load_c, mask),
+                        (2, true) => rows_tile::<R, 2, true>(kc, a, b, c, load_c, mask),
+                        (2, false) => rows_tile::<R, 2, false>(kc, a, b, c, load_c, mask),
+                        (_, true) => rows_tile::<R, 1, true>(kc, a, b, c, load_c, mask),
+                        (_, false) => rows_tile::<R, 1, false>(kc, a, b, c, load_c, mask),
                     }
                 }
             }
@@ -310,15 +343,15 @@ macro_rules! vector_kernels {
             #[allow(clippy::too_many_arguments)]
             unsafe fn rows_tile<const R: usize, const V: usize, const FULL: bool>(
                 kc: usize,
-                a: *const f32,
+                (a, a_rs, a_cs): TileA,
                 b: *const f32,
-                c: *mut f32,
-                c_stride: usize,
+                (c, c_stride): (*mut f32, usize),
                 load_c: bool,
                 mask: $mask,
             ) {
-                // SAFETY: (whole body) a and b are packed (TILE_ROWS and PANEL floats per term,
-                // kc terms); C is read and written in rows < R and lanes inside the mask.
+                // SAFETY: (whole body) A holds R rows of kc terms at its strides, b is packed
+                // (PANEL floats per term, kc terms); C is read and written in rows < R and lanes
+                // inside the mask.
                 unsafe {
                     let mut acc: [[$vec; V]; R] = [[$zero; V]; R];
                     if load_c {
@@ -340,12 +373,12 @@ macro_rules! vector_kernels {
                             *bv = ($load)(b.add(v * W));
                         }
                         for (r, acc_r) in acc.iter_mut().enumerate() {
-                            let a_r = ($splat)(*a.add(r));
+                            let a_r = ($splat)(*a.add(r * a_rs));
                             for (acc_rv, bv) in acc_r.iter_mut().zip(&b_vec) {
                                 *acc_rv = ($fma)(a_r, *bv, *acc_rv);
                             }
                         }
-                        a = a.add(TILE_ROWS);
+                        a = a.add(a_cs);
                         b = b.add(PANEL);
                     }
                     for (r, acc_r) in acc.iter().enumerate() {
@@ -531,6 +564,27 @@ mod tests {
             let wide: Vec<f32> = b.iter().flat_map(|v| [*v; 17]).collect();
             matmul(path, (1, 17, 3), &mut dst, 17, false, Strided::rows(&ones, 3), Strided::rows(&wide, 17));
             assert!(dst.iter().all(|v| *v == 0.0), "{path}: {dst:?}");
+        }
+    }
+
+    #[test]
+    fn packing_a_transposed_weight_by_blocks_gives_the_element_by_element_panel() {
+        if !KernelPath::Avx2.is_supported() {
+            return;
+        }
+        // a weight of 53 rows (columns of B) by 70 terms, packed from term 5, column 3
+        let w = values(53 * 70, 0.9);
+        let b = Strided::transposed(&w, 70);
+        for (cols, kc) in [(48, 64), (45, 61), (8, 8), (7, 9), (16, 1)] {
+            let (mut blocks, mut scalar) = (vec![f32::NAN; 3], vec![f32::NAN; 3]);
+            pack_b(b, 5, kc, 3, cols, 48, true, &mut blocks);
+            pack_b(b, 5, kc, 3, cols, 48, false, &mut scalar);
+            assert_eq!(blocks.len(), kc * 48);
+            assert!(blocks.iter().zip(&scalar).all(|(x, y)| x.to_bits() == y.to_bits()), "{cols} x {kc}");
+            // element (term p, column j) is w[(3 + j) * 70 + 5 + p]; zeros past the columns
+            assert_eq!(blocks[1], w[4 * 70 + 5]);
+            assert_eq!(blocks[(kc - 1) * 48 + cols - 1], w[(3 + cols - 1) * 70 + 5 + kc - 1]);
+            assert!(blocks.chunks(48).all(|row| row[cols..].iter().all(|v| *v == 0.0)));
         }
     }
 
