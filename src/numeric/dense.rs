@@ -179,6 +179,8 @@ impl CustomOp3 for Dense {
         // inputs from the replay buffer need no gradient; hidden activations and the actor's
         // action do
         let need_grad_x = x.track_op();
+        // weights held constant (an actor loss through frozen critics) need none either
+        let need_grad_params = w.track_op() || b.track_op();
         let grad = grad.contiguous()?;
         let (xs, xl) = x.storage_and_layout();
         let (ws, wl) = w.storage_and_layout();
@@ -193,18 +195,21 @@ impl CustomOp3 for Dense {
             Activation::Identity => gv.to_vec(),
             Activation::Relu => gv.iter().zip(yv).map(|(g, y)| if *y > 0.0 { *g } else { 0.0 }).collect(),
         };
-        let mut gw = vec![0f32; d.k * d.out * d.inp];
-        let mut gb = vec![0f32; d.k * d.out];
+        let mut gw = vec![0f32; if need_grad_params { d.k * d.out * d.inp } else { 0 }];
+        let mut gb = vec![0f32; if need_grad_params { d.k * d.out } else { 0 }];
         // per member; summed below when the members share x
         let mut gx = vec![0f32; if need_grad_x { d.k * d.n * d.inp } else { 0 }];
         let (n, inp, out) = (d.n, d.inp, d.out);
         let gx_len = if need_grad_x { n * inp } else { 0 };
         // members g0, g0 + 1, ... into consecutive blocks of gw, gb and gx
-        let members = |g0: usize, gw: &mut [f32], gb: &mut [f32], gx: &mut [f32]| {
-            for (i, (gw, gb)) in gw.chunks_exact_mut(out * inp).zip(gb.chunks_exact_mut(out)).enumerate() {
+        let members = |g0: usize, count: usize, gw: &mut [f32], gb: &mut [f32], gx: &mut [f32]| {
+            for i in 0..count {
                 let g = g0 + i;
                 let gp = &gp[g * n * out..(g + 1) * n * out];
-                weight_grads(path, gp, out, &xv[d.x_range(g)], gw, gb, n, inp);
+                if need_grad_params {
+                    let (gw, gb) = (&mut gw[i * out * inp..(i + 1) * out * inp], &mut gb[i * out..(i + 1) * out]);
+                    weight_grads(path, gp, out, &xv[d.x_range(g)], gw, gb, n, inp);
+                }
                 if need_grad_x {
                     input_grad(
                         path,
@@ -218,15 +223,17 @@ impl CustomOp3 for Dense {
             }
         };
         if !d.split() {
-            members(0, &mut gw, &mut gb, &mut gx);
+            members(0, d.k, &mut gw, &mut gb, &mut gx);
         } else if d.k == 1 {
             // weight gradients split by output units, input gradients by rows
             let (units, rows) = (out / 2, n / 2);
-            let (gw_a, gw_z) = gw.split_at_mut(units * inp);
-            let (gb_a, gb_z) = gb.split_at_mut(units);
+            let (gw_a, gw_z) = gw.split_at_mut(if need_grad_params { units * inp } else { 0 });
+            let (gb_a, gb_z) = gb.split_at_mut(if need_grad_params { units } else { 0 });
             let (gx_a, gx_z) = gx.split_at_mut(if need_grad_x { rows * inp } else { 0 });
             let half = |gp_units: &[f32], gw: &mut [f32], gb: &mut [f32], gp_rows: &[f32], gx: &mut [f32]| {
-                weight_grads(path, gp_units, out, xv, gw, gb, n, inp);
+                if need_grad_params {
+                    weight_grads(path, gp_units, out, xv, gw, gb, n, inp);
+                }
                 if need_grad_x {
                     input_grad(path, gp_rows, wv, gx, inp, out);
                 }
@@ -237,10 +244,10 @@ impl CustomOp3 for Dense {
             );
         } else {
             let first = d.k / 2;
-            let (gw_a, gw_z) = gw.split_at_mut(first * out * inp);
-            let (gb_a, gb_z) = gb.split_at_mut(first * out);
+            let (gw_a, gw_z) = gw.split_at_mut(if need_grad_params { first * out * inp } else { 0 });
+            let (gb_a, gb_z) = gb.split_at_mut(if need_grad_params { first * out } else { 0 });
             let (gx_a, gx_z) = gx.split_at_mut(first * gx_len);
-            second_core::join(|| members(0, gw_a, gb_a, gx_a), || members(first, gw_z, gb_z, gx_z));
+            second_core::join(|| members(0, first, gw_a, gb_a, gx_a), || members(first, d.k - first, gw_z, gb_z, gx_z));
         }
         drop((xs, ws, ys, gs));
         let dev = x.device();
@@ -252,7 +259,12 @@ impl CustomOp3 for Dense {
             gx.truncate(gx_len);
         }
         let grad_x = if need_grad_x { Some(Tensor::from_vec(gx, x.shape(), dev)?) } else { None };
-        Ok((grad_x, Some(Tensor::from_vec(gw, w.shape(), dev)?), Some(Tensor::from_vec(gb, b.shape(), dev)?)))
+        let (grad_w, grad_b) = if need_grad_params {
+            (Some(Tensor::from_vec(gw, w.shape(), dev)?), Some(Tensor::from_vec(gb, b.shape(), dev)?))
+        } else {
+            (None, None)
+        };
+        Ok((grad_x, grad_w, grad_b))
     }
 }
 
@@ -383,5 +395,35 @@ mod tests {
             .unwrap()
         };
         assert_eq!(all(false), all(true));
+    }
+
+    /// Weights held constant: the input gradient is unchanged and no weight gradient is made.
+    #[test]
+    fn frozen_weights_pass_the_input_gradient_and_get_none() {
+        for helper in [false, true] {
+            std::thread::spawn(move || {
+                if helper {
+                    second_core::enable_on_this_thread();
+                }
+                for case in CASES {
+                    let (xs, ws, bs) = case;
+                    for act in [Activation::Identity, Activation::Relu] {
+                        let trained = run(case, act);
+                        let (x, w, b) = (var(xs, 0.1), var(ws, 0.7), var(bs, 1.9));
+                        let shape = out_shape(xs, ws);
+                        let probe = Tensor::from_vec(values(shape.iter().product(), 2.3), shape, &Device::Cpu).unwrap();
+                        let (w, b) = (w.as_tensor().detach(), b.as_tensor().detach());
+                        let y = dense(x.as_tensor(), &w, &b, act).unwrap();
+                        let grads = (&y * &probe).unwrap().sum_all().unwrap().backward().unwrap();
+                        assert_eq!(flat(&y), trained[0], "{xs:?} {act:?}");
+                        assert_eq!(flat(grads.get(x.as_tensor()).unwrap()), trained[1], "{xs:?} {act:?}");
+                        // (candle would store a gradient for the detached tensors had one been made)
+                        assert!(grads.get(&w).is_none() && grads.get(&b).is_none(), "{xs:?} {act:?}");
+                    }
+                }
+            })
+            .join()
+            .unwrap();
+        }
     }
 }

@@ -8,6 +8,12 @@ use std::cell::RefCell;
 
 use candle_core::{bail, CpuStorage, InplaceOp2, Layout, Result, Storage};
 
+use super::second_core;
+
+/// Parameters with at least this many values are updated in two halves, the second on the
+/// helper thread when there is one (element by element, so the same bits either way).
+const SPLIT_LEN: usize = 1 << 14;
+
 fn contiguous_mut<'a>(storage: &'a mut CpuStorage, layout: &Layout, what: &str) -> Result<&'a mut [f32]> {
     let Some((start, end)) = layout.contiguous_offsets() else { bail!("{what}: destination tensor is not contiguous") };
     match storage {
@@ -59,13 +65,25 @@ impl InplaceOp2 for AdamStep<'_> {
         if theta.len() != grad.len() || m.len() != grad.len() || v.len() != grad.len() {
             bail!("adam: parameter, gradient and moments differ in length");
         }
-        let (b1, b2) = (self.beta1, self.beta2);
+        let (b1, b2, eps) = (self.beta1, self.beta2, self.eps);
         let step_size = self.lr / self.bias_correction1;
         let inv_sqrt_bc2 = 1.0 / self.bias_correction2.sqrt();
-        for (((t, g), m), v) in theta.iter_mut().zip(grad).zip(m.iter_mut()).zip(v.iter_mut()) {
-            *m = b1 * *m + (1.0 - b1) * g;
-            *v = b2 * *v + (1.0 - b2) * g * g;
-            *t -= step_size * *m / (v.sqrt() * inv_sqrt_bc2 + self.eps);
+        let step = |theta: &mut [f32], grad: &[f32], m: &mut [f32], v: &mut [f32]| {
+            for (((t, g), m), v) in theta.iter_mut().zip(grad).zip(m.iter_mut()).zip(v.iter_mut()) {
+                *m = b1 * *m + (1.0 - b1) * g;
+                *v = b2 * *v + (1.0 - b2) * g * g;
+                *t -= step_size * *m / (v.sqrt() * inv_sqrt_bc2 + eps);
+            }
+        };
+        if theta.len() < SPLIT_LEN {
+            step(theta, grad, &mut m, &mut v);
+        } else {
+            let half = theta.len() / 2;
+            let (t0, t1) = theta.split_at_mut(half);
+            let (g0, g1) = grad.split_at(half);
+            let (m0, m1) = m.split_at_mut(half);
+            let (v0, v1) = v.split_at_mut(half);
+            second_core::join(|| step(t0, g0, m0, v0), || step(t1, g1, m1, v1));
         }
         Ok(())
     }
@@ -87,9 +105,19 @@ impl InplaceOp2 for Polyak {
         if target.len() != online.len() {
             bail!("polyak: online and target differ in length");
         }
-        let keep = 1.0 - self.tau;
-        for (t, o) in target.iter_mut().zip(online) {
-            *t = self.tau * o + keep * *t;
+        let (tau, keep) = (self.tau, 1.0 - self.tau);
+        let average = |target: &mut [f32], online: &[f32]| {
+            for (t, o) in target.iter_mut().zip(online) {
+                *t = tau * o + keep * *t;
+            }
+        };
+        if target.len() < SPLIT_LEN {
+            average(target, online);
+        } else {
+            let half = target.len() / 2;
+            let (t0, t1) = target.split_at_mut(half);
+            let (o0, o1) = online.split_at(half);
+            second_core::join(|| average(t0, o0), || average(t1, o1));
         }
         Ok(())
     }

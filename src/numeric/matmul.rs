@@ -43,6 +43,11 @@ impl<'a> Strided<'a> {
         Strided { data, row_stride: 1, col_stride: cols }
     }
 
+    /// The same elements read as the transpose.
+    pub fn transpose(self) -> Strided<'a> {
+        Strided { data: self.data, row_stride: self.col_stride, col_stride: self.row_stride }
+    }
+
     fn holds(&self, rows: usize, cols: usize) -> bool {
         rows == 0 || cols == 0 || self.data.len() > (rows - 1) * self.row_stride + (cols - 1) * self.col_stride
     }
@@ -74,6 +79,12 @@ pub fn matmul(
         return;
     }
     assert!(path.is_supported(), "matmul: the {path} kernels need CPU features this machine lacks");
+    if n == 1 && m > 1 && dst_stride == 1 {
+        // One output column (a critic's value layer) would fill one lane of each vector; its
+        // transpose C^T = B^T A^T is one row of m outputs across full vectors. Each element
+        // takes the same products (b * a = a * b exactly) in the same order: the same bits.
+        return matmul(path, (1, m, k), dst, m, accumulate, b.transpose(), a.transpose());
+    }
     let (tile, Geometry { tile_rows, panel }): (TileKernel, Geometry) = match path {
         #[cfg(target_arch = "x86_64")]
         KernelPath::Avx512 => (avx512::tile, avx512::GEOMETRY),
@@ -539,6 +550,46 @@ mod tests {
                             (a - l).abs() <= scale * (1.0 + l.abs()),
                             "{shape:?} layout {layout} element {i}: {a} vs gemm {l}"
                         );
+                    }
+                }
+            }
+        }
+    }
+
+    /// Every exact path against the definition: one `mul_add` per term, in order, from the old
+    /// value (or zero), element by element.
+    #[test]
+    fn every_exact_path_is_the_element_by_element_definition() {
+        let shapes = SHAPES.iter().copied().chain([(256, 1, 300), (9, 1, 5), (1, 1, 7)]);
+        for (m, n, k) in shapes {
+            for layout in 0..3 {
+                for accumulate in [false, true] {
+                    let a_data = values(m * k, 0.3);
+                    let b_data = values(k * n, 1.1);
+                    let (a, b) = match layout {
+                        0 => (Strided::rows(&a_data, k), Strided::rows(&b_data, n)),
+                        1 => (Strided::transposed(&a_data, m), Strided::rows(&b_data, n)),
+                        _ => (Strided::rows(&a_data, k), Strided::transposed(&b_data, k)),
+                    };
+                    // a single column is also written unpadded (stride 1), as a value layer's is
+                    let stride = if n == 1 { 1 } else { n + 3 };
+                    let start = values(m * stride, 2.7);
+                    let mut expected = start.clone();
+                    for i in 0..m {
+                        for j in 0..n {
+                            let at = |s: &Strided, r: usize, c: usize| s.data[r * s.row_stride + c * s.col_stride];
+                            let mut acc = if accumulate { start[i * stride + j] } else { 0.0 };
+                            for p in 0..k {
+                                acc = at(&a, i, p).mul_add(at(&b, p, j), acc);
+                            }
+                            expected[i * stride + j] = acc;
+                        }
+                    }
+                    for path in KernelPath::ALL.into_iter().filter(|p| p.is_exact() && p.is_supported()) {
+                        let mut dst = start.clone();
+                        matmul(path, (m, n, k), &mut dst, stride, accumulate, a, b);
+                        let same = dst.iter().zip(&expected).all(|(x, y)| x.to_bits() == y.to_bits());
+                        assert!(same, "{path} at {:?} layout {layout} accumulate {accumulate}", (m, n, k));
                     }
                 }
             }
