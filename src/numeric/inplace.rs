@@ -167,18 +167,21 @@ mod tests {
                 let (mut m, mut v) = (m0.clone(), v0.clone());
                 let theta = Tensor::new(theta0.as_slice(), &Device::Cpu).unwrap();
                 let g = Tensor::new(grad.as_slice(), &Device::Cpu).unwrap();
-                let step = AdamStep {
-                    lr,
-                    beta1: b1,
-                    beta2: b2,
-                    eps,
-                    bias_correction1: bc1,
-                    bias_correction2: bc2,
-                    m: RefCell::new(&mut m),
-                    v: RefCell::new(&mut v),
-                };
-                theta.inplace_op2(&g, &step).unwrap();
-                drop(step);
+                theta
+                    .inplace_op2(
+                        &g,
+                        &AdamStep {
+                            lr,
+                            beta1: b1,
+                            beta2: b2,
+                            eps,
+                            bias_correction1: bc1,
+                            bias_correction2: bc2,
+                            m: RefCell::new(&mut m),
+                            v: RefCell::new(&mut v),
+                        },
+                    )
+                    .unwrap();
                 let (step_size, inv) = (lr / bc1, 1.0 / bc2.sqrt());
                 for i in 0..n {
                     let m_i = b1 * m0[i] + (1.0 - b1) * grad[i];
