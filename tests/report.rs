@@ -84,21 +84,23 @@ fn sweep_then_report_evaluates_every_run_at_its_budget_beside_the_controller() {
     assert!(!md.contains("| 100k |"), "no run reached 100k: no such row");
     // Only the rows trained under the controller's reward (drift 0) stand beside it, each with
     // its own numbers: the speed in versus_controller.csv is the held-out row's.
-    let csv = |file: &str| -> Vec<Vec<String>> {
-        std::fs::read_to_string(report.join(file))
-            .unwrap()
-            .lines()
-            .skip(1)
-            .map(|l| l.split(',').map(str::to_string).collect())
-            .collect()
+    // each row as column name -> value, by the file's header
+    let csv = |file: &str| -> Vec<std::collections::HashMap<String, String>> {
+        let text = std::fs::read_to_string(report.join(file)).unwrap();
+        let mut lines = text.lines();
+        let header: Vec<String> = lines.next().unwrap().split(',').map(str::to_string).collect();
+        lines.map(|l| header.iter().cloned().zip(l.split(',').map(str::to_string)).collect()).collect()
     };
     let (versus, held_out) = (csv("versus_controller.csv"), csv("held_out.csv"));
-    let policies: Vec<&str> = versus.iter().map(|v| v[1].as_str()).collect();
+    let policies: Vec<&str> = versus.iter().map(|v| v["policy"].as_str()).collect();
     assert_eq!(policies, ["sac-drift0", "td3-drift0"], "{versus:?}");
     for v in &versus {
-        // held_out.csv: env,policy,budget,...,speed at column 15; versus: env,policy,budget,seeds,speed
-        let h = held_out.iter().find(|h| h[1] == v[1] && h[2] == v[2]).unwrap();
-        assert_eq!(h[15], v[4], "{} at {}: held-out speed {} against {}", v[1], v[2], h[15], v[4]);
+        let h = held_out.iter().find(|h| h["policy"] == v["policy"] && h["budget"] == v["budget"]).unwrap();
+        assert_eq!(
+            h["speed"], v["speed"],
+            "{} at {}: held-out speed against the compared one",
+            v["policy"], v["budget"]
+        );
     }
     let svgs: Vec<String> = std::fs::read_dir(&report)
         .unwrap()

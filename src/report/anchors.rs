@@ -2,6 +2,7 @@
 use serde::Deserialize;
 
 use super::runs::Run;
+use crate::envs::EnvConfig;
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -30,6 +31,10 @@ pub(crate) struct Anchor {
     /// with the same values are set beside it.
     #[serde(default)]
     pub(crate) options: toml::Table,
+    /// Options the source varied and reports its value for every setting of (Freeman's drift
+    /// weight): ours may have any value of these.
+    #[serde(default)]
+    pub(crate) any_value: Vec<String>,
 }
 
 impl Anchor {
@@ -39,13 +44,26 @@ impl Anchor {
         self.window_episodes.is_some() || self.window_steps.is_some() || self.evaluation_episodes.is_some()
     }
 
-    /// Same env, algorithm and environment options as the source; the agent's settings may
-    /// differ (CrossQ with narrower critics than the paper's), and then say so where shown.
+    /// Same env, algorithm and environment options as the source: the options the anchor names
+    /// at its values, those it lists in `any_value` at any, every other option at the env's
+    /// default (an anchor naming none was trained on the default env). The agent's settings may differ (CrossQ with narrower
+    /// critics than the paper's), and then say so where shown.
     pub(crate) fn comparable(&self, run: &Run) -> bool {
-        let options = run.config.env.resolved_options().unwrap_or_default();
-        run.env() == self.env
-            && run.algo() == self.algo
-            && self.options.iter().all(|(k, v)| options.get(k).and_then(number) == number(v))
+        if run.env() != self.env || run.algo() != self.algo {
+            return false;
+        }
+        let (Ok(ours), Ok(defaults)) =
+            (run.config.env.resolved_options(), EnvConfig::new(&self.env).resolved_options())
+        else {
+            return false;
+        };
+        let same = |a: Option<&toml::Value>, b: Option<&toml::Value>| match (a, b) {
+            (Some(a), Some(b)) => number(a).zip(number(b)).map_or(a == b, |(x, y)| x == y),
+            _ => false,
+        };
+        let theirs = |k: &str| self.options.get(k).or_else(|| defaults.get(k));
+        let free = |k: &str| self.any_value.iter().any(|v| v == k);
+        self.options.keys().chain(ours.keys()).filter(|k| !free(k)).all(|k| same(ours.get(k), theirs(k)))
     }
 
     /// The run's value measured as the source's: its mean training-episode return in the
@@ -155,6 +173,9 @@ mod tests {
         // Another energy weight or another algorithm: not comparable. Other agent settings are
         // (the report names them).
         assert!(!freeman.comparable(&run("minitaur", Algo::Sac, "", &[])));
+        // He reports every drift weight he tried: any of ours is his env; another shake weight is not.
+        assert!(freeman.comparable(&run("minitaur", Algo::Sac, "", &[("energy_weight", "0"), ("drift_weight", "3")])));
+        assert!(!freeman.comparable(&run("minitaur", Algo::Sac, "", &[("energy_weight", "0"), ("shake_weight", "3")])));
         assert!(!freeman.comparable(&run("minitaur", Algo::Td3, "", &[("energy_weight", "0")])));
         assert!(freeman.comparable(&run("minitaur", Algo::Sac, "batch_size=64", &[("energy_weight", "0")])));
         // A run that stopped before the budget has no value.
@@ -167,6 +188,11 @@ mod tests {
             vec![episode(850_000, 100.0), episode(950_000, 10.0), episode(1_000_000, 20.0), episode(1_050_000, 1e6)];
         // The episodes of the last 100k steps before 1M.
         assert_eq!(cleanrl.measure(&ppo), Some(15.0));
+        // An anchor naming no options holds for the default env only: a run with another
+        // reward weight is not set beside it; one naming a default value explicitly is.
+        assert!(cleanrl.options.is_empty() && cleanrl.comparable(&ppo));
+        assert!(!cleanrl.comparable(&run("hopper", Algo::Ppo, "", &[("ctrl_cost_weight", "0.5")])));
+        assert!(cleanrl.comparable(&run("hopper", Algo::Ppo, "", &[("forward_reward_weight", "1")])));
         assert!(!super::bundled_anchors().into_iter().find(|a| a.algo == "td3").unwrap().is_measurable());
     }
 

@@ -117,13 +117,12 @@ pub(crate) fn curves_csv(envs: &BTreeMap<String, Vec<(&Group, &Vec<&Run>)>>) -> 
 
 /// A published deterministic evaluation at `mark` that these runs can stand beside where no
 /// published curve covers them (CrossQ's 100k and 300k): same env, algorithm and environment
-/// options (`Anchor::comparable`; an anchor naming no options holds for the default reward).
+/// options (`Anchor::comparable`; an anchor naming no options holds for the default env only).
 /// The agent's settings may differ, and the table then says so.
 fn evaluation_anchor(g: &Group, runs: &[&Run], mark: u64) -> Option<(f64, f64, String)> {
     bundled_anchors()
         .into_iter()
         .filter(|a| a.steps == mark && a.evaluation_episodes.is_some() && a.env == g.env && a.algo == g.algo)
-        .filter(|a| !a.options.is_empty() || g.has_default_reward())
         .find(|a| runs.iter().all(|r| a.comparable(r)))
         .and_then(|a| Some((a.value, a.std?, a.seeds.map_or(String::new(), |n| n.to_string()))))
 }
