@@ -27,6 +27,9 @@ fn config(algo: Algo) -> TrainConfig {
         // 2,560 steps: 5 rollouts of 2 x 256, 4 epochs of 8 minibatches each.
         "total_steps=2500,eval_every=1000,checkpoint_every=600,eval_episodes=2,hidden=[40,24],num_envs=2,num_steps=256,\
          num_minibatches=8,update_epochs=4"
+    } else if algo == Algo::Dqn {
+        "total_steps=2500,learning_starts=300,eval_every=1000,checkpoint_every=600,eval_episodes=2,hidden=[40,24],\
+         batch_size=64,exploration_steps=1000"
     } else if algo == Algo::Crossq {
         "total_steps=2500,warmup_steps=300,learning_starts=300,eval_every=1000,checkpoint_every=600,eval_episodes=2,\
          hidden=[40,24],critic_hidden=[40,24],batch_size=64"
@@ -67,7 +70,7 @@ fn every_exact_kernel_path_trains_the_same_run_bit_for_bit() {
     let paths = exact_paths();
     eprintln!("exact paths on this CPU: {paths:?}");
     let dir = tempfile::tempdir().unwrap();
-    for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg, Algo::Ppo, Algo::Crossq] {
+    for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg, Algo::Ppo, Algo::Crossq, Algo::Dqn] {
         let runs: Vec<(KernelPath, Vec<Vec<u8>>)> = paths
             .iter()
             .map(|&path| {
@@ -101,7 +104,7 @@ fn a_run_resumed_on_another_kernel_path_continues_exactly() {
     let paths = exact_paths();
     let (first, second) = (paths[0], *paths.last().unwrap());
     let dir = tempfile::tempdir().unwrap();
-    for algo in [Algo::Td3, Algo::Sac, Algo::Ppo, Algo::Crossq] {
+    for algo in [Algo::Td3, Algo::Sac, Algo::Ppo, Algo::Crossq, Algo::Dqn] {
         let whole = dir.path().join(format!("{}-whole", algo.name()));
         let a = train_on(second, algo, &whole, &RunControl::default());
 
