@@ -93,6 +93,32 @@ fn the_same_run_on_any_thread_count_and_after_a_resume() {
     assert!(action.iter().all(|a| (-1.0..=1.0).contains(a)));
 }
 
+/// A budget that is not a multiple of the rollout: the run ends on the rollout past it, and keeps
+/// both the actor that collected the budget's step (the report's row for the budget) and the
+/// final one.
+#[test]
+fn a_budget_inside_a_rollout_keeps_the_actor_that_reached_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let settings = SMALL.replace("total_steps=2400", "total_steps=2350");
+    let s = train::train(
+        EnvConfig::new("hopper"),
+        config("hopper", &settings),
+        3,
+        &run,
+        None,
+        false,
+        &RunControl::default(),
+    )
+    .unwrap();
+    assert_eq!((s.outcome, s.steps), (Outcome::Finished, 2400));
+    assert_eq!(train::budget_policy_steps(&run), vec![2350, 2400]);
+    let obs = vec![1.25, 0.0, 0.1, -0.1, 0.2, 0.5, -0.3, 0.0, 0.4, 0.1, -0.2];
+    let act = |step| train::load_budget_policy(&run, step).unwrap().1.act(&obs).unwrap();
+    // the last rollout's update comes after the budget's actor
+    assert_ne!(act(2350), act(2400));
+}
+
 #[test]
 fn bad_settings_are_refused_with_a_clear_error() {
     let err = build_config("hopper", Algo::Ppo, &split_pairs("num_envs=2,num_steps=8,num_minibatches=32").unwrap())

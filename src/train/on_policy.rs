@@ -266,8 +266,10 @@ impl OnPolicyTrainer {
             let s = self.envs.step(&env_actions)?;
             let before = self.step;
             self.step += n as u64;
-            if let Some(&budget) = POLICY_BUDGETS.iter().find(|&&b| before < b && b <= self.step) {
-                // The actor that collected this step is the one at the budget.
+            // The actor that collected this step is the one at the budget. The run's own budget
+            // counts too: it ends on a whole rollout, past a budget that is not a multiple of one.
+            let budgets = POLICY_BUDGETS.iter().copied().chain([self.cfg().total_steps]);
+            if let Some(budget) = budgets.filter(|&b| before < b && b <= self.step).min() {
                 save_budget_policy(&self.run_dir, budget, &self.agent)?;
             }
 
