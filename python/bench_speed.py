@@ -4,7 +4,8 @@
 
 Per env: (1) locobench through gymnasium.make (wrappers, NumPy conversions), (2) the same env's
 raw binding call per step (one Python-to-Rust crossing), (3) the same steps looped in Rust (no
-crossing), and (4) Gymnasium's own v5 env (MuJoCo 4.0 from PyPI) through gymnasium.make. The
+crossing), (4) Gymnasium's own v5 env (MuJoCo 4.0 from PyPI) through gymnasium.make, and (5) the
+vector env (8 copies, the class gymnasium.make_vec builds) on one thread and on two. The
 binding's overhead per step is (2) - (3). Zero actions; episodes reset when they end.
 """
 import os
@@ -62,6 +63,21 @@ def rust_loop(env):
     return lambda n: core.step_repeat(action, n)
 
 
+VEC_COPIES = 8
+
+
+def vec_loop(name, threads):
+    envs = locobench.LocobenchVectorEnv(name, VEC_COPIES, threads=threads)
+    actions = np.zeros(envs.action_space.shape, dtype=np.float32)
+    envs.reset(seed=0)
+
+    def run(n):
+        for _ in range(n // VEC_COPIES):
+            envs.step(actions)
+
+    return run
+
+
 def cpu():
     for line in open("/proc/cpuinfo"):
         if line.startswith("model name"):
@@ -79,7 +95,8 @@ def main():
     note = os.environ.get("LOCOBENCH_BENCH_NOTE", "")
     print(f"# machine: {cpu()} ({simd}), {os.cpu_count()} cores; commit {commit}; python {platform.python_version()}, "
           f"gymnasium {gym.__version__}; command: python python/bench_speed.py {steps}" + (f"; {note}" if note else ""))
-    print("env,locobench_gym_steps_per_s,locobench_raw_steps_per_s,locobench_rust_steps_per_s,binding_overhead_us,gymnasium_steps_per_s")
+    print("env,locobench_gym_steps_per_s,locobench_raw_steps_per_s,locobench_rust_steps_per_s,binding_overhead_us,"
+          "gymnasium_steps_per_s,vec8_1_thread_steps_per_s,vec8_2_threads_steps_per_s")
     for name, gym_id in ENVS:
         ours = gym.make(locobench.ENV_IDS[name])
         g = rate(gym_loop(ours), steps)
@@ -87,7 +104,8 @@ def main():
         rust = rate(rust_loop(ours), steps)
         overhead = (1 / raw - 1 / rust) * 1e6
         theirs = rate(gym_loop(gym.make(gym_id)), steps) if gym_id else float("nan")
-        print(f"{name},{g:.0f},{raw:.0f},{rust:.0f},{overhead:.2f},{theirs:.0f}")
+        vec1, vec2 = (rate(vec_loop(name, t), steps) for t in (1, 2))
+        print(f"{name},{g:.0f},{raw:.0f},{rust:.0f},{overhead:.2f},{theirs:.0f},{vec1:.0f},{vec2:.0f}")
 
 
 if __name__ == "__main__":

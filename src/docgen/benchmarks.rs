@@ -118,17 +118,19 @@ pub(crate) fn vector_env(results: &Path) -> Result<String> {
 pub(crate) fn python_speed(results: &Path) -> Result<String> {
     let path = newest(results, "python-speed.csv")?;
     let rows = read(&path)?;
-    let mut out = quoting(&path)? + "\n\n| env | locobench through Gymnasium (steps/s) | raw binding (steps/s) | looped in Rust (steps/s) | binding overhead per step | Gymnasium's own env (steps/s) |\n|---|---|---|---|---|---|\n";
+    let mut out = quoting(&path)? + "\n\n| env | locobench through Gymnasium (steps/s) | raw binding (steps/s) | looped in Rust (steps/s) | binding overhead per step | Gymnasium's own env (steps/s) | vector env, 8 copies, 1 thread (steps/s) | same, 2 threads (steps/s) |\n|---|---|---|---|---|---|---|---|\n";
     for r in &rows {
         let _ = writeln!(
             out,
-            "| {} | {} | {} | {} | {:.1} µs | {} |",
+            "| {} | {} | {} | {} | {:.1} µs | {} | {} | {} |",
             r.text("env"),
             fixed(r.num("locobench_gym_steps_per_s"), 0),
             fixed(r.num("locobench_raw_steps_per_s"), 0),
             fixed(r.num("locobench_rust_steps_per_s"), 0),
             r.num("binding_overhead_us"),
             fixed(r.num("gymnasium_steps_per_s"), 0),
+            fixed(r.num("vec8_1_thread_steps_per_s"), 0),
+            fixed(r.num("vec8_2_threads_steps_per_s"), 0),
         );
     }
     Ok(out)
