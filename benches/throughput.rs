@@ -105,32 +105,28 @@ fn mlp_flops(sizes: &[usize], batch: usize, skip_first: bool) -> f64 {
     layers.map(|w| 2.0 * (batch * w[0] * w[1]) as f64).sum()
 }
 
-/// Matmul FLOPs of one TD3 update at these sizes (about 0.75 GFLOP): target
-/// actor + two target critics forward; two critics forward and backward (weight gradients, and
-/// input gradients past the first layer); every second update the actor step (actor forward,
-/// critic 0 forward and its input gradients down to the action, actor backward).
-fn td3_update_flops() -> f64 {
-    let actor = [OBS, 400, 300, ACT];
-    let critic = [OBS + ACT, 400, 300, 1];
-    let (a, c) = (mlp_flops(&actor, BATCH, false), mlp_flops(&critic, BATCH, false));
+/// Matmul FLOPs of one update of an actor and twin critics at these sizes: the target actor and
+/// two target critics forward; two critics forward and backward (weight gradients, and input
+/// gradients past the first layer); and, `actor_steps` times per update, the actor step: actor
+/// forward, `loss_critics` critics forward and their input gradients down to the action, actor
+/// backward.
+fn update_flops(actor: &[usize], critic: &[usize], loss_critics: f64, actor_steps: f64) -> f64 {
+    let (a, c) = (mlp_flops(actor, BATCH, false), mlp_flops(critic, BATCH, false));
     let targets = a + 2.0 * c;
-    let critic_step = 2.0 * (c + c + mlp_flops(&critic, BATCH, true));
-    let actor_step = a + c + c + a + mlp_flops(&actor, BATCH, true);
-    targets + critic_step + actor_step / 2.0
+    let critic_step = 2.0 * (c + c + mlp_flops(critic, BATCH, true));
+    let actor_step = a + loss_critics * (c + c) + a + mlp_flops(actor, BATCH, true);
+    targets + critic_step + actor_steps * actor_step
 }
 
-/// Matmul FLOPs of one SAC 256-256 update (about 0.37 GFLOP): the actor (mean and log-std
-/// heads) samples next actions, two target critics forward; two critics forward and backward;
-/// every update the actor step (actor forward, both critics forward and their input gradients
-/// down to the action, actor backward).
+/// TD3 400-300 (about 0.75 GFLOP): the actor step every second update, through critic 0.
+fn td3_update_flops() -> f64 {
+    update_flops(&[OBS, 400, 300, ACT], &[OBS + ACT, 400, 300, 1], 1.0, 0.5)
+}
+
+/// SAC 256-256 (about 0.58 GFLOP; the actor has mean and log-std heads): the actor step every
+/// update, through the minimum of both critics.
 fn sac_update_flops() -> f64 {
-    let actor = [OBS, 256, 256, 2 * ACT];
-    let critic = [OBS + ACT, 256, 256, 1];
-    let (a, c) = (mlp_flops(&actor, BATCH, false), mlp_flops(&critic, BATCH, false));
-    let targets = a + 2.0 * c;
-    let critic_step = 2.0 * (c + c + mlp_flops(&critic, BATCH, true));
-    let actor_step = a + 2.0 * (c + c) + a + mlp_flops(&actor, BATCH, true);
-    targets + critic_step + actor_step
+    update_flops(&[OBS, 256, 256, 2 * ACT], &[OBS + ACT, 256, 256, 1], 2.0, 1.0)
 }
 
 /// Single-thread f32 matmul rate of the gemm library candle uses, on a large square product:

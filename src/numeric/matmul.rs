@@ -135,8 +135,8 @@ pub fn matmul(
 /// --matmul`).
 const K_CHUNK: usize = 128;
 
-/// A path's register tile: rows of A (a packed row tile) by `panel` columns (a packed column
-/// panel of B, whole vectors).
+/// A path's register tile: `tile_rows` rows of A (read where they lie) by `panel` columns (a
+/// packed column panel of B, whole vectors).
 #[derive(Clone, Copy)]
 struct Geometry {
     tile_rows: usize,
@@ -511,15 +511,26 @@ mod tests {
         (257, 31, 6),
     ];
 
+    /// The operands of an m x k by k x n product, read with one of the stride patterns the dense
+    /// layer uses: 0 both row-major, 1 A transposed, 2 B transposed.
+    fn operands<'a>(
+        a_data: &'a [f32],
+        b_data: &'a [f32],
+        (m, n, k): (usize, usize, usize),
+        layout: usize,
+    ) -> (Strided<'a>, Strided<'a>) {
+        match layout {
+            0 => (Strided::rows(a_data, k), Strided::rows(b_data, n)),
+            1 => (Strided::transposed(a_data, m), Strided::rows(b_data, n)),
+            _ => (Strided::rows(a_data, k), Strided::transposed(b_data, k)),
+        }
+    }
+
     /// The same product with every stride pattern the dense layer uses.
     fn product(path: KernelPath, (m, n, k): (usize, usize, usize), layout: usize, accumulate: bool) -> Vec<f32> {
         let a_data = values(m * k, 0.3);
         let b_data = values(k * n, 1.1);
-        let (a, b) = match layout {
-            0 => (Strided::rows(&a_data, k), Strided::rows(&b_data, n)),
-            1 => (Strided::transposed(&a_data, m), Strided::rows(&b_data, n)),
-            _ => (Strided::rows(&a_data, k), Strided::transposed(&b_data, k)),
-        };
+        let (a, b) = operands(&a_data, &b_data, (m, n, k), layout);
         let stride = n + 3;
         let mut dst = values(m * stride, 2.7);
         matmul(path, (m, n, k), &mut dst, stride, accumulate, a, b);
@@ -566,11 +577,7 @@ mod tests {
                 for accumulate in [false, true] {
                     let a_data = values(m * k, 0.3);
                     let b_data = values(k * n, 1.1);
-                    let (a, b) = match layout {
-                        0 => (Strided::rows(&a_data, k), Strided::rows(&b_data, n)),
-                        1 => (Strided::transposed(&a_data, m), Strided::rows(&b_data, n)),
-                        _ => (Strided::rows(&a_data, k), Strided::transposed(&b_data, k)),
-                    };
+                    let (a, b) = operands(&a_data, &b_data, (m, n, k), layout);
                     // a single column is also written unpadded (stride 1), as a value layer's is
                     let stride = if n == 1 { 1 } else { n + 3 };
                     let start = values(m * stride, 2.7);

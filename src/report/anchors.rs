@@ -46,8 +46,8 @@ impl Anchor {
 
     /// Same env, algorithm and environment options as the source: the options the anchor names
     /// at its values, those it lists in `any_value` at any, every other option at the env's
-    /// default (an anchor naming none was trained on the default env). The agent's settings may differ (CrossQ with narrower
-    /// critics than the paper's), and then say so where shown.
+    /// default (an anchor naming none was trained on the default env). The agent's settings may
+    /// differ (CrossQ with narrower critics than the paper's), and then say so where shown.
     pub(crate) fn comparable(&self, run: &Run) -> bool {
         if run.env() != self.env || run.algo() != self.algo {
             return false;
