@@ -5,7 +5,9 @@ use candle_core::{Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 
 use super::config::WeightInit;
-use super::nets::{run_layers, DenseStack, Mlp, Output};
+use super::nets::{DenseStack, Mlp, Output};
+use crate::numeric::optim::Param;
+use crate::numeric::stack::relu_stack;
 
 pub(crate) struct Critics {
     /// weight `[k, out, in]`, bias `[k, 1, out]` per layer
@@ -52,8 +54,8 @@ impl Critics {
             .body
             .layers()
             .iter()
-            .map(|(w, b)| Ok((w.as_tensor().narrow(0, 0, 1)?.detach(), b.as_tensor().narrow(0, 0, 1)?.detach())));
-        run_layers(x, first.collect::<Result<Vec<_>>>()?.into_iter())?.squeeze(0)
+            .map(|(w, b)| Ok((w.as_tensor().narrow(0, 0, 1)?, b.as_tensor().narrow(0, 0, 1)?)));
+        relu_stack(x, &first.collect::<Result<Vec<_>>>()?, None)?.squeeze(0)
     }
 
     /// min over members (`[n, 1]`) with the weights held constant. SAC's actor loss.
@@ -72,8 +74,14 @@ impl Critics {
         q.broadcast_sub(y)?.sqr()?.mean_all()? * self.k() as f64
     }
 
+    #[cfg(test)]
     pub fn vars(&self) -> Vec<Var> {
         self.body.vars()
+    }
+
+    /// The parameters for an optimiser (see [`DenseStack::params`]).
+    pub(crate) fn params(&self) -> Vec<Param> {
+        self.body.params()
     }
 
     /// Parameters named `<prefix>.<layer>.weight` (`[k, out, in]`) / `.bias` (`[k, 1, out]`).
@@ -124,13 +132,13 @@ mod tests {
         assert_eq!(first, q.get(0).unwrap().to_vec2::<f32>().unwrap());
 
         // the summed loss gives each member the gradient its own loss gives it
-        let grads = critics.mse_sum(&x, &y).unwrap().backward().unwrap();
-        let w1 = grads.get(critics.vars()[2].as_tensor()).unwrap();
+        critics.mse_sum(&x, &y).unwrap().backward().unwrap();
+        let w1 = critics.body.waiting_grad(2).unwrap();
         for (i, net) in separate.iter().enumerate() {
             let own = net.forward(&x).unwrap().sub(&y).unwrap().sqr().unwrap().mean_all().unwrap();
-            let g = own.backward().unwrap();
-            let expected = g.get(net.vars()[2].as_tensor()).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
-            let got = w1.get(i).unwrap().flatten_all().unwrap().to_vec1::<f32>().unwrap();
+            own.backward().unwrap();
+            let expected = net.body().waiting_grad(2).unwrap();
+            let got = &w1[i * expected.len()..(i + 1) * expected.len()];
             for (a, b) in got.iter().zip(&expected) {
                 assert!((a - b).abs() < 1e-5, "{a} vs {b}");
             }
@@ -138,6 +146,7 @@ mod tests {
         // frozen evaluation leaves the weights without gradients
         let g = critics.min_frozen(&x).unwrap().sum_all().unwrap().backward().unwrap();
         assert!(critics.vars().iter().all(|v| g.get(v.as_tensor()).is_none()));
+        assert!((0..critics.vars().len()).all(|i| i == 2 || critics.body.waiting_grad(i).is_some()));
 
         let target = Critics::new(2, &sizes, WeightInit::Uniform, &mut ChaCha8Rng::seed_from_u64(9)).unwrap();
         assert_ne!(target.forward(&x).unwrap().to_vec3::<f32>().unwrap(), q.to_vec3::<f32>().unwrap());

@@ -42,8 +42,8 @@ impl DeterministicAgent {
         let critics = Critics::new(n_critics, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), cfg.weight_init, rng)?;
         let actor_target = actor.deep_copy()?;
         let critic_targets = critics.deep_copy()?;
-        let actor_opt = Adam::new(actor.vars(), cfg.actor_lr);
-        let critic_opt = Adam::new(critics.vars(), cfg.critic_lr);
+        let actor_opt = Adam::new(actor.params(), cfg.actor_lr);
+        let critic_opt = Adam::new(critics.params(), cfg.critic_lr);
         let noise = match dpg.noise {
             NoiseKind::Gaussian => Noise::Gaussian { sigma: dpg.exploration_noise },
             NoiseKind::OrnsteinUhlenbeck => Noise::ornstein_uhlenbeck(

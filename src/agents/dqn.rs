@@ -70,7 +70,7 @@ impl BranchingDqnAgent {
             epsilon_start: s.epsilon_start,
             epsilon_end: s.epsilon_end,
             exploration_steps: s.exploration_steps,
-            opt: Adam::new(q.vars(), cfg.critic_lr),
+            opt: Adam::new(q.params(), cfg.critic_lr),
             q,
             target,
             updates: 0,

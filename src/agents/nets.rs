@@ -1,4 +1,6 @@
 //! Multi-layer perceptrons on candle-nn, initialised from the run's own seeded RNG.
+use std::sync::Arc;
+
 use candle_core::{DType, Device, Result, Tensor, Var};
 use nalgebra::DMatrix;
 use rand::Rng;
@@ -6,8 +8,9 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::config::WeightInit;
-use crate::numeric::dense::dense;
-use crate::numeric::inplace::{Activation, Polyak};
+use crate::numeric::inplace::Polyak;
+use crate::numeric::optim::Param;
+use crate::numeric::stack::{relu_stack, GradSlot};
 
 /// What follows the last layer.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -18,42 +21,64 @@ pub(crate) enum Output {
 
 /// Dense layers given as (weight, bias) variables, ReLU between them and nothing after the last:
 /// the body shared by `Mlp` (weights `out x in`) and `Critics` (k networks stacked, `[k, out, in]`).
-pub(crate) struct DenseStack(Vec<(Var, Var)>);
+/// `forward` runs them as one fused node ([`crate::numeric::stack`]) that leaves the weight
+/// gradients in `grads`, where the optimiser built from [`DenseStack::params`] takes them.
+pub(crate) struct DenseStack {
+    layers: Vec<(Var, Var)>,
+    /// one slot per weight and bias, in the order of `vars`
+    grads: Arc<[GradSlot]>,
+}
 
 impl DenseStack {
-    pub fn new(params: Vec<(Var, Var)>) -> DenseStack {
-        DenseStack(params)
+    pub fn new(layers: Vec<(Var, Var)>) -> DenseStack {
+        let grads = (0..2 * layers.len()).map(|_| GradSlot::default()).collect();
+        DenseStack { layers, grads }
     }
 
     /// An independent copy with equal weights (for target networks).
     pub(crate) fn deep_copy(&self) -> Result<DenseStack> {
         let copy = |v: &Var| Var::from_tensor(&v.as_tensor().copy()?);
-        Ok(DenseStack(self.0.iter().map(|(w, b)| Ok((copy(w)?, copy(b)?))).collect::<Result<_>>()?))
+        Ok(DenseStack::new(self.layers.iter().map(|(w, b)| Ok((copy(w)?, copy(b)?))).collect::<Result<_>>()?))
+    }
+
+    fn tensors(&self) -> Vec<(Tensor, Tensor)> {
+        self.layers.iter().map(|(w, b)| (w.as_tensor().clone(), b.as_tensor().clone())).collect()
     }
 
     pub fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        run_layers(x, self.0.iter().map(|(w, b)| (w.as_tensor().clone(), b.as_tensor().clone())))
+        relu_stack(x, &self.tensors(), Some(&self.grads))
     }
 
     /// The same function with the weights treated as constants: gradients flow to `x` only.
     /// The actors' losses go through the critics this way, so their backward pass skips the
     /// critics' weight gradients (which the actor's optimiser never uses).
     pub(crate) fn forward_frozen(&self, x: &Tensor) -> Result<Tensor> {
-        run_layers(x, self.0.iter().map(|(w, b)| (w.as_tensor().detach(), b.as_tensor().detach())))
+        relu_stack(x, &self.tensors(), None)
+    }
+
+    /// The parameters for an optimiser, each with the slot `forward` leaves its gradient in.
+    pub(crate) fn params(&self) -> Vec<Param> {
+        self.vars().into_iter().enumerate().map(|(i, v)| Param::with_slot(v, self.grads.clone(), i)).collect()
+    }
+
+    /// The gradient waiting in the slot of the `i`-th of `vars`, if any.
+    #[cfg(test)]
+    pub(crate) fn waiting_grad(&self, i: usize) -> Option<Vec<f32>> {
+        self.grads[i].peek()
     }
 
     /// (weight, bias) per layer.
     pub fn layers(&self) -> &[(Var, Var)] {
-        &self.0
+        &self.layers
     }
 
     pub fn vars(&self) -> Vec<Var> {
-        self.0.iter().flat_map(|(w, b)| [w.clone(), b.clone()]).collect()
+        self.layers.iter().flat_map(|(w, b)| [w.clone(), b.clone()]).collect()
     }
 
     /// Parameters named `<prefix>.<layer>.weight` / `.bias`, for checkpoints.
     pub(crate) fn named_vars(&self, prefix: &str) -> Vec<(String, Var)> {
-        self.0
+        self.layers
             .iter()
             .enumerate()
             .flat_map(|(i, (w, b))| {
@@ -70,17 +95,6 @@ impl DenseStack {
         }
         Ok(())
     }
-}
-
-/// Applies `(weight, bias)` layers to `x` as dense layers, ReLU after all but the last.
-pub(crate) fn run_layers(x: &Tensor, layers: impl ExactSizeIterator<Item = (Tensor, Tensor)>) -> Result<Tensor> {
-    let n = layers.len();
-    let mut h = x.clone();
-    for (i, (w, b)) in layers.enumerate() {
-        let act = if i + 1 < n { Activation::Relu } else { Activation::Identity };
-        h = dense(&h, &w, &b, act)?;
-    }
-    Ok(h)
 }
 
 /// Layers `sizes[0] -> sizes[1] -> ... -> sizes[n]` with ReLU between them.
@@ -137,13 +151,24 @@ impl Mlp {
         }
     }
 
+    #[cfg(test)]
+    pub(crate) fn body(&self) -> &DenseStack {
+        &self.body
+    }
+
     /// (weight `out x in`, bias `out`) of layer `i`.
     pub fn layer(&self, i: usize) -> &(Var, Var) {
         &self.body.layers()[i]
     }
 
+    #[cfg(test)]
     pub fn vars(&self) -> Vec<Var> {
         self.body.vars()
+    }
+
+    /// The parameters for an optimiser (see [`DenseStack::params`]).
+    pub(crate) fn params(&self) -> Vec<Param> {
+        self.body.params()
     }
 
     /// Parameters named `<prefix>.<layer>.weight` / `.bias`, for checkpoints.
@@ -246,12 +271,16 @@ mod tests {
         let live = net.body.forward(x.as_tensor()).unwrap().sum_all().unwrap();
         let frozen = net.body.forward_frozen(x.as_tensor()).unwrap().sum_all().unwrap();
         assert_eq!(live.to_scalar::<f32>().unwrap(), frozen.to_scalar::<f32>().unwrap());
-        let (g_live, g_frozen) = (live.backward().unwrap(), frozen.backward().unwrap());
+        let g_frozen = frozen.backward().unwrap();
+        let count = net.vars().len();
+        assert!((0..count).all(|i| net.body.waiting_grad(i).is_none()), "a frozen pass wrote a weight gradient");
+        let g_live = live.backward().unwrap();
         let dx = |g: &candle_core::backprop::GradStore| g.get(x.as_tensor()).unwrap().to_vec2::<f32>().unwrap();
         assert_eq!(dx(&g_live), dx(&g_frozen));
-        for w in net.vars() {
-            assert!(g_live.get(w.as_tensor()).is_some());
-            assert!(g_frozen.get(w.as_tensor()).is_none());
+        // the live pass leaves every weight's gradient in its slot, neither in candle's store
+        for (i, w) in net.vars().iter().enumerate() {
+            assert!(net.body.waiting_grad(i).is_some());
+            assert!(g_live.get(w.as_tensor()).is_none() && g_frozen.get(w.as_tensor()).is_none());
         }
     }
 }

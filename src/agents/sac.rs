@@ -113,7 +113,7 @@ impl SacAgent {
             SacVersion::V1 => {
                 let net = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 1), Output::Linear, cfg.weight_init, rng)?;
                 let target = net.deep_copy()?;
-                let opt = Adam::new(net.vars(), settings.value_lr);
+                let opt = Adam::new(net.params(), settings.value_lr);
                 Some(ValueNet { net, target, opt })
             }
         };
@@ -124,8 +124,8 @@ impl SacAgent {
             act_dim,
             gamma: cfg.gamma,
             tau: cfg.tau,
-            actor_opt: Adam::new(actor.vars(), cfg.actor_lr),
-            critic_opt: Adam::new(critics.vars(), cfg.critic_lr),
+            actor_opt: Adam::new(actor.params(), cfg.actor_lr),
+            critic_opt: Adam::new(critics.params(), cfg.critic_lr),
             alpha_opt: autotune.then(|| Adam::new(vec![log_alpha.clone()], settings.alpha_lr)),
             actor,
             critics,

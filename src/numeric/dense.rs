@@ -31,13 +31,13 @@ struct Dense {
 }
 
 /// Sizes of `x [n, in] | [k, n, in]`, `w [out, in] | [k, out, in]` and `b` (k * out values).
-struct Dims {
-    k: usize,
-    n: usize,
-    inp: usize,
-    out: usize,
+pub(super) struct Dims {
+    pub(super) k: usize,
+    pub(super) n: usize,
+    pub(super) inp: usize,
+    pub(super) out: usize,
     /// x is one `[n, in]` block used by every member.
-    shared_x: bool,
+    pub(super) shared_x: bool,
 }
 
 impl Dims {
@@ -55,7 +55,7 @@ impl Dims {
     }
 }
 
-fn dims(x: &[usize], w: &[usize], b_len: usize) -> Result<Dims> {
+pub(super) fn dims(x: &[usize], w: &[usize], b_len: usize) -> Result<Dims> {
     let (k, out, inp) = match w {
         [out, inp] => (1, *out, *inp),
         [k, out, inp] => (*k, *out, *inp),
@@ -123,6 +123,123 @@ fn input_grad(path: KernelPath, gp: &[f32], w: &[f32], gx: &mut [f32], inp: usiz
     matmul(path, (rows, inp, out), gx, inp, false, Strided::rows(gp, out), Strided::rows(w, inp));
 }
 
+/// `y [k, n, out] = act(x W^T + b)` for every member, every element written. Large layers run
+/// in two halves, the second offered to the helper thread.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn layer_forward(
+    path: KernelPath,
+    d: &Dims,
+    x: &[f32],
+    w: &[f32],
+    b: &[f32],
+    act: Activation,
+    y: &mut [f32],
+) {
+    // members g0, g0 + 1, ... into consecutive `[n, out]` blocks of y
+    let members = |g0: usize, y: &mut [f32]| {
+        for (i, y) in y.chunks_exact_mut(d.n * d.out).enumerate() {
+            let g = g0 + i;
+            let w = &w[g * d.out * d.inp..(g + 1) * d.out * d.inp];
+            forward_block(path, &x[d.x_range(g)], w, &b[g * d.out..(g + 1) * d.out], y, d.inp, d.out, act)
+        }
+    };
+    if !d.split() {
+        members(0, y);
+    } else if d.k == 1 {
+        let half = d.n / 2;
+        let (top, bottom) = y.split_at_mut(half * d.out);
+        second_core::join(
+            || forward_block(path, &x[..half * d.inp], w, b, top, d.inp, d.out, act),
+            || forward_block(path, &x[half * d.inp..], w, b, bottom, d.inp, d.out, act),
+        );
+    } else {
+        let first = d.k / 2;
+        let (a, z) = y.split_at_mut(first * d.n * d.out);
+        second_core::join(|| members(0, a), || members(first, z));
+    }
+}
+
+/// A layer's gradients from `gp [k, n, out]`, the gradient of its output before the activation:
+/// with `params`, the weight and bias gradients (`[k, out, in]`, `[k, out]`); with `gx`
+/// (`k * n * in` values), the input gradient of each member, and when the members share one
+/// input, their sum (member 0 + member 1 + ..., in that order) in the first `n * in` values.
+/// `relu_input`: x is the output of a ReLU, and gx is wanted before it (zero where x is not
+/// positive), computed in the same halves as gx itself.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn layer_backward(
+    path: KernelPath,
+    d: &Dims,
+    x: &[f32],
+    w: &[f32],
+    gp: &[f32],
+    params: Option<(&mut [f32], &mut [f32])>,
+    gx: Option<&mut [f32]>,
+    relu_input: bool,
+) {
+    assert!(!(relu_input && d.shared_x && d.k > 1), "a shared input's gradient is summed before any ReLU");
+    let (need_grad_params, need_grad_x) = (params.is_some(), gx.is_some());
+    let (gw, gb) = params.unwrap_or_default();
+    let gx = gx.unwrap_or_default();
+    let (n, inp, out) = (d.n, d.inp, d.out);
+    let gx_len = if need_grad_x { n * inp } else { 0 };
+    let input_grad = |gp: &[f32], w: &[f32], gx: &mut [f32], x: &[f32]| {
+        input_grad(path, gp, w, gx, inp, out);
+        if relu_input {
+            // the same select as `gradient_before`
+            gx.iter_mut().zip(x).for_each(|(g, x)| *g = if *x > 0.0 { *g } else { 0.0 });
+        }
+    };
+    // members g0, g0 + 1, ... into consecutive blocks of gw, gb and gx
+    let members = |g0: usize, count: usize, gw: &mut [f32], gb: &mut [f32], gx: &mut [f32]| {
+        for i in 0..count {
+            let g = g0 + i;
+            let gp = &gp[g * n * out..(g + 1) * n * out];
+            if need_grad_params {
+                let (gw, gb) = (&mut gw[i * out * inp..(i + 1) * out * inp], &mut gb[i * out..(i + 1) * out]);
+                weight_grads(path, gp, out, &x[d.x_range(g)], gw, gb, n, inp);
+            }
+            if need_grad_x {
+                let (w, x) = (&w[g * out * inp..(g + 1) * out * inp], &x[d.x_range(g)]);
+                input_grad(gp, w, &mut gx[i * gx_len..(i + 1) * gx_len], x);
+            }
+        }
+    };
+    if !d.split() {
+        members(0, d.k, gw, gb, gx);
+    } else if d.k == 1 {
+        // weight gradients split by output units, input gradients by rows
+        let (units, rows) = (out / 2, n / 2);
+        let (gw_a, gw_z) = gw.split_at_mut(if need_grad_params { units * inp } else { 0 });
+        let (gb_a, gb_z) = gb.split_at_mut(if need_grad_params { units } else { 0 });
+        let (gx_a, gx_z) = gx.split_at_mut(if need_grad_x { rows * inp } else { 0 });
+        let half =
+            |gp_units: &[f32], gw: &mut [f32], gb: &mut [f32], gp_rows: &[f32], gx: &mut [f32], x_rows: &[f32]| {
+                if need_grad_params {
+                    weight_grads(path, gp_units, out, x, gw, gb, n, inp);
+                }
+                if need_grad_x {
+                    input_grad(gp_rows, w, gx, x_rows);
+                }
+            };
+        second_core::join(
+            || half(gp, gw_a, gb_a, &gp[..rows * out], gx_a, &x[..rows * inp]),
+            || half(&gp[units..], gw_z, gb_z, &gp[rows * out..], gx_z, &x[rows * inp..]),
+        );
+    } else {
+        let first = d.k / 2;
+        let (gw_a, gw_z) = gw.split_at_mut(if need_grad_params { first * out * inp } else { 0 });
+        let (gb_a, gb_z) = gb.split_at_mut(if need_grad_params { first * out } else { 0 });
+        let (gx_a, gx_z) = gx.split_at_mut(first * gx_len);
+        second_core::join(|| members(0, first, gw_a, gb_a, gx_a), || members(first, d.k - first, gw_z, gb_z, gx_z));
+    }
+    if need_grad_x && d.shared_x && d.k > 1 {
+        let (total, rest) = gx.split_at_mut(gx_len);
+        for member in rest.chunks_exact(gx_len) {
+            total.iter_mut().zip(member).for_each(|(t, m)| *t += m);
+        }
+    }
+}
+
 impl CustomOp3 for Dense {
     fn name(&self) -> &'static str {
         "dense"
@@ -139,30 +256,8 @@ impl CustomOp3 for Dense {
     ) -> Result<(CpuStorage, Shape)> {
         let (x, w, b) = (contiguous(s1, l1, "dense")?, contiguous(s2, l2, "dense")?, contiguous(s3, l3, "dense")?);
         let d = dims(l1.dims(), l2.dims(), b.len())?;
-        let (act, path) = (self.act, self.path);
         let mut y = vec![0f32; d.k * d.n * d.out];
-        // members g0, g0 + 1, ... into consecutive `[n, out]` blocks of y
-        let members = |g0: usize, y: &mut [f32]| {
-            for (i, y) in y.chunks_exact_mut(d.n * d.out).enumerate() {
-                let g = g0 + i;
-                let w = &w[g * d.out * d.inp..(g + 1) * d.out * d.inp];
-                forward_block(path, &x[d.x_range(g)], w, &b[g * d.out..(g + 1) * d.out], y, d.inp, d.out, act)
-            }
-        };
-        if !d.split() {
-            members(0, &mut y);
-        } else if d.k == 1 {
-            let half = d.n / 2;
-            let (top, bottom) = y.split_at_mut(half * d.out);
-            second_core::join(
-                || forward_block(path, &x[..half * d.inp], w, b, top, d.inp, d.out, act),
-                || forward_block(path, &x[half * d.inp..], w, b, bottom, d.inp, d.out, act),
-            );
-        } else {
-            let first = d.k / 2;
-            let (a, z) = y.split_at_mut(first * d.n * d.out);
-            second_core::join(|| members(0, a), || members(first, z));
-        }
+        layer_forward(self.path, &d, x, w, b, self.act, &mut y);
         let shape: Shape = if l2.dims().len() == 2 { (d.n, d.out).into() } else { (d.k, d.n, d.out).into() };
         Ok((CpuStorage::F32(y), shape))
     }
@@ -189,75 +284,23 @@ impl CustomOp3 for Dense {
         let (xv, wv, yv) =
             (cpu_contiguous(&xs, xl, "dense")?, cpu_contiguous(&ws, wl, "dense")?, cpu_contiguous(&ys, yl, "dense")?);
         let gv = cpu_contiguous(&gs, gl, "dense")?;
-        // gradient before the activation (a select, not a branch, so that it vectorises)
-        let path = self.path;
-        let gp: Vec<f32> = match self.act {
-            Activation::Identity => gv.to_vec(),
-            Activation::Relu => gv.iter().zip(yv).map(|(g, y)| if *y > 0.0 { *g } else { 0.0 }).collect(),
-        };
+        let gp = gradient_before(self.act, gv, yv);
         let mut gw = vec![0f32; if need_grad_params { d.k * d.out * d.inp } else { 0 }];
         let mut gb = vec![0f32; if need_grad_params { d.k * d.out } else { 0 }];
-        // per member; summed below when the members share x
         let mut gx = vec![0f32; if need_grad_x { d.k * d.n * d.inp } else { 0 }];
-        let (n, inp, out) = (d.n, d.inp, d.out);
-        let gx_len = if need_grad_x { n * inp } else { 0 };
-        // members g0, g0 + 1, ... into consecutive blocks of gw, gb and gx
-        let members = |g0: usize, count: usize, gw: &mut [f32], gb: &mut [f32], gx: &mut [f32]| {
-            for i in 0..count {
-                let g = g0 + i;
-                let gp = &gp[g * n * out..(g + 1) * n * out];
-                if need_grad_params {
-                    let (gw, gb) = (&mut gw[i * out * inp..(i + 1) * out * inp], &mut gb[i * out..(i + 1) * out]);
-                    weight_grads(path, gp, out, &xv[d.x_range(g)], gw, gb, n, inp);
-                }
-                if need_grad_x {
-                    input_grad(
-                        path,
-                        gp,
-                        &wv[g * out * inp..(g + 1) * out * inp],
-                        &mut gx[i * gx_len..(i + 1) * gx_len],
-                        inp,
-                        out,
-                    );
-                }
-            }
-        };
-        if !d.split() {
-            members(0, d.k, &mut gw, &mut gb, &mut gx);
-        } else if d.k == 1 {
-            // weight gradients split by output units, input gradients by rows
-            let (units, rows) = (out / 2, n / 2);
-            let (gw_a, gw_z) = gw.split_at_mut(if need_grad_params { units * inp } else { 0 });
-            let (gb_a, gb_z) = gb.split_at_mut(if need_grad_params { units } else { 0 });
-            let (gx_a, gx_z) = gx.split_at_mut(if need_grad_x { rows * inp } else { 0 });
-            let half = |gp_units: &[f32], gw: &mut [f32], gb: &mut [f32], gp_rows: &[f32], gx: &mut [f32]| {
-                if need_grad_params {
-                    weight_grads(path, gp_units, out, xv, gw, gb, n, inp);
-                }
-                if need_grad_x {
-                    input_grad(path, gp_rows, wv, gx, inp, out);
-                }
-            };
-            second_core::join(
-                || half(&gp, gw_a, gb_a, &gp[..rows * out], gx_a),
-                || half(&gp[units..], gw_z, gb_z, &gp[rows * out..], gx_z),
-            );
-        } else {
-            let first = d.k / 2;
-            let (gw_a, gw_z) = gw.split_at_mut(if need_grad_params { first * out * inp } else { 0 });
-            let (gb_a, gb_z) = gb.split_at_mut(if need_grad_params { first * out } else { 0 });
-            let (gx_a, gx_z) = gx.split_at_mut(first * gx_len);
-            second_core::join(|| members(0, first, gw_a, gb_a, gx_a), || members(first, d.k - first, gw_z, gb_z, gx_z));
-        }
+        layer_backward(
+            self.path,
+            &d,
+            xv,
+            wv,
+            &gp,
+            need_grad_params.then_some((gw.as_mut_slice(), gb.as_mut_slice())),
+            need_grad_x.then_some(gx.as_mut_slice()),
+            false,
+        );
         drop((xs, ws, ys, gs));
         let dev = x.device();
-        if need_grad_x && d.shared_x && d.k > 1 {
-            let (total, rest) = gx.split_at_mut(gx_len);
-            for member in rest.chunks_exact(gx_len) {
-                total.iter_mut().zip(member).for_each(|(t, m)| *t += m);
-            }
-            gx.truncate(gx_len);
-        }
+        gx.truncate(if d.shared_x { d.n * d.inp } else { d.k * d.n * d.inp });
         let grad_x = if need_grad_x { Some(Tensor::from_vec(gx, x.shape(), dev)?) } else { None };
         let (grad_w, grad_b) = if need_grad_params {
             (Some(Tensor::from_vec(gw, w.shape(), dev)?), Some(Tensor::from_vec(gb, b.shape(), dev)?))
@@ -265,6 +308,15 @@ impl CustomOp3 for Dense {
             (None, None)
         };
         Ok((grad_x, grad_w, grad_b))
+    }
+}
+
+/// The gradient before the activation, from the gradient `g` of the output `y` (a select, not a
+/// branch, so that it vectorises).
+fn gradient_before(act: Activation, g: &[f32], y: &[f32]) -> Vec<f32> {
+    match act {
+        Activation::Identity => g.to_vec(),
+        Activation::Relu => g.iter().zip(y).map(|(g, y)| if *y > 0.0 { *g } else { 0.0 }).collect(),
     }
 }
 

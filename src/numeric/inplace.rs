@@ -6,7 +6,7 @@
 //! replaces.
 use std::cell::RefCell;
 
-use candle_core::{bail, CpuStorage, InplaceOp2, Layout, Result, Storage};
+use candle_core::{bail, CpuStorage, InplaceOp1, InplaceOp2, Layout, Result, Storage};
 
 use super::second_core;
 
@@ -53,14 +53,8 @@ pub(crate) struct AdamStep<'a> {
     pub v: RefCell<&'a mut [f32]>,
 }
 
-impl InplaceOp2 for AdamStep<'_> {
-    fn name(&self) -> &'static str {
-        "adam-step"
-    }
-
-    fn cpu_fwd(&self, s1: &mut CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<()> {
-        let theta = contiguous_mut(s1, l1, "adam")?;
-        let grad = contiguous(s2, l2, "adam")?;
+impl AdamStep<'_> {
+    fn apply(&self, theta: &mut [f32], grad: &[f32]) -> Result<()> {
         let (mut m, mut v) = (self.m.borrow_mut(), self.v.borrow_mut());
         if theta.len() != grad.len() || m.len() != grad.len() || v.len() != grad.len() {
             bail!("adam: parameter, gradient and moments differ in length");
@@ -86,6 +80,33 @@ impl InplaceOp2 for AdamStep<'_> {
             second_core::join(|| step(t0, g0, m0, v0), || step(t1, g1, m1, v1));
         }
         Ok(())
+    }
+}
+
+impl InplaceOp2 for AdamStep<'_> {
+    fn name(&self) -> &'static str {
+        "adam-step"
+    }
+
+    fn cpu_fwd(&self, s1: &mut CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<()> {
+        self.apply(contiguous_mut(s1, l1, "adam")?, contiguous(s2, l2, "adam")?)
+    }
+}
+
+/// An Adam step whose gradient is a slice rather than a tensor (one a fused node left in a
+/// [`super::stack::GradSlot`]).
+pub(crate) struct AdamStepFrom<'a, 'b> {
+    pub(crate) step: &'a AdamStep<'b>,
+    pub(crate) grad: &'a [f32],
+}
+
+impl InplaceOp1 for AdamStepFrom<'_, '_> {
+    fn name(&self) -> &'static str {
+        "adam-step"
+    }
+
+    fn cpu_fwd(&self, s1: &mut CpuStorage, l1: &Layout) -> Result<()> {
+        self.step.apply(contiguous_mut(s1, l1, "adam")?, self.grad)
     }
 }
 

@@ -15,5 +15,6 @@ pub mod kernel_path;
 pub mod matmul;
 pub mod optim;
 pub mod second_core;
+pub mod stack;
 
 pub use kernel_path::KernelPath;

@@ -3,11 +3,34 @@
 //! private; this one computes the same update (tested against it) in one pass per parameter,
 //! in place (`inplace::AdamStep`).
 use std::cell::RefCell;
+use std::sync::Arc;
 
 use candle_core::backprop::GradStore;
 use candle_core::{Device, Result, Tensor, Var};
 
-use super::inplace::AdamStep;
+use super::inplace::{AdamStep, AdamStepFrom};
+use super::stack::GradSlot;
+
+/// A parameter an optimiser updates, and where its gradient is found: in candle's gradient
+/// store, or first in a slot that a fused node ([`super::stack`]) writes.
+#[derive(Clone)]
+pub struct Param {
+    var: Var,
+    slot: Option<(Arc<[GradSlot]>, usize)>,
+}
+
+impl Param {
+    /// `var`, whose gradient a fused node leaves in `slots[index]`.
+    pub fn with_slot(var: Var, slots: Arc<[GradSlot]>, index: usize) -> Param {
+        Param { var, slot: Some((slots, index)) }
+    }
+}
+
+impl From<Var> for Param {
+    fn from(var: Var) -> Param {
+        Param { var, slot: None }
+    }
+}
 
 /// Adam (Kingma and Ba, 2015) over candle variables, updated in place with fixed-order arithmetic.
 pub struct Adam {
@@ -20,16 +43,17 @@ pub struct Adam {
     /// Added to the root of the second moment.
     pub eps: f64,
     step: u64,
-    params: Vec<Var>,
+    params: Vec<Param>,
     m: Vec<Vec<f32>>,
     v: Vec<Vec<f32>>,
 }
 
 impl Adam {
     /// Adam over `params` with the usual betas (0.9, 0.999) and eps 1e-8.
-    pub fn new(params: Vec<Var>, lr: f64) -> Adam {
-        let m = params.iter().map(|p| vec![0.0; p.elem_count()]).collect();
-        let v = params.iter().map(|p| vec![0.0; p.elem_count()]).collect();
+    pub fn new<P: Into<Param>>(params: Vec<P>, lr: f64) -> Adam {
+        let params: Vec<Param> = params.into_iter().map(Into::into).collect();
+        let m = params.iter().map(|p| vec![0.0; p.var.elem_count()]).collect();
+        let v = params.iter().map(|p| vec![0.0; p.var.elem_count()]).collect();
         Adam { lr, beta1: 0.9, beta2: 0.999, eps: 1e-8, step: 0, params, m, v }
     }
 
@@ -38,15 +62,13 @@ impl Adam {
         self.step
     }
 
-    /// One update from the gradients of the parameters; parameters without a gradient are left alone.
+    /// One update from the gradients of the parameters (each from its slot if one waits there,
+    /// else from `grads`); parameters without a gradient are left alone.
     pub fn step(&mut self, grads: &GradStore) -> Result<()> {
         self.step += 1;
         let bias_correction1 = (1.0 - self.beta1.powi(self.step as i32)) as f32;
         let bias_correction2 = (1.0 - self.beta2.powi(self.step as i32)) as f32;
         for ((p, m), v) in self.params.iter().zip(&mut self.m).zip(&mut self.v) {
-            let Some(g) = grads.get(p.as_tensor()) else {
-                continue;
-            };
             let kernel = AdamStep {
                 lr: self.lr as f32,
                 beta1: self.beta1 as f32,
@@ -57,7 +79,15 @@ impl Adam {
                 m: RefCell::new(m.as_mut_slice()),
                 v: RefCell::new(v.as_mut_slice()),
             };
-            p.as_tensor().inplace_op2(&g.contiguous()?, &kernel)?;
+            let theta = p.var.as_tensor();
+            if let Some((slots, i)) = &p.slot {
+                if slots[*i].take(|grad| theta.inplace_op1(&AdamStepFrom { step: &kernel, grad }))? {
+                    continue;
+                }
+            }
+            if let Some(g) = grads.get(theta) {
+                theta.inplace_op2(&g.contiguous()?, &kernel)?;
+            }
         }
         Ok(())
     }

@@ -1,0 +1,453 @@
+//! A stack of dense layers (ReLU between them, nothing after the last) as one autograd node,
+//! whose weight gradients bypass candle's gradient store.
+//!
+//! With one node per layer ([`super::dense`]), candle's backward pass allocates a zero gradient
+//! for every input of every node, weights and hidden activations alike, and adds the layer's
+//! gradient into it; the optimiser then reads the weight gradients from that store. perf put
+//! those fills, adds and copies at about a tenth of a SAC update. As one node the stack keeps its
+//! hidden activations in reused buffers, runs the layers' backward passes from one buffer to the
+//! next, and writes the weight gradients into the network's [`GradSlot`]s, where
+//! [`super::optim::Adam`] takes them. Each layer's arithmetic is [`super::dense`]'s, so a stack
+//! gives the bits its layers give one node at a time (tested below).
+use std::cell::RefCell;
+use std::sync::{Arc, Mutex, MutexGuard};
+
+use candle_core::{bail, CpuStorage, CustomOp2, Layout, Result, Shape, Tensor};
+
+use super::dense::{dims, layer_backward, layer_forward, Dims};
+use super::inplace::{contiguous, cpu_contiguous, Activation};
+use super::kernel_path::{self, KernelPath};
+
+/// Where the backward pass leaves one parameter's gradient until the optimiser takes it.
+#[derive(Default)]
+pub struct GradSlot(Mutex<Slot>);
+
+#[derive(Default)]
+struct Slot {
+    values: Vec<f32>,
+    /// `values` holds a gradient not yet taken.
+    fresh: bool,
+}
+
+impl GradSlot {
+    fn lock(&self) -> MutexGuard<'_, Slot> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Runs `f` on the waiting gradient and marks it taken; false (and `f` not run) when none waits.
+    pub fn take(&self, f: impl FnOnce(&[f32]) -> Result<()>) -> Result<bool> {
+        let mut slot = self.lock();
+        if !slot.fresh {
+            return Ok(false);
+        }
+        slot.fresh = false;
+        f(&slot.values).map(|()| true)
+    }
+
+    /// A copy of the waiting gradient, if any (tests and diagnostics; the slot keeps it).
+    pub fn peek(&self) -> Option<Vec<f32>> {
+        let slot = self.lock();
+        slot.fresh.then(|| slot.values.clone())
+    }
+}
+
+/// `len` values for a new gradient: the slot's own buffer when none waits, otherwise (the network
+/// used twice in one loss) a scratch buffer that [`deposit`] adds to the waiting one.
+fn deposit_buffer(slot: &mut Slot, len: usize) -> Vec<f32> {
+    if slot.fresh {
+        take_buffer(len)
+    } else {
+        slot.values.resize(len, 0.0);
+        std::mem::take(&mut slot.values)
+    }
+}
+
+fn deposit(slot: &mut Slot, mut buffer: Vec<f32>, len: usize) {
+    if slot.fresh {
+        slot.values.iter_mut().zip(&buffer[..len]).for_each(|(a, g)| *a += g);
+        give_buffer(buffer);
+    } else {
+        buffer.truncate(len);
+        slot.values = buffer;
+        slot.fresh = true;
+    }
+}
+
+thread_local! {
+    /// Buffers of earlier forward and backward passes, reused so that each pass neither
+    /// allocates nor clears its activations and gradients (every value is written before use).
+    static FREE: RefCell<Vec<Vec<f32>>> = const { RefCell::new(Vec::new()) };
+}
+
+/// A buffer of at least `len` values (old contents).
+fn take_buffer(len: usize) -> Vec<f32> {
+    FREE.with(|free| {
+        let mut free = free.borrow_mut();
+        let best = free.iter().enumerate().filter(|(_, b)| b.len() >= len).min_by_key(|(_, b)| b.len()).map(|(i, _)| i);
+        match best {
+            Some(i) => free.swap_remove(i),
+            None => vec![0.0; len],
+        }
+    })
+}
+
+fn give_buffer(buffer: Vec<f32>) {
+    const KEEP: usize = 32;
+    FREE.with(|free| {
+        let mut free = free.borrow_mut();
+        if free.len() < KEEP && !buffer.is_empty() {
+            free.push(buffer);
+        }
+    });
+}
+
+/// The node: layers after the first (the first is the op's second input), the slots of every
+/// weight and bias in layer order (none when the weights are held constant), and the outputs of
+/// the hidden layers, kept from the forward pass for the backward pass.
+struct Stack {
+    rest: Vec<(Tensor, Tensor)>,
+    first_bias: Tensor,
+    grads: Option<Arc<[GradSlot]>>,
+    path: KernelPath,
+    hidden: Mutex<Vec<Vec<f32>>>,
+}
+
+impl Drop for Stack {
+    fn drop(&mut self) {
+        let hidden = std::mem::take(self.hidden.get_mut().unwrap_or_else(|e| e.into_inner()));
+        hidden.into_iter().for_each(give_buffer);
+    }
+}
+
+/// A layer's input dims: the stack's input for layer 0, `[k, n, in]` (or `[n, in]` for one
+/// network) after it.
+fn layer_dims(x_dims: &[usize], w: &Tensor, b: &Tensor, first: bool, n: usize) -> Result<Dims> {
+    let wd = w.dims();
+    if first {
+        return dims(x_dims, wd, b.elem_count());
+    }
+    let x: Vec<usize> = if wd.len() == 3 { vec![wd[0], n, wd[2]] } else { vec![n, wd[1]] };
+    dims(&x, wd, b.elem_count())
+}
+
+fn values<'a>(storage: &'a candle_core::Storage, layout: &Layout) -> Result<&'a [f32]> {
+    cpu_contiguous(storage, layout, "dense stack")
+}
+
+impl Stack {
+    fn bias(&self, l: usize) -> &Tensor {
+        if l == 0 {
+            &self.first_bias
+        } else {
+            &self.rest[l - 1].1
+        }
+    }
+}
+
+impl CustomOp2 for Stack {
+    fn name(&self) -> &'static str {
+        "dense-stack"
+    }
+
+    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
+        let x = contiguous(s1, l1, "dense stack")?;
+        let layers = self.rest.len() + 1;
+        let n = l1.dims()[l1.dims().len() - 2];
+        let mut hidden = self.hidden.lock().unwrap_or_else(|e| e.into_inner());
+        for l in 0..layers {
+            let w_lock = (l > 0).then(|| self.rest[l - 1].0.storage_and_layout());
+            let w = match &w_lock {
+                Some((guard, layout)) => values(guard, layout)?,
+                None => contiguous(s2, l2, "dense stack")?,
+            };
+            let (b_guard, b_layout) = self.bias(l).storage_and_layout();
+            let b = values(&b_guard, b_layout)?;
+            let d = if l == 0 {
+                dims(l1.dims(), l2.dims(), b.len())?
+            } else {
+                layer_dims(&[], &self.rest[l - 1].0, self.bias(l), false, n)?
+            };
+            let input = if l == 0 { x } else { &hidden[l - 1][..d.k * d.n * d.inp] };
+            let len = d.k * d.n * d.out;
+            if l + 1 == layers {
+                let mut output = vec![0f32; len];
+                layer_forward(self.path, &d, input, w, b, Activation::Identity, &mut output);
+                let w_dims = if l == 0 { l2.dims() } else { self.rest[l - 1].0.dims() };
+                let shape: Shape = if w_dims.len() == 2 { (d.n, d.out).into() } else { (d.k, d.n, d.out).into() };
+                return Ok((CpuStorage::F32(output), shape));
+            }
+            let mut y = take_buffer(len);
+            layer_forward(self.path, &d, input, w, b, Activation::Relu, &mut y[..len]);
+            hidden.push(y);
+        }
+        unreachable!("the last layer returns")
+    }
+
+    fn bwd(&self, x: &Tensor, w0: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
+        let need_grad_x = x.track_op();
+        let hidden = self.hidden.lock().unwrap_or_else(|e| e.into_inner());
+        let layers = self.rest.len() + 1;
+        if hidden.len() + 1 != layers {
+            bail!("dense stack: backward pass without a forward pass");
+        }
+        let n = x.dims()[x.dims().len() - 2];
+        let grad = grad.contiguous()?;
+        let (gs, gl) = grad.storage_and_layout();
+        let (xs, xl) = x.storage_and_layout();
+        let x_values = values(&xs, xl)?;
+        // gp: the gradient of layer l's output before its activation (the last layer has none)
+        let mut gp_buffer: Option<Vec<f32>> = None;
+        let mut grad_x = None;
+        for l in (0..layers).rev() {
+            let (w_tensor, b_tensor) =
+                if l == 0 { (w0, &self.first_bias) } else { (&self.rest[l - 1].0, &self.rest[l - 1].1) };
+            let d = layer_dims(x.dims(), w_tensor, b_tensor, l == 0, n)?;
+            let (w_guard, w_layout) = w_tensor.storage_and_layout();
+            let w = values(&w_guard, w_layout)?;
+            let input: &[f32] = if l == 0 { x_values } else { &hidden[l - 1][..d.k * d.n * d.inp] };
+            let gp_len = d.k * d.n * d.out;
+            let gp: &[f32] = match &gp_buffer {
+                Some(buffer) => &buffer[..gp_len],
+                None => values(&gs, gl)?,
+            };
+            let want_gx = l > 0 || need_grad_x;
+            let gx_len = d.k * d.n * d.inp;
+            let mut gx = want_gx.then(|| take_buffer(gx_len));
+            let gx_slice = gx.as_mut().map(|g| &mut g[..gx_len]);
+            match &self.grads {
+                Some(slots) => {
+                    let (mut w_slot, mut b_slot) = (slots[2 * l].lock(), slots[2 * l + 1].lock());
+                    let (w_len, b_len) = (d.k * d.out * d.inp, d.k * d.out);
+                    let (mut gw, mut gb) = (deposit_buffer(&mut w_slot, w_len), deposit_buffer(&mut b_slot, b_len));
+                    let params = Some((&mut gw[..w_len], &mut gb[..b_len]));
+                    layer_backward(self.path, &d, input, w, gp, params, gx_slice, l > 0);
+                    deposit(&mut w_slot, gw, w_len);
+                    deposit(&mut b_slot, gb, b_len);
+                }
+                None => layer_backward(self.path, &d, input, w, gp, None, gx_slice, l > 0),
+            }
+            if let Some(old) = gp_buffer.take() {
+                give_buffer(old);
+            }
+            let Some(mut gx) = gx else { break };
+            if l > 0 {
+                // (already through the ReLU that made this layer's input)
+                gp_buffer = Some(gx);
+            } else {
+                let len = if d.shared_x { d.n * d.inp } else { gx_len };
+                gx.truncate(len);
+                grad_x = Some(Tensor::from_vec(gx, x.shape(), x.device())?);
+            }
+        }
+        Ok((grad_x, None))
+    }
+}
+
+/// `layers` (weight `[out, in]` or `[k, out, in]`, bias `out` or `[k, 1, out]` values) applied to
+/// `x` with ReLU between them, as [`super::dense::dense`] would one at a time. With `grads` (one
+/// slot per weight and bias, in order) the backward pass leaves the parameters' gradients there
+/// instead of in candle's gradient store; without, the parameters are held constant and only
+/// `x` gets a gradient.
+pub fn relu_stack(x: &Tensor, layers: &[(Tensor, Tensor)], grads: Option<&Arc<[GradSlot]>>) -> Result<Tensor> {
+    let Some(((w0, b0), rest)) = layers.split_first() else { bail!("dense stack: no layers") };
+    if let Some(slots) = grads {
+        if slots.len() != 2 * layers.len() {
+            bail!("dense stack: {} gradient slots for {} layers", slots.len(), layers.len());
+        }
+    }
+    let mut width = x.dims().last().copied().unwrap_or(0);
+    for (i, (w, b)) in layers.iter().enumerate() {
+        let ok = match (w.dims(), layers[0].0.rank()) {
+            ([out, inp], 2) => *inp == width && b.elem_count() == *out,
+            ([k, out, inp], 3) => *inp == width && *k == layers[0].0.dims()[0] && b.elem_count() == k * out,
+            _ => false,
+        };
+        if !ok {
+            bail!(
+                "dense stack: layer {i} (weight {:?}, bias {:?}) does not follow a width of {width}",
+                w.dims(),
+                b.dims()
+            );
+        }
+        width = w.dims()[w.rank() - 2];
+    }
+    let contiguous = |t: &Tensor| t.contiguous();
+    let rest = rest.iter().map(|(w, b)| Ok((contiguous(w)?, contiguous(b)?))).collect::<Result<Vec<_>>>()?;
+    let op = Stack {
+        rest,
+        first_bias: b0.contiguous()?,
+        grads: grads.cloned(),
+        path: kernel_path::active(),
+        hidden: Mutex::new(Vec::new()),
+    };
+    // The first weight is an input of the node only so that candle keeps the node in the graph
+    // when x needs no gradient (a critic's loss); it never receives a gradient from candle.
+    let w0 = if grads.is_some() { w0.contiguous()? } else { w0.detach().contiguous()? };
+    x.contiguous()?.apply_op2(&w0, op)
+}
+
+#[cfg(test)]
+mod tests {
+    use candle_core::{Device, Var};
+
+    use super::*;
+    use crate::numeric::dense::dense;
+    use crate::numeric::second_core;
+
+    fn values(n: usize, seed: f32) -> Vec<f32> {
+        (0..n).map(|i| (i as f32 * 0.37 + seed).sin() * 0.5).collect()
+    }
+
+    fn var(shape: &[usize], seed: f32) -> Var {
+        Var::from_tensor(&Tensor::from_vec(values(shape.iter().product(), seed), shape, &Device::Cpu).unwrap()).unwrap()
+    }
+
+    fn flat(t: &Tensor) -> Vec<f32> {
+        t.flatten_all().unwrap().to_vec1::<f32>().unwrap()
+    }
+
+    /// (input shape, members k (0: one network), layer sizes): small ones in one piece, large
+    /// ones split in halves.
+    const CASES: [(&[usize], usize, &[usize]); 5] = [
+        (&[5, 3], 0, &[3, 8, 6, 2]),
+        (&[5, 3], 2, &[3, 8, 6, 1]),
+        (&[64, 23], 0, &[23, 400, 300, 12]),
+        (&[64, 23], 2, &[23, 256, 256, 1]),
+        (&[7, 4], 0, &[4, 3]),
+    ];
+
+    fn layers(k: usize, sizes: &[usize]) -> Vec<(Var, Var)> {
+        sizes
+            .windows(2)
+            .enumerate()
+            .map(|(i, s)| {
+                let (w, b): (Vec<usize>, Vec<usize>) =
+                    if k == 0 { (vec![s[1], s[0]], vec![s[1]]) } else { (vec![k, s[1], s[0]], vec![k, 1, s[1]]) };
+                (var(&w, 0.3 + i as f32), var(&b, 1.1 + i as f32))
+            })
+            .collect()
+    }
+
+    /// The layers one node each (`dense`), as the agents ran them before the stack.
+    fn one_node_per_layer(x: &Tensor, layers: &[(Var, Var)]) -> Tensor {
+        let mut h = x.clone();
+        for (i, (w, b)) in layers.iter().enumerate() {
+            let act = if i + 1 < layers.len() { Activation::Relu } else { Activation::Identity };
+            h = dense(&h, w.as_tensor(), b.as_tensor(), act).unwrap();
+        }
+        h
+    }
+
+    /// Output, input gradient and parameter gradients of `sum(y * probe)` (twice the same
+    /// network when `twice`): by one node per layer, and by the stack.
+    fn both(case: usize, twice: bool) -> [Vec<Vec<f32>>; 2] {
+        let (x_shape, k, sizes) = CASES[case];
+        let x = var(x_shape, 0.9);
+        let params = layers(k, sizes);
+        let tensors: Vec<(Tensor, Tensor)> =
+            params.iter().map(|(w, b)| (w.as_tensor().clone(), b.as_tensor().clone())).collect();
+        let slots: Arc<[GradSlot]> = (0..2 * params.len()).map(|_| GradSlot::default()).collect();
+        let vars: Vec<&Var> = params.iter().flat_map(|(w, b)| [w, b]).collect();
+        let run = |fused: bool| {
+            let forward = |x: &Tensor| {
+                if fused {
+                    relu_stack(x, &tensors, Some(&slots)).unwrap()
+                } else {
+                    one_node_per_layer(x, &params)
+                }
+            };
+            let y = forward(x.as_tensor());
+            let probe = Tensor::from_vec(values(y.elem_count(), 2.3), y.shape(), &Device::Cpu).unwrap();
+            let mut loss = (&y * &probe).unwrap().sum_all().unwrap();
+            if twice {
+                let again = forward(&x.as_tensor().affine(0.5, 0.1).unwrap());
+                loss = (loss + (again * &probe).unwrap().sum_all().unwrap()).unwrap();
+            }
+            let grads = loss.backward().unwrap();
+            let mut out = vec![flat(&y), flat(grads.get(x.as_tensor()).unwrap())];
+            for (i, v) in vars.iter().enumerate() {
+                out.push(if fused {
+                    assert!(grads.get(v.as_tensor()).is_none(), "a fused gradient reached candle's store");
+                    slots[i].peek().expect("a gradient in the slot")
+                } else {
+                    flat(grads.get(v.as_tensor()).unwrap())
+                });
+            }
+            out
+        };
+        [run(false), run(true)]
+    }
+
+    /// Same values and gradients as the layers run one node at a time, compared bit for bit
+    /// (as f32 equality: candle adds every gradient to a zero, which turns a -0 into +0).
+    #[test]
+    fn a_stack_gives_the_bits_of_its_layers_one_node_at_a_time() {
+        for helper in [false, true] {
+            std::thread::spawn(move || {
+                if helper {
+                    second_core::enable_on_this_thread();
+                }
+                for case in 0..CASES.len() {
+                    for twice in [false, true] {
+                        let [reference, fused] = both(case, twice);
+                        assert_eq!(reference.len(), fused.len());
+                        for (i, (r, f)) in reference.iter().zip(&fused).enumerate() {
+                            assert_eq!(r, f, "case {case}, twice {twice}, helper {helper}, item {i}");
+                        }
+                    }
+                }
+            })
+            .join()
+            .unwrap();
+        }
+    }
+
+    /// Without slots the weights are constants: the input gradient is unchanged, no weight
+    /// gradient is made anywhere; and a stack whose input needs no gradient still reaches its
+    /// weights (a critic's loss).
+    #[test]
+    fn frozen_stacks_pass_the_input_gradient_and_inputs_without_gradient_still_train() {
+        let (x_shape, k, sizes) = CASES[3];
+        let x = var(x_shape, 0.9);
+        let params = layers(k, sizes);
+        let tensors: Vec<(Tensor, Tensor)> =
+            params.iter().map(|(w, b)| (w.as_tensor().clone(), b.as_tensor().clone())).collect();
+        let slots: Arc<[GradSlot]> = (0..2 * params.len()).map(|_| GradSlot::default()).collect();
+        let frozen = relu_stack(x.as_tensor(), &tensors, None).unwrap();
+        let live = one_node_per_layer(x.as_tensor(), &params);
+        assert_eq!(flat(&frozen), flat(&live));
+        let g_frozen = frozen.sum_all().unwrap().backward().unwrap();
+        let g_live = live.sum_all().unwrap().backward().unwrap();
+        assert_eq!(flat(g_frozen.get(x.as_tensor()).unwrap()), flat(g_live.get(x.as_tensor()).unwrap()));
+        assert!(params
+            .iter()
+            .all(|(w, b)| g_frozen.get(w.as_tensor()).is_none() && g_frozen.get(b.as_tensor()).is_none()));
+
+        let constant_x = x.as_tensor().detach();
+        let y = relu_stack(&constant_x, &tensors, Some(&slots)).unwrap();
+        let grads = y.sum_all().unwrap().backward().unwrap();
+        assert!(grads.get(&constant_x).is_none());
+        let g_w0 = g_live.get(params[0].0.as_tensor()).unwrap();
+        assert_eq!(slots[0].peek().unwrap(), flat(g_w0));
+        // taken once
+        assert!(slots[0].take(|_| Ok(())).unwrap());
+        assert!(!slots[0].take(|_| Ok(())).unwrap());
+        assert!(slots[0].peek().is_none());
+    }
+
+    #[test]
+    fn bad_stacks_are_refused() {
+        let x = Tensor::zeros((4, 3), candle_core::DType::F32, &Device::Cpu).unwrap();
+        let layer = |out: usize, inp: usize| {
+            (
+                Tensor::zeros((out, inp), candle_core::DType::F32, &Device::Cpu).unwrap(),
+                Tensor::zeros(out, candle_core::DType::F32, &Device::Cpu).unwrap(),
+            )
+        };
+        assert!(relu_stack(&x, &[], None).is_err());
+        assert!(relu_stack(&x, &[layer(5, 2)], None).is_err());
+        assert!(relu_stack(&x, &[layer(5, 3), layer(2, 4)], None).is_err());
+        let two_slots: Arc<[GradSlot]> = (0..2).map(|_| GradSlot::default()).collect();
+        assert!(relu_stack(&x, &[layer(5, 3), layer(2, 5)], Some(&two_slots)).is_err());
+    }
+}
