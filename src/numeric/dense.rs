@@ -17,6 +17,7 @@ use super::inplace::{contiguous, cpu_contiguous, Activation};
 use super::kernel_path::{self, KernelPath};
 use super::matmul::{matmul, Strided};
 use super::second_core;
+use super::wide::wide;
 
 /// Layers with fewer multiply-adds (k * n * in * out) than this run as one piece (a single
 /// observation while acting, the 300 -> 1 output layer). TD3 400-300 updates/s with two
@@ -112,9 +113,11 @@ fn weight_grads(
     let gp_t = Strided { data: gp, row_stride: 1, col_stride: out };
     matmul(path, (units, inp, rows), gw, inp, false, gp_t, Strided::rows(x, inp));
     gb.fill(0.0);
-    for r in 0..rows {
-        gb.iter_mut().zip(&gp[r * out..r * out + units]).for_each(|(a, g)| *a += g);
-    }
+    wide(path, move || {
+        for r in 0..rows {
+            gb.iter_mut().zip(&gp[r * out..r * out + units]).for_each(|(a, g)| *a += g);
+        }
+    });
 }
 
 /// Input gradient of a block of rows: `gx [rows, in] = gp [rows, out] W [out, in]`.
@@ -186,7 +189,7 @@ pub(super) fn layer_backward(
         input_grad(path, gp, w, gx, inp, out);
         if relu_input {
             // the same select as `gradient_before`
-            gx.iter_mut().zip(x).for_each(|(g, x)| *g = if *x > 0.0 { *g } else { 0.0 });
+            wide(path, move || gx.iter_mut().zip(x).for_each(|(g, x)| *g = if *x > 0.0 { *g } else { 0.0 }));
         }
     };
     // members g0, g0 + 1, ... into consecutive blocks of gw, gb and gx
@@ -235,7 +238,8 @@ pub(super) fn layer_backward(
     if need_grad_x && d.shared_x && d.k > 1 {
         let (total, rest) = gx.split_at_mut(gx_len);
         for member in rest.chunks_exact(gx_len) {
-            total.iter_mut().zip(member).for_each(|(t, m)| *t += m);
+            let total = &mut *total;
+            wide(path, move || total.iter_mut().zip(member).for_each(|(t, m)| *t += m));
         }
     }
 }

@@ -8,7 +8,9 @@ use std::cell::RefCell;
 
 use candle_core::{bail, CpuStorage, InplaceOp1, InplaceOp2, Layout, Result, Storage};
 
+use super::kernel_path;
 use super::second_core;
+use super::wide::wide;
 
 /// Parameters with at least this many values are updated in two halves, the second on the
 /// helper thread when there is one (element by element, so the same bits either way).
@@ -62,12 +64,17 @@ impl AdamStep<'_> {
         let (b1, b2, eps) = (self.beta1, self.beta2, self.eps);
         let step_size = self.lr / self.bias_correction1;
         let inv_sqrt_bc2 = 1.0 / self.bias_correction2.sqrt();
+        let path = kernel_path::active();
         let step = |theta: &mut [f32], grad: &[f32], m: &mut [f32], v: &mut [f32]| {
-            for (((t, g), m), v) in theta.iter_mut().zip(grad).zip(m.iter_mut()).zip(v.iter_mut()) {
-                *m = b1 * *m + (1.0 - b1) * g;
-                *v = b2 * *v + (1.0 - b2) * g * g;
-                *t -= step_size * *m / (v.sqrt() * inv_sqrt_bc2 + eps);
-            }
+            // `move`: the constants are copied in, so that the compiler can keep them in
+            // registers and vectorise (by reference they are reloaded after every store)
+            wide(path, move || {
+                for (((t, g), m), v) in theta.iter_mut().zip(grad).zip(m.iter_mut()).zip(v.iter_mut()) {
+                    *m = b1 * *m + (1.0 - b1) * g;
+                    *v = b2 * *v + (1.0 - b2) * g * g;
+                    *t -= step_size * *m / (v.sqrt() * inv_sqrt_bc2 + eps);
+                }
+            })
         };
         if theta.len() < SPLIT_LEN {
             step(theta, grad, &mut m, &mut v);
@@ -127,10 +134,13 @@ impl InplaceOp2 for Polyak {
             bail!("polyak: online and target differ in length");
         }
         let (tau, keep) = (self.tau, 1.0 - self.tau);
+        let path = kernel_path::active();
         let average = |target: &mut [f32], online: &[f32]| {
-            for (t, o) in target.iter_mut().zip(online) {
-                *t = tau * o + keep * *t;
-            }
+            wide(path, move || {
+                for (t, o) in target.iter_mut().zip(online) {
+                    *t = tau * o + keep * *t;
+                }
+            })
         };
         if target.len() < SPLIT_LEN {
             average(target, online);

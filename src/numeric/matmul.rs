@@ -163,7 +163,7 @@ fn pack_b(b: Strided, p0: usize, kc: usize, j0: usize, cols: usize, panel: usize
     if b.col_stride == 1 {
         for (p, row) in out.chunks_exact_mut(panel).enumerate() {
             let start = (p0 + p) * b.row_stride + j0;
-            row[..cols].copy_from_slice(&b.data[start..start + cols]);
+            copy_short(&mut row[..cols], &b.data[start..start + cols]);
         }
         return;
     }
@@ -188,6 +188,20 @@ fn pack_b(b: Strided, p0: usize, kc: usize, j0: usize, cols: usize, panel: usize
             // SAFETY: base + j * col_stride <= last < len (asserted above).
             *dst = unsafe { *b.data.get_unchecked(base + j * b.col_stride) };
         }
+    }
+}
+
+/// `dst.copy_from_slice(src)` for a few dozen floats, in 16-float pieces the compiler copies
+/// inline: as a `memcpy` call per panel row, packing cost about 4% of a SAC update.
+#[inline]
+fn copy_short(dst: &mut [f32], src: &[f32]) {
+    let mut d = dst.chunks_exact_mut(16);
+    let mut s = src.chunks_exact(16);
+    for (d, s) in d.by_ref().zip(s.by_ref()) {
+        d.copy_from_slice(s);
+    }
+    for (d, s) in d.into_remainder().iter_mut().zip(s.remainder()) {
+        *d = *s;
     }
 }
 

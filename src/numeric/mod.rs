@@ -16,5 +16,6 @@ pub mod matmul;
 pub mod optim;
 pub mod second_core;
 pub mod stack;
+pub(crate) mod wide;
 
 pub use kernel_path::KernelPath;
