@@ -15,7 +15,7 @@ use candle_core::{bail, CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 
 use super::inplace::{contiguous, cpu_contiguous, Activation};
 use super::kernel_path::{self, KernelPath};
-use super::matmul::{matmul, Strided};
+use super::matmul::{matmul, matmul_bias, Strided};
 use super::second_core;
 use super::wide::wide;
 
@@ -86,13 +86,17 @@ fn forward_block(
     act: Activation,
 ) {
     let rows = y.len() / out;
-    for row in y.chunks_exact_mut(out) {
-        row.copy_from_slice(b);
-    }
-    matmul(path, (rows, out, inp), y, out, true, Strided::rows(&x[..rows * inp], inp), Strided::transposed(w, inp));
-    if act == Activation::Relu {
-        y.iter_mut().for_each(|v| *v = v.max(0.0));
-    }
+    let relu = act == Activation::Relu;
+    matmul_bias(
+        path,
+        (rows, out, inp),
+        y,
+        out,
+        b,
+        relu,
+        Strided::rows(&x[..rows * inp], inp),
+        Strided::transposed(w, inp),
+    );
 }
 
 /// Weight and bias gradients of `units` output units: `gw [units, in] = gp^T x`, `gb = sum of gp's

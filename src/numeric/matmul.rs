@@ -61,10 +61,77 @@ impl<'a> Strided<'a> {
 #[allow(clippy::too_many_arguments)]
 pub fn matmul(
     path: KernelPath,
-    (m, n, k): (usize, usize, usize),
+    dims: (usize, usize, usize),
     dst: &mut [f32],
     dst_stride: usize,
     accumulate: bool,
+    a: Strided,
+    b: Strided,
+) {
+    let start = if accumulate { Start::Dst } else { Start::Zero };
+    product(path, dims, dst, dst_stride, start, false, a, b)
+}
+
+/// A dense layer's product: `dst [m x n] = act(bias + a [m x k] * b [k x n])` with `bias` (n
+/// values) added to every row first and `act` ReLU (`x > 0 ? x : 0`) when `relu`. The same bits as
+/// filling `dst` with the bias, [`matmul`] accumulating onto it, and applying the ReLU after; the
+/// vector paths start their registers from the bias and apply the ReLU as they store, instead of
+/// passing over `dst` twice more.
+///
+/// # Panics
+/// As [`matmul`], and when `bias` does not hold n values.
+#[allow(clippy::too_many_arguments)]
+pub fn matmul_bias(
+    path: KernelPath,
+    dims: (usize, usize, usize),
+    dst: &mut [f32],
+    dst_stride: usize,
+    bias: &[f32],
+    relu: bool,
+    a: Strided,
+    b: Strided,
+) {
+    let (m, n, _) = dims;
+    assert_eq!(bias.len(), n, "matmul: the bias needs one value per column");
+    if path == KernelPath::Library || n == 1 {
+        // (the library takes no bias, and a single column is computed as its transpose, whose
+        // rows would need the one bias value repeated)
+        dst.chunks_mut(dst_stride).take(m).for_each(|row| row[..n].copy_from_slice(bias));
+        matmul(path, dims, dst, dst_stride, true, a, b);
+        if relu {
+            dst.chunks_mut(dst_stride).take(m).for_each(|row| row[..n].iter_mut().for_each(|v| *v = relu_of(*v)));
+        }
+        return;
+    }
+    product(path, dims, dst, dst_stride, Start::Row(bias.as_ptr()), relu, a, b)
+}
+
+/// The ReLU every path applies: a select, so that -0 and NaN give +0 everywhere.
+#[inline]
+pub fn relu_of(v: f32) -> f32 {
+    if v > 0.0 {
+        v
+    } else {
+        0.0
+    }
+}
+
+/// What a product's output starts from: zero, dst's old values, or a row (the bias) repeated.
+#[derive(Clone, Copy)]
+enum Start {
+    Zero,
+    Dst,
+    Row(*const f32),
+}
+
+#[allow(clippy::too_many_arguments)]
+fn product(
+    path: KernelPath,
+    (m, n, k): (usize, usize, usize),
+    dst: &mut [f32],
+    dst_stride: usize,
+    start: Start,
+    relu: bool,
     a: Strided,
     b: Strided,
 ) {
@@ -73,13 +140,15 @@ pub fn matmul(
     if m == 0 || n == 0 {
         return;
     }
+    let accumulate = matches!(start, Start::Dst);
     if path == KernelPath::Library {
+        debug_assert!(!relu && !matches!(start, Start::Row(_)));
         // SAFETY: the asserts above bound every element the strides address.
         unsafe { library(m, n, k, dst, dst_stride, accumulate, a, b) };
         return;
     }
     assert!(path.is_supported(), "matmul: the {path} kernels need CPU features this machine lacks");
-    if n == 1 && m > 1 && dst_stride == 1 {
+    if n == 1 && m > 1 && dst_stride == 1 && !relu && !matches!(start, Start::Row(_)) {
         // One output column (a critic's value layer) would fill one lane of each vector; its
         // transpose C^T = B^T A^T is one row of m outputs across full vectors. Each element
         // takes the same products (b * a = a * b exactly) in the same order: the same bits.
@@ -93,8 +162,16 @@ pub fn matmul(
         _ => (portable_tile, PORTABLE),
     };
     if k == 0 {
-        if !accumulate {
-            dst.chunks_mut(dst_stride).take(m).for_each(|row| row[..n].fill(0.0));
+        for row in dst.chunks_mut(dst_stride).take(m) {
+            match start {
+                Start::Zero => row[..n].fill(0.0),
+                Start::Dst => {}
+                // SAFETY: `matmul_bias` asserted n bias values.
+                Start::Row(bias) => row[..n].copy_from_slice(unsafe { std::slice::from_raw_parts(bias, n) }),
+            }
+            if relu {
+                row[..n].iter_mut().for_each(|v| *v = relu_of(*v));
+            }
         }
         return;
     }
@@ -102,9 +179,17 @@ pub fn matmul(
         let b_pack = &mut *scratch.borrow_mut();
         for p0 in (0..k).step_by(K_CHUNK) {
             let kc = K_CHUNK.min(k - p0);
+            let last_chunk = p0 + kc == k;
             for j0 in (0..n).step_by(panel) {
                 let cols = panel.min(n - j0);
                 pack_b(b, p0, kc, j0, cols, panel, path != KernelPath::Portable, b_pack);
+                let tile_start = match start {
+                    _ if p0 > 0 => TileStart::C,
+                    Start::Zero => TileStart::Zero,
+                    Start::Dst => TileStart::C,
+                    // SAFETY: j0 < n and the bias holds n values.
+                    Start::Row(bias) => TileStart::Row(unsafe { bias.add(j0) }),
+                };
                 for i0 in (0..m).step_by(tile_rows) {
                     let rows = tile_rows.min(m - i0);
                     let c = &mut dst[i0 * dst_stride + j0..];
@@ -113,15 +198,16 @@ pub fn matmul(
                     let a_tile = a.data[i0 * a.row_stride + p0 * a.col_stride..].as_ptr();
                     // SAFETY: the CPU has the path's features (asserted above); A holds rows
                     // i0..i0+rows and terms p0..p0+kc at its strides (`holds`), the packed panel
-                    // kc terms of `panel` columns, and c `rows` rows of `cols` elements at
-                    // `dst_stride` (asserted).
+                    // kc terms of `panel` columns, c `rows` rows of `cols` elements at
+                    // `dst_stride` (asserted), and a bias row `cols` values from j0.
                     unsafe {
                         tile(
                             Tile { rows, cols, kc },
                             (a_tile, a.row_stride, a.col_stride),
                             b_pack.as_ptr(),
                             (c.as_mut_ptr(), dst_stride),
-                            accumulate || p0 > 0,
+                            tile_start,
+                            relu && last_chunk,
                         )
                     };
                 }
@@ -259,9 +345,18 @@ struct Tile {
 /// A tile's A operand where it lies: element (r, p) at `ptr + r * row_stride + p * col_stride`.
 type TileA = (*const f32, usize, usize);
 
+/// What a tile's registers start from: zero, C's values, or a row (`cols` values) in every row.
+#[derive(Clone, Copy)]
+enum TileStart {
+    Zero,
+    C,
+    Row(*const f32),
+}
+
 /// Adds `kc` terms of A times a packed B panel (`panel` floats per term) to `rows x cols` of C
-/// (pointer and row stride), starting from C's values when `load_c` and from zero otherwise.
-type TileKernel = unsafe fn(Tile, TileA, *const f32, (*mut f32, usize), bool);
+/// (pointer and row stride), starting from `TileStart`, and stores them through the ReLU when
+/// the flag is set.
+type TileKernel = unsafe fn(Tile, TileA, *const f32, (*mut f32, usize), TileStart, bool);
 
 /// One element at a time, in the order every path follows.
 ///
@@ -271,7 +366,8 @@ unsafe fn portable_tile(
     (a, a_rs, a_cs): TileA,
     b: *const f32,
     (c, c_stride): (*mut f32, usize),
-    load_c: bool,
+    start: TileStart,
+    relu: bool,
 ) {
     let panel = PORTABLE.panel;
     // SAFETY: forwarded from the caller.
@@ -279,11 +375,15 @@ unsafe fn portable_tile(
         for r in 0..rows {
             for j in 0..cols {
                 let out = c.add(r * c_stride + j);
-                let mut acc = if load_c { *out } else { 0.0 };
+                let mut acc = match start {
+                    TileStart::Zero => 0.0,
+                    TileStart::C => *out,
+                    TileStart::Row(row) => *row.add(j),
+                };
                 for p in 0..kc {
                     acc = (*a.add(r * a_rs + p * a_cs)).mul_add(*b.add(p * panel + j), acc);
                 }
-                *out = acc;
+                *out = if relu { relu_of(acc) } else { acc };
             }
         }
     }
@@ -294,11 +394,11 @@ unsafe fn portable_tile(
 #[cfg(target_arch = "x86_64")]
 macro_rules! vector_kernels {
     ($module:ident, $feature:literal, $width:expr, $tile_rows:expr, $vectors:expr, $vec:ty, $mask:ty, $mask_for:expr, $zero:expr,
-     $load:expr, $store:expr, $masked_load:expr, $masked_store:expr, $splat:expr, $fma:expr) => {
+     $load:expr, $store:expr, $masked_load:expr, $masked_store:expr, $splat:expr, $fma:expr, $max:expr) => {
         mod $module {
             use std::arch::x86_64::*;
 
-            use super::{Geometry, Tile, TileA};
+            use super::{Geometry, Tile, TileA, TileStart};
 
             const W: usize = $width;
             const TILE_ROWS: usize = $tile_rows;
@@ -316,7 +416,8 @@ macro_rules! vector_kernels {
                 a: TileA,
                 b: *const f32,
                 c: (*mut f32, usize),
-                load_c: bool,
+                start: TileStart,
+                relu: bool,
             ) {
                 let vectors = cols.div_ceil(W);
                 let last = cols - (vectors - 1) * W;
@@ -325,14 +426,14 @@ macro_rules! vector_kernels {
                 // SAFETY: forwarded from the caller.
                 unsafe {
                     match rows {
-                        8 => by_vectors::<8>(vectors, full, kc, a, b, c, load_c, mask),
-                        7 => by_vectors::<7>(vectors, full, kc, a, b, c, load_c, mask),
-                        6 => by_vectors::<6>(vectors, full, kc, a, b, c, load_c, mask),
-                        5 => by_vectors::<5>(vectors, full, kc, a, b, c, load_c, mask),
-                        4 => by_vectors::<4>(vectors, full, kc, a, b, c, load_c, mask),
-                        3 => by_vectors::<3>(vectors, full, kc, a, b, c, load_c, mask),
-                        2 => by_vectors::<2>(vectors, full, kc, a, b, c, load_c, mask),
-                        _ => by_vectors::<1>(vectors, full, kc, a, b, c, load_c, mask),
+                        8 => by_vectors::<8>(vectors, full, kc, a, b, c, start, relu, mask),
+                        7 => by_vectors::<7>(vectors, full, kc, a, b, c, start, relu, mask),
+                        6 => by_vectors::<6>(vectors, full, kc, a, b, c, start, relu, mask),
+                        5 => by_vectors::<5>(vectors, full, kc, a, b, c, start, relu, mask),
+                        4 => by_vectors::<4>(vectors, full, kc, a, b, c, start, relu, mask),
+                        3 => by_vectors::<3>(vectors, full, kc, a, b, c, start, relu, mask),
+                        2 => by_vectors::<2>(vectors, full, kc, a, b, c, start, relu, mask),
+                        _ => by_vectors::<1>(vectors, full, kc, a, b, c, start, relu, mask),
                     }
                 }
             }
@@ -346,18 +447,19 @@ macro_rules! vector_kernels {
                 a: TileA,
                 b: *const f32,
                 c: (*mut f32, usize),
-                load_c: bool,
+                start: TileStart,
+                relu: bool,
                 mask: $mask,
             ) {
                 // SAFETY: forwarded from `tile`.
                 unsafe {
                     match (vectors, full) {
-                        (3, true) => rows_tile::<R, 3, true>(kc, a, b, c, load_c, mask),
-                        (3, false) => rows_tile::<R, 3, false>(kc, a, b, c, load_c, mask),
-                        (2, true) => rows_tile::<R, 2, true>(kc, a, b, c, load_c, mask),
-                        (2, false) => rows_tile::<R, 2, false>(kc, a, b, c, load_c, mask),
-                        (_, true) => rows_tile::<R, 1, true>(kc, a, b, c, load_c, mask),
-                        (_, false) => rows_tile::<R, 1, false>(kc, a, b, c, load_c, mask),
+                        (3, true) => rows_tile::<R, 3, true>(kc, a, b, c, start, relu, mask),
+                        (3, false) => rows_tile::<R, 3, false>(kc, a, b, c, start, relu, mask),
+                        (2, true) => rows_tile::<R, 2, true>(kc, a, b, c, start, relu, mask),
+                        (2, false) => rows_tile::<R, 2, false>(kc, a, b, c, start, relu, mask),
+                        (_, true) => rows_tile::<R, 1, true>(kc, a, b, c, start, relu, mask),
+                        (_, false) => rows_tile::<R, 1, false>(kc, a, b, c, start, relu, mask),
                     }
                 }
             }
@@ -371,23 +473,35 @@ macro_rules! vector_kernels {
                 (a, a_rs, a_cs): TileA,
                 b: *const f32,
                 (c, c_stride): (*mut f32, usize),
-                load_c: bool,
+                start: TileStart,
+                relu: bool,
                 mask: $mask,
             ) {
                 // SAFETY: (whole body) A holds R rows of kc terms at its strides, b is packed
                 // (PANEL floats per term, kc terms); C is read and written in rows < R and lanes
-                // inside the mask.
+                // inside the mask, and a start row holds the tile's columns.
                 unsafe {
                     let mut acc: [[$vec; V]; R] = [[$zero; V]; R];
-                    if load_c {
-                        for (r, acc_r) in acc.iter_mut().enumerate() {
-                            let row = c.add(r * c_stride);
-                            for (v, acc_rv) in acc_r.iter_mut().enumerate() {
-                                *acc_rv = if FULL || v + 1 < V {
-                                    ($load)(row.add(v * W))
-                                } else {
-                                    ($masked_load)(row.add(v * W), mask)
-                                };
+                    let lanes = |p: *const f32, v: usize| {
+                        if FULL || v + 1 < V {
+                            ($load)(p.add(v * W))
+                        } else {
+                            ($masked_load)(p.add(v * W), mask)
+                        }
+                    };
+                    match start {
+                        TileStart::Zero => {}
+                        TileStart::C => {
+                            for (r, acc_r) in acc.iter_mut().enumerate() {
+                                for (v, acc_rv) in acc_r.iter_mut().enumerate() {
+                                    *acc_rv = lanes(c.add(r * c_stride), v);
+                                }
+                            }
+                        }
+                        TileStart::Row(row) => {
+                            for v in 0..V {
+                                let start = lanes(row, v);
+                                acc.iter_mut().for_each(|acc_r| acc_r[v] = start);
                             }
                         }
                     }
@@ -405,6 +519,9 @@ macro_rules! vector_kernels {
                         }
                         a = a.add(a_cs);
                         b = b.add(PANEL);
+                    }
+                    if relu {
+                        acc.iter_mut().flatten().for_each(|v| *v = ($max)(*v, $zero));
                     }
                     for (r, acc_r) in acc.iter().enumerate() {
                         let row = c.add(r * c_stride);
@@ -438,7 +555,9 @@ vector_kernels!(
     |p: *const f32, m: __mmask16| _mm512_maskz_loadu_ps(m, p),
     |p: *mut f32, m: __mmask16, v: __m512| _mm512_mask_storeu_ps(p, m, v),
     |x: f32| _mm512_set1_ps(x),
-    |a: __m512, b: __m512, c: __m512| _mm512_fmadd_ps(a, b, c)
+    |a: __m512, b: __m512, c: __m512| _mm512_fmadd_ps(a, b, c),
+    // max(v, 0) returns its second operand when v is NaN or either zero: v > 0 ? v : +0
+    |v: __m512, zero: __m512| _mm512_max_ps(v, zero)
 );
 
 #[cfg(target_arch = "x86_64")]
@@ -457,7 +576,8 @@ vector_kernels!(
     |p: *const f32, m: __m256i| _mm256_maskload_ps(p, m),
     |p: *mut f32, m: __m256i, v: __m256| _mm256_maskstore_ps(p, m, v),
     |x: f32| _mm256_set1_ps(x),
-    |a: __m256, b: __m256, c: __m256| _mm256_fmadd_ps(a, b, c)
+    |a: __m256, b: __m256, c: __m256| _mm256_fmadd_ps(a, b, c),
+    |v: __m256, zero: __m256| _mm256_max_ps(v, zero)
 );
 
 /// The `gemm` crate, as candle calls it, on one thread.
@@ -615,6 +735,58 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// `matmul_bias` is the bias written first, `matmul` accumulating onto it and the ReLU after,
+    /// bit for bit on every path, whatever the chunk of k the tile ends in (the ReLU is applied
+    /// only as the last chunk stores) and including -0, NaN and infinite sums.
+    #[test]
+    fn bias_and_relu_in_the_product_equal_them_applied_around_it() {
+        let shapes = SHAPES.iter().copied().chain([(256, 1, 300), (9, 1, 5), (33, 70, 300), (8, 48, 129)]);
+        for (m, n, k) in shapes {
+            let mut bias = values(n, 2.9);
+            if n > 3 {
+                bias[0] = -0.0;
+                bias[1] = f32::NAN;
+                bias[2] = f32::INFINITY;
+            }
+            let a_data = values(m * k, 0.3);
+            let b_data = values(k * n, 1.1);
+            for layout in 0..3 {
+                let (a, b) = operands(&a_data, &b_data, (m, n, k), layout);
+                for relu in [false, true] {
+                    let stride = n + 3;
+                    let mut expected = vec![7.0f32; m.max(1) * stride];
+                    expected.chunks_mut(stride).take(m).for_each(|row| row[..n].copy_from_slice(&bias));
+                    matmul(KernelPath::Portable, (m, n, k), &mut expected, stride, true, a, b);
+                    if relu {
+                        expected
+                            .chunks_mut(stride)
+                            .take(m)
+                            .for_each(|r| r[..n].iter_mut().for_each(|v| *v = relu_of(*v)));
+                    }
+                    for path in KernelPath::ALL.into_iter().filter(|p| p.is_supported()) {
+                        let mut dst = vec![7.0f32; m.max(1) * stride];
+                        matmul_bias(path, (m, n, k), &mut dst, stride, &bias, relu, a, b);
+                        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+                        if path.is_exact() {
+                            assert_eq!(
+                                bits(&dst),
+                                bits(&expected),
+                                "{path} {:?} layout {layout} relu {relu}",
+                                (m, n, k)
+                            );
+                        } else if relu {
+                            assert!(dst.iter().all(|v| *v >= 0.0 || *v == 7.0), "{path} {:?}", (m, n, k));
+                        }
+                    }
+                }
+            }
+        }
+        assert_eq!(
+            (relu_of(-0.0).to_bits(), relu_of(f32::NAN).to_bits(), relu_of(-3.0), relu_of(2.5)),
+            (0, 0, 0.0, 2.5)
+        );
     }
 
     #[test]
