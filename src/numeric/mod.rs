@@ -1,11 +1,13 @@
-//! The numeric engine under the agents: the dense layer, the matrix-multiply kernels it runs on,
-//! the in-place optimiser and target-network steps, and the settings every network computation
-//! runs under (flush-to-zero, the helper thread, the allocator).
+//! The numeric engine under the agents: the dense layer, the fused stack of dense layers the
+//! off-policy agents train through, the matrix-multiply kernels they run on, the in-place
+//! optimiser and target-network steps, and the settings every network computation runs under
+//! (flush-to-zero, the helper thread, the allocator).
 //!
 //! Results are the same bits on every x86-64 CPU with AVX2 and FMA, with or without AVX-512, for
 //! a fixed seed and thread count: the matrix products follow one order of operations on every
-//! [`kernel_path::KernelPath`] (see [`matmul`]), and everything else here is plain Rust compiled
-//! for the baseline x86-64 target, which does not change with the CPU.
+//! [`kernel_path::KernelPath`] (see [`matmul`]); the elementwise loops ([`wide`]) use only
+//! operations IEEE 754 rounds one at a time, so their vector width does not change a bit; and
+//! everything else here is plain Rust compiled for the baseline x86-64 target.
 pub(crate) mod allocator;
 pub mod batch_renorm;
 pub(crate) mod denormals;
