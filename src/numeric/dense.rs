@@ -4,7 +4,7 @@
 //! one for the ReLU, and candle's backward pass allocates a zero gradient and adds into it for
 //! every input of every node, including a strided add for the transposed weight. perf showed that
 //! bookkeeping at about a fifth of a TD3 update once the matmuls were fast; as one node the
-//! forward pass is a single matrix product ([`super::matmul`]) that accumulates onto the bias, and
+//! forward pass is a single matrix product ([`super::matmul`]) that starts from the bias, and
 //! the backward pass is two products, a mask and a row sum.
 //!
 //! Large layers are cut in two independent halves (stacked networks by member, one network by
