@@ -91,19 +91,8 @@ pub fn matmul_bias(
     a: Strided,
     b: Strided,
 ) {
-    let (m, n, _) = dims;
-    assert_eq!(bias.len(), n, "matmul: the bias needs one value per column");
-    if path == KernelPath::Library || n == 1 {
-        // (the library takes no bias, and a single column is computed as its transpose, whose
-        // rows would need the one bias value repeated)
-        dst.chunks_mut(dst_stride).take(m).for_each(|row| row[..n].copy_from_slice(bias));
-        matmul(path, dims, dst, dst_stride, true, a, b);
-        if relu {
-            dst.chunks_mut(dst_stride).take(m).for_each(|row| row[..n].iter_mut().for_each(|v| *v = relu_of(*v)));
-        }
-        return;
-    }
-    product(path, dims, dst, dst_stride, Start::Row(bias.as_ptr()), relu, a, b)
+    assert_eq!(bias.len(), dims.1, "matmul: the bias needs one value per column");
+    product(path, dims, dst, dst_stride, Start::Row(bias), relu, a, b)
 }
 
 /// The ReLU every path applies: a select, so that -0 and NaN give +0 everywhere.
@@ -118,10 +107,10 @@ pub fn relu_of(v: f32) -> f32 {
 
 /// What a product's output starts from: zero, dst's old values, or a row (the bias) repeated.
 #[derive(Clone, Copy)]
-enum Start {
+enum Start<'a> {
     Zero,
     Dst,
-    Row(*const f32),
+    Row(&'a [f32]),
 }
 
 #[allow(clippy::too_many_arguments)]
@@ -135,20 +124,33 @@ fn product(
     a: Strided,
     b: Strided,
 ) {
+    debug_assert!(!relu || matches!(start, Start::Row(_)), "the ReLU comes with a start row");
     assert!(m == 0 || n == 0 || dst.len() >= (m - 1) * dst_stride + n, "matmul: destination too short");
     assert!(a.holds(m, k) && b.holds(k, n), "matmul: operand too short for {m}x{k} * {k}x{n}");
     if m == 0 || n == 0 {
         return;
     }
+    if let Start::Row(bias) = start {
+        if path == KernelPath::Library || k == 0 || (n == 1 && m > 1 && dst_stride == 1) {
+            // The library takes no start row, k = 0 has no tile to start, and a single column is
+            // computed as its transpose below, whose rows would need the bias value repeated:
+            // write the bias rows, accumulate onto them, and apply the ReLU after (the same bits).
+            dst.chunks_mut(dst_stride).take(m).for_each(|row| row[..n].copy_from_slice(bias));
+            product(path, (m, n, k), dst, dst_stride, Start::Dst, false, a, b);
+            if relu {
+                dst.chunks_mut(dst_stride).take(m).for_each(|row| row[..n].iter_mut().for_each(|v| *v = relu_of(*v)));
+            }
+            return;
+        }
+    }
     let accumulate = matches!(start, Start::Dst);
     if path == KernelPath::Library {
-        debug_assert!(!relu && !matches!(start, Start::Row(_)));
         // SAFETY: the asserts above bound every element the strides address.
         unsafe { library(m, n, k, dst, dst_stride, accumulate, a, b) };
         return;
     }
     assert!(path.is_supported(), "matmul: the {path} kernels need CPU features this machine lacks");
-    if n == 1 && m > 1 && dst_stride == 1 && !relu && !matches!(start, Start::Row(_)) {
+    if n == 1 && m > 1 && dst_stride == 1 {
         // One output column (a critic's value layer) would fill one lane of each vector; its
         // transpose C^T = B^T A^T is one row of m outputs across full vectors. Each element
         // takes the same products (b * a = a * b exactly) in the same order: the same bits.
@@ -162,16 +164,8 @@ fn product(
         _ => (portable_tile, PORTABLE),
     };
     if k == 0 {
-        for row in dst.chunks_mut(dst_stride).take(m) {
-            match start {
-                Start::Zero => row[..n].fill(0.0),
-                Start::Dst => {}
-                // SAFETY: `matmul_bias` asserted n bias values.
-                Start::Row(bias) => row[..n].copy_from_slice(unsafe { std::slice::from_raw_parts(bias, n) }),
-            }
-            if relu {
-                row[..n].iter_mut().for_each(|v| *v = relu_of(*v));
-            }
+        if !accumulate {
+            dst.chunks_mut(dst_stride).take(m).for_each(|row| row[..n].fill(0.0));
         }
         return;
     }
@@ -187,8 +181,7 @@ fn product(
                     _ if p0 > 0 => TileStart::C,
                     Start::Zero => TileStart::Zero,
                     Start::Dst => TileStart::C,
-                    // SAFETY: j0 < n and the bias holds n values.
-                    Start::Row(bias) => TileStart::Row(unsafe { bias.add(j0) }),
+                    Start::Row(bias) => TileStart::Row(bias[j0..].as_ptr()),
                 };
                 for i0 in (0..m).step_by(tile_rows) {
                     let rows = tile_rows.min(m - i0);

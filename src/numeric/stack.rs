@@ -119,13 +119,10 @@ impl Drop for Stack {
     }
 }
 
-/// A layer's input dims: the stack's input for layer 0, `[k, n, in]` (or `[n, in]` for one
-/// network) after it.
-fn layer_dims(x_dims: &[usize], w: &Tensor, b: &Tensor, first: bool, n: usize) -> Result<Dims> {
+/// The dims of a layer after the first, whose input is the previous layer's output: `[k, n, in]`,
+/// or `[n, in]` for one network.
+fn hidden_layer_dims(w: &Tensor, b: &Tensor, n: usize) -> Result<Dims> {
     let wd = w.dims();
-    if first {
-        return dims(x_dims, wd, b.elem_count());
-    }
     let x: Vec<usize> = if wd.len() == 3 { vec![wd[0], n, wd[2]] } else { vec![n, wd[1]] };
     dims(&x, wd, b.elem_count())
 }
@@ -165,7 +162,7 @@ impl CustomOp2 for Stack {
             let d = if l == 0 {
                 dims(l1.dims(), l2.dims(), b.len())?
             } else {
-                layer_dims(&[], &self.rest[l - 1].0, self.bias(l), false, n)?
+                hidden_layer_dims(&self.rest[l - 1].0, self.bias(l), n)?
             };
             let input = if l == 0 { x } else { &hidden[l - 1][..d.k * d.n * d.inp] };
             let len = d.k * d.n * d.out;
@@ -201,7 +198,11 @@ impl CustomOp2 for Stack {
         for l in (0..layers).rev() {
             let (w_tensor, b_tensor) =
                 if l == 0 { (w0, &self.first_bias) } else { (&self.rest[l - 1].0, &self.rest[l - 1].1) };
-            let d = layer_dims(x.dims(), w_tensor, b_tensor, l == 0, n)?;
+            let d = if l == 0 {
+                dims(x.dims(), w_tensor.dims(), b_tensor.elem_count())?
+            } else {
+                hidden_layer_dims(w_tensor, b_tensor, n)?
+            };
             let (w_guard, w_layout) = w_tensor.storage_and_layout();
             let w = values(&w_guard, w_layout)?;
             let input: &[f32] = if l == 0 { x_values } else { &hidden[l - 1][..d.k * d.n * d.inp] };
