@@ -2,6 +2,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::noise::NoiseKind;
+pub use crate::numeric::squashed::TanhCorrection;
 
 /// A learning algorithm, as named in `--algo` and `config.toml`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -47,18 +48,6 @@ pub enum SacVersion {
     V2,
     /// Haarnoja et al. 2018a: separate value network and target value network, fixed temperature.
     V1,
-}
-
-/// How SAC's log-density accounts for the tanh squashing, log(1 - tanh(u)^2).
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum TanhCorrection {
-    /// Exact and stable, 2 (log 2 - u - softplus(-2u)): the SAC paper's formula (Haarnoja et al.
-    /// 2018, appendix C) as jaxrl's tanh bijector computes it.
-    Exact,
-    /// log(1 - a^2 + 1e-6) with a = tanh(u) in f32, as Stable-Baselines3 and CleanRL compute it:
-    /// bounded below by log(1e-6), so a saturated action costs at most 13.8 nats per dimension.
-    Epsilon,
 }
 
 /// How every network's weights are drawn (biases: see each variant).

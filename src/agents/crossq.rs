@@ -205,8 +205,7 @@ impl CrossqAgent {
     }
 
     fn sample(&self, obs: &Tensor, train: bool, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
-        let (mean, log_std) = self.mean_log_std(obs, train)?;
-        sample_squashed(mean, &log_std, TanhCorrection::Exact, rng)
+        sample_squashed(&self.actor.forward(obs, train, self.actor_passes, false)?, TanhCorrection::Exact, rng)
     }
 }
 

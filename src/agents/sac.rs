@@ -1,7 +1,7 @@
 //! Soft Actor-Critic. v2 (Haarnoja et al. 2018b, the default): tanh-squashed Gaussian policy,
 //! twin critics with target networks, automatic temperature towards entropy -dim(A). v1
 //! (2018a): a separate state-value network with its own target network and a fixed temperature.
-use candle_core::{Device, Result, Tensor, Var, D};
+use candle_core::{Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
@@ -11,6 +11,7 @@ use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
 use super::{layer_sizes, Agent, Losses};
 use crate::numeric::optim::Adam;
+use crate::numeric::squashed::squashed_sample;
 
 /// The policy's log-std is clamped to this range (SAC's and CrossQ's).
 pub(crate) const LOG_STD_MIN: f64 = -20.0;
@@ -41,49 +42,20 @@ pub struct SacAgent {
     updates: u64,
 }
 
-/// log(1 - tanh(u)^2), computed stably as 2 (log 2 - u - softplus(-2u)).
-pub(crate) fn log_one_minus_tanh_sq(u: &Tensor) -> Result<Tensor> {
-    let minus_2u = u.affine(-2.0, 0.0)?;
-    // softplus(x) = max(x, 0) + log(1 + exp(-|x|))
-    let softplus = (minus_2u.relu()? + minus_2u.abs()?.neg()?.exp()?.affine(1.0, 1.0)?.log()?)?;
-    ((u.neg()? - softplus)? + 2f64.ln())?.affine(2.0, 0.0)
-}
-
-/// Stable-Baselines3's and CleanRL's log(1 - a^2 + 1e-6), a = tanh(u).
-pub(crate) fn log_one_minus_sq_plus_epsilon(a: &Tensor) -> Result<Tensor> {
-    a.sqr()?.affine(-1.0, 1.0 + 1e-6)?.log()
-}
-
-/// Log-density of a = tanh(u), u = mean + std * eps, summed over action dimensions.
-pub(crate) fn squashed_gaussian_log_prob(
-    u: &Tensor,
-    eps: &Tensor,
-    log_std: &Tensor,
-    correction: TanhCorrection,
-) -> Result<Tensor> {
-    let half_log_2pi = 0.5 * (2.0 * std::f64::consts::PI).ln();
-    let gaussian = ((eps.sqr()?.affine(-0.5, -half_log_2pi))? - log_std)?;
-    let squash = match correction {
-        TanhCorrection::Exact => log_one_minus_tanh_sq(u)?,
-        TanhCorrection::Epsilon => log_one_minus_sq_plus_epsilon(&u.tanh()?)?,
-    };
-    (gaussian - squash)?.sum_keepdim(D::Minus1)
-}
-
-/// A reparameterised sample of the squashed Gaussian with `mean` and `log_std` (`[n, act_dim]`):
-/// (tanh(u), log pi(a|s)) with eps drawn from `rng`. SAC's and CrossQ's policy.
+/// A reparameterised sample of the squashed Gaussian whose mean and raw log-std are the two
+/// halves of the policy's output `out` (`[n, 2 act_dim]`), the log-std clamped to
+/// [LOG_STD_MIN, LOG_STD_MAX]: (tanh(u), log pi(a|s)), u = mean + std * eps, eps drawn from
+/// `rng`. SAC's and CrossQ's policy, one graph node ([`squashed_sample`]).
 pub(crate) fn sample_squashed(
-    mean: Tensor,
-    log_std: &Tensor,
+    out: &Tensor,
     correction: TanhCorrection,
     rng: &mut ChaCha8Rng,
 ) -> Result<(Tensor, Tensor)> {
-    let (n, act_dim) = mean.dims2()?;
+    let (n, width) = out.dims2()?;
+    let act_dim = width / 2;
     let eps: Vec<f32> = (0..n * act_dim).map(|_| StandardNormal.sample(rng)).collect();
-    let eps = Tensor::from_vec(eps, (n, act_dim), &Device::Cpu)?;
-    let u = (mean + (log_std.exp()? * &eps)?)?;
-    let log_prob = squashed_gaussian_log_prob(&u, &eps, log_std, correction)?;
-    Ok((u.tanh()?, log_prob))
+    let sample = squashed_sample(out, eps, (LOG_STD_MIN as f32, LOG_STD_MAX as f32), correction)?;
+    Ok((sample.narrow(1, 0, act_dim)?, sample.narrow(1, act_dim, 1)?))
 }
 
 /// The temperature exp(log_alpha).
@@ -152,8 +124,7 @@ impl SacAgent {
 
     /// A reparameterised sample: (tanh(u), log pi(a|s)) with eps drawn from `rng`.
     fn sample(&self, obs: &Tensor, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
-        let (mean, log_std) = self.mean_log_std(obs)?;
-        sample_squashed(mean, &log_std, self.tanh_correction, rng)
+        sample_squashed(&self.actor.forward(obs)?, self.tanh_correction, rng)
     }
 
     fn critic_input(obs: &Tensor, action: &Tensor) -> Result<Tensor> {
@@ -265,7 +236,123 @@ impl Agent for SacAgent {
 
 #[cfg(test)]
 mod tests {
+    use candle_core::{Device, D};
+    use rand::SeedableRng;
+
     use super::*;
+    use crate::numeric::second_core;
+
+    /// The head as candle operations, one node each: the reference the fused node must match.
+    fn sample_squashed_graph(out: &Tensor, eps: &Tensor, correction: TanhCorrection) -> (Tensor, Tensor) {
+        let act_dim = out.dims()[1] / 2;
+        let mean = out.narrow(1, 0, act_dim).unwrap();
+        let log_std = out.narrow(1, act_dim, act_dim).unwrap().clamp(LOG_STD_MIN as f32, LOG_STD_MAX as f32).unwrap();
+        let u = (mean + (log_std.exp().unwrap() * eps).unwrap()).unwrap();
+        let half_log_2pi = 0.5 * (2.0 * std::f64::consts::PI).ln();
+        let gaussian = (eps.sqr().unwrap().affine(-0.5, -half_log_2pi).unwrap() - &log_std).unwrap();
+        let squash = match correction {
+            TanhCorrection::Exact => {
+                // log(1 - tanh(u)^2) = 2 (log 2 - u - softplus(-2u)),
+                // softplus(x) = max(x, 0) + log(1 + exp(-|x|))
+                let minus_2u = u.affine(-2.0, 0.0).unwrap();
+                let exp_term = minus_2u.abs().unwrap().neg().unwrap().exp().unwrap();
+                let softplus = (minus_2u.relu().unwrap() + exp_term.affine(1.0, 1.0).unwrap().log().unwrap()).unwrap();
+                ((u.neg().unwrap() - softplus).unwrap() + 2f64.ln()).unwrap().affine(2.0, 0.0).unwrap()
+            }
+            TanhCorrection::Epsilon => {
+                u.tanh().unwrap().sqr().unwrap().affine(-1.0, 1.0 + 1e-6).unwrap().log().unwrap()
+            }
+        };
+        let log_prob = (gaussian - squash).unwrap().sum_keepdim(D::Minus1).unwrap();
+        (u.tanh().unwrap(), log_prob)
+    }
+
+    fn tensor(v: &[f32], shape: (usize, usize)) -> Tensor {
+        Tensor::from_vec(v.to_vec(), shape, &Device::Cpu).unwrap()
+    }
+
+    fn flat(t: &Tensor) -> Vec<f32> {
+        t.flatten_all().unwrap().to_vec1::<f32>().unwrap()
+    }
+
+    /// Policy outputs that reach every branch: clamp ties and both sides of the clamp, means far
+    /// in tanh's tails and at zero, signed zeros.
+    fn policy_output(n: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Vec<f32> {
+        let special = [-20.0, 2.0, -25.0, 3.5, 0.0, -0.0, 30.0, -30.0, 9.0, -9.0];
+        (0..n * 2 * act_dim)
+            .map(|i| {
+                let x: f32 = StandardNormal.sample(rng);
+                if i % 7 == 3 {
+                    special[(i / 7) % special.len()]
+                } else {
+                    2.0 * x
+                }
+            })
+            .collect()
+    }
+
+    /// SAC's actor loss, mean(alpha * log pi - Q(s, tanh(u))), through the head built by `head`;
+    /// returns the action, the log-density and the gradient of the policy output.
+    fn actor_loss_through(
+        out: &[f32],
+        n: usize,
+        act_dim: usize,
+        head: impl Fn(&Tensor) -> (Tensor, Tensor),
+    ) -> [Vec<f32>; 3] {
+        let out = Var::from_tensor(&tensor(out, (n, 2 * act_dim))).unwrap();
+        let obs = tensor(&(0..n * 3).map(|i| (i as f32 * 0.31).sin()).collect::<Vec<_>>(), (n, 3));
+        let critic =
+            tensor(&(0..n * (3 + act_dim)).map(|i| (i as f32 * 0.17).cos()).collect::<Vec<_>>(), (n, 3 + act_dim));
+        let (action, log_prob) = head(out.as_tensor());
+        let q = (Tensor::cat(&[&obs, &action], 1).unwrap() * &critic).unwrap().sum_keepdim(1).unwrap();
+        let loss = (log_prob.affine(0.2, 0.0).unwrap() - q).unwrap().mean_all().unwrap();
+        let grads = loss.backward().unwrap();
+        [flat(&action), flat(&log_prob), flat(grads.get(out.as_tensor()).unwrap())]
+    }
+
+    fn bits(v: &[f32]) -> Vec<u32> {
+        v.iter().map(|x| x.to_bits()).collect()
+    }
+
+    /// The fused head gives candle's graph's action, log-density and gradient bit for bit, both
+    /// corrections, in one piece and in halves on two threads.
+    #[test]
+    fn the_fused_head_gives_the_bits_of_candles_graph() {
+        for helper in [false, true] {
+            std::thread::spawn(move || {
+                if helper {
+                    second_core::enable_on_this_thread();
+                }
+                let mut rng = ChaCha8Rng::seed_from_u64(5);
+                for (n, act_dim) in [(1, 6), (5, 3), (256, 6), (77, 17)] {
+                    for correction in [TanhCorrection::Exact, TanhCorrection::Epsilon] {
+                        let out = policy_output(n, act_dim, &mut rng);
+                        let eps: Vec<f32> = (0..n * act_dim).map(|_| StandardNormal.sample(&mut rng)).collect();
+                        let eps_tensor = tensor(&eps, (n, act_dim));
+                        let graph =
+                            actor_loss_through(&out, n, act_dim, |o| sample_squashed_graph(o, &eps_tensor, correction));
+                        let fused = actor_loss_through(&out, n, act_dim, |o| {
+                            let y =
+                                squashed_sample(o, eps.clone(), (LOG_STD_MIN as f32, LOG_STD_MAX as f32), correction)
+                                    .unwrap();
+                            (y.narrow(1, 0, act_dim).unwrap(), y.narrow(1, act_dim, 1).unwrap())
+                        });
+                        for (what, (g, f)) in ["action", "log-density", "gradient"].iter().zip(graph.iter().zip(&fused))
+                        {
+                            assert_eq!(
+                                bits(g),
+                                bits(f),
+                                "{what}: n {n}, act_dim {act_dim}, {correction:?}, helper {helper}"
+                            );
+                        }
+                        assert!(fused[2].iter().all(|g| g.is_finite()));
+                    }
+                }
+            })
+            .join()
+            .unwrap();
+        }
+    }
 
     #[test]
     fn squashed_log_prob_matches_the_closed_form() {
@@ -280,29 +367,39 @@ mod tests {
                 log_n - (1.0 - u[i].tanh().powi(2)).ln()
             })
             .sum();
-        let t = |v: &[f64]| {
-            Tensor::from_vec(v.iter().map(|x| *x as f32).collect::<Vec<_>>(), (1, 3), &Device::Cpu).unwrap()
+        let out: Vec<f32> = m.iter().map(|x| *x as f32).chain(s.iter().map(|x| x.ln() as f32)).collect();
+        let eps32: Vec<f32> = eps.iter().map(|x| *x as f32).collect();
+        let range = (LOG_STD_MIN as f32, LOG_STD_MAX as f32);
+        let sample = |out: &[f32], correction| {
+            flat(&squashed_sample(&tensor(out, (1, out.len())), eps32.clone(), range, correction).unwrap())
         };
-        let log_std: Vec<f64> = s.iter().map(|x| x.ln()).collect();
-        let got = squashed_gaussian_log_prob(&t(&u), &t(&eps), &t(&log_std), TanhCorrection::Exact)
-            .unwrap()
-            .to_vec2::<f32>()
-            .unwrap()[0][0];
-        assert!((got as f64 - expected).abs() < 1e-4, "{got} vs {expected}");
+        let exact = sample(&out, TanhCorrection::Exact);
+        for i in 0..3 {
+            assert!((exact[i] as f64 - u[i].tanh()).abs() < 1e-6, "{exact:?}");
+        }
+        assert!((exact[3] as f64 - expected).abs() < 1e-4, "{} vs {expected}", exact[3]);
         // Away from saturation the epsilon form differs from the exact one by about 1e-6 / (1 - a^2).
-        let eps_form = squashed_gaussian_log_prob(&t(&u), &t(&eps), &t(&log_std), TanhCorrection::Epsilon)
-            .unwrap()
-            .to_vec2::<f32>()
-            .unwrap()[0][0];
-        assert!((eps_form - got).abs() < 1e-3, "{eps_form} vs {got}");
-        // Far in the tails the naive formula overflows; the stable one does not.
-        let big = log_one_minus_tanh_sq(&t(&[30.0, -30.0, 0.0])).unwrap().to_vec2::<f32>().unwrap();
-        assert!(big[0].iter().all(|v| v.is_finite()));
-        assert!((big[0][0] as f64 - (4f64.ln() - 60.0)).abs() < 1e-3);
-        // Saturated in f32, the epsilon form stops at log(1e-6) where the exact one goes on.
-        let a = t(&[30.0, -30.0, 0.0]).tanh().unwrap();
-        let capped = log_one_minus_sq_plus_epsilon(&a).unwrap().to_vec2::<f32>().unwrap();
-        assert!((capped[0][0] as f64 - 1e-6f64.ln()).abs() < 0.05, "{:?}", capped);
-        assert!(capped[0][2].abs() < 1e-5);
+        let epsilon = sample(&out, TanhCorrection::Epsilon);
+        assert!((epsilon[3] - exact[3]).abs() < 1e-3, "{epsilon:?} vs {exact:?}");
+        // Far in the tails (u = +-30, std e^-20) the naive formula overflows; the stable one does
+        // not. Saturated in f32, the epsilon form stops at log(1e-6) per dimension.
+        let tails = [30.0f32, -30.0, 0.0, -20.0, -20.0, -20.0];
+        let exact = sample(&tails, TanhCorrection::Exact);
+        assert!(exact.iter().all(|v| v.is_finite()), "{exact:?}");
+        let gaussian: f64 = eps.iter().map(|e| -0.5 * e * e + 20.0 - 0.5 * (2.0 * std::f64::consts::PI).ln()).sum();
+        let squash = 2.0 * (4f64.ln() - 60.0);
+        assert!((exact[3] as f64 - (gaussian - squash)).abs() < 1e-2, "{} vs {}", exact[3], gaussian - squash);
+        let capped = sample(&tails, TanhCorrection::Epsilon);
+        let squash = 2.0 * 1e-6f64.ln();
+        assert!((capped[3] as f64 - (gaussian - squash)).abs() < 0.1, "{} vs {}", capped[3], gaussian - squash);
+    }
+
+    #[test]
+    fn a_malformed_policy_output_or_noise_is_an_error() {
+        let out = tensor(&[0.0; 6], (1, 6));
+        let range = (LOG_STD_MIN as f32, LOG_STD_MAX as f32);
+        assert!(squashed_sample(&out, vec![0.0; 2], range, TanhCorrection::Exact).is_err());
+        let odd = tensor(&[0.0; 5], (1, 5));
+        assert!(squashed_sample(&odd, vec![0.0; 2], range, TanhCorrection::Exact).is_err());
     }
 }

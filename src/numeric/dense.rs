@@ -10,7 +10,9 @@
 //! Large layers are cut in two independent halves (stacked networks by member, one network by
 //! rows of the batch for outputs and input gradients, by output units for weight gradients),
 //! handed to [`second_core::join`]. The cut depends only on the sizes, never on whether a helper
-//! thread exists, so results are the same with one thread or two.
+//! thread exists, so results are the same with one thread or two. A stack of layers
+//! ([`super::stack`]) is cut once for all its layers ([`stack_forward`], [`rows_stack_backward`],
+//! [`members_stack_backward`]), one hand-off instead of one per layer.
 use candle_core::{bail, CpuStorage, CustomOp3, Layout, Result, Shape, Tensor};
 
 use super::inplace::{contiguous, cpu_contiguous, Activation};
@@ -97,6 +99,92 @@ fn forward_block(
         Strided::rows(&x[..rows * inp], inp),
         Strided::transposed(w, inp),
     );
+}
+
+/// Every layer of a stack, ReLU after each but the last: `ys[l]` receives layer l's output
+/// `[k, n, out]` from `ws[l]` and `bs[l]`. A stack with enough work runs in two halves from its
+/// input to its output, with one hand-off to the helper thread: the rows of the batch for one
+/// network, the members for stacked ones. Rows and members never mix, so the bits are those of
+/// one layer at a time.
+pub(super) fn stack_forward(
+    path: KernelPath,
+    ds: &[Dims],
+    x: &[f32],
+    ws: &[&[f32]],
+    bs: &[&[f32]],
+    ys: &mut [&mut [f32]],
+) {
+    let d0 = &ds[0];
+    let macs: usize = ds.iter().map(|d| d.k * d.n * d.inp * d.out).sum();
+    let whole = |ys: &mut [&mut [f32]]| {
+        if d0.k == 1 {
+            rows_forward(path, ds, x, ws, bs, ys)
+        } else {
+            members_forward(path, ds, x, ws, bs, ys, 0)
+        }
+    };
+    if macs < SPLIT_MACS || (d0.k < 2 && d0.n < 2) {
+        return whole(ys);
+    }
+    // where each layer's output is cut: after `cut` rows of every member, or after `cut` members
+    let (cut, by_rows) = if d0.k == 1 { (d0.n / 2, true) } else { (d0.k / 2, false) };
+    let (mut a, mut z): (Vec<&mut [f32]>, Vec<&mut [f32]>) = ys
+        .iter_mut()
+        .zip(ds)
+        .map(|(y, d)| y.split_at_mut(if by_rows { cut * d.out } else { cut * d.n * d.out }))
+        .unzip();
+    if by_rows {
+        let (x_a, x_z) = x.split_at(cut * d0.inp);
+        second_core::join(
+            || rows_forward(path, ds, x_a, ws, bs, &mut a),
+            || rows_forward(path, ds, x_z, ws, bs, &mut z),
+        );
+    } else {
+        second_core::join(
+            || members_forward(path, ds, x, ws, bs, &mut a, 0),
+            || members_forward(path, ds, x, ws, bs, &mut z, cut),
+        );
+    }
+}
+
+fn stack_activation(l: usize, layers: usize) -> Activation {
+    if l + 1 == layers {
+        Activation::Identity
+    } else {
+        Activation::Relu
+    }
+}
+
+/// One network's layers for the rows of `x` (`ys[l]`: those rows of layer l's output).
+fn rows_forward(path: KernelPath, ds: &[Dims], x: &[f32], ws: &[&[f32]], bs: &[&[f32]], ys: &mut [&mut [f32]]) {
+    for (l, d) in ds.iter().enumerate() {
+        let (done, todo) = ys.split_at_mut(l);
+        let input: &[f32] = if l == 0 { x } else { done[l - 1] };
+        forward_block(path, input, ws[l], bs[l], todo[0], d.inp, d.out, stack_activation(l, ds.len()));
+    }
+}
+
+/// Members `g0, g0 + 1, ...` of stacked networks through every layer (`ys[l]`: their blocks of
+/// layer l's output).
+fn members_forward(
+    path: KernelPath,
+    ds: &[Dims],
+    x: &[f32],
+    ws: &[&[f32]],
+    bs: &[&[f32]],
+    ys: &mut [&mut [f32]],
+    g0: usize,
+) {
+    for (l, d) in ds.iter().enumerate() {
+        let (done, todo) = ys.split_at_mut(l);
+        let (n, inp, out) = (d.n, d.inp, d.out);
+        for (i, y) in todo[0].chunks_exact_mut(n * out).enumerate() {
+            let g = g0 + i;
+            let input = if l == 0 { &x[d.x_range(g)] } else { &done[l - 1][i * n * inp..(i + 1) * n * inp] };
+            let (w, b) = (&ws[l][g * out * inp..(g + 1) * out * inp], &bs[l][g * out..(g + 1) * out]);
+            forward_block(path, input, w, b, y, inp, out, stack_activation(l, ds.len()));
+        }
+    }
 }
 
 /// Weight and bias gradients of `units` output units: `gw [units, in] = gp^T x`, `gb = sum of gp's
@@ -192,8 +280,7 @@ pub(super) fn layer_backward(
     let input_grad = |gp: &[f32], w: &[f32], gx: &mut [f32], x: &[f32]| {
         input_grad(path, gp, w, gx, inp, out);
         if relu_input {
-            // the same select as `gradient_before`
-            wide(path, move || gx.iter_mut().zip(x).for_each(|(g, x)| *g = if *x > 0.0 { *g } else { 0.0 }));
+            relu_mask(path, gx, x);
         }
     };
     // members g0, g0 + 1, ... into consecutive blocks of gw, gb and gx
@@ -244,6 +331,181 @@ pub(super) fn layer_backward(
         for member in rest.chunks_exact(gx_len) {
             let total = &mut *total;
             wide(path, move || total.iter_mut().zip(member).for_each(|(t, m)| *t += m));
+        }
+    }
+}
+
+/// Whether a stack of layers with these dims is cut in two halves (see [`stack_forward`]).
+pub(super) fn split_stack(ds: &[Dims]) -> bool {
+    let macs: usize = ds.iter().map(|d| d.k * d.n * d.inp * d.out).sum();
+    macs >= SPLIT_MACS && (ds[0].k >= 2 || ds[0].n >= 2)
+}
+
+/// Gradient buffers of a stack's backward pass, one entry per layer: `gw [k, out, in]` and
+/// `gb [k, out]` (empty when the weights are constant), and `gx [k, n, in]`, the gradient of
+/// the layer's input, before the ReLU that made it for layers after the first (the first
+/// layer's is empty when the stack's input needs none).
+pub(super) struct StackGrads<'a> {
+    pub(super) gw: Vec<&'a mut [f32]>,
+    pub(super) gb: Vec<&'a mut [f32]>,
+    pub(super) gx: Vec<&'a mut [f32]>,
+}
+
+/// `g` through the ReLU whose output is `x` (zero where x is not positive): the same select as
+/// `gradient_before`.
+fn relu_mask(path: KernelPath, g: &mut [f32], x: &[f32]) {
+    wide(path, move || g.iter_mut().zip(x).for_each(|(g, x)| *g = if *x > 0.0 { *g } else { 0.0 }));
+}
+
+/// Each layer's buffer cut in two at `at(l)` values (an empty one stays empty).
+fn cut<'b>(parts: &'b mut [&mut [f32]], at: impl Fn(usize) -> usize) -> [Vec<&'b mut [f32]>; 2] {
+    let (a, z) = parts.iter_mut().enumerate().map(|(l, p)| p.split_at_mut(at(l).min(p.len()))).unzip();
+    [a, z]
+}
+
+/// The backward pass of one network (k = 1) from `g_out [n, out]`, the gradient of the last
+/// layer's output; `xs[l]` is layer l's input. First every layer's input gradient, rows of the
+/// batch being independent all the way down; then every layer's weight gradients, output units
+/// being independent. A large stack runs each of the two in halves (rows, then units), with one
+/// hand-off to the helper thread each. Each product is [`layer_backward`]'s, so are the bits.
+pub(super) fn rows_stack_backward(
+    path: KernelPath,
+    ds: &[Dims],
+    xs: &[&[f32]],
+    ws: &[&[f32]],
+    g_out: &[f32],
+    grads: StackGrads<'_>,
+) {
+    assert!(ds[0].k == 1, "rows_stack_backward is for one network");
+    let StackGrads { mut gw, mut gb, mut gx } = grads;
+    let layers = ds.len();
+    let split = split_stack(ds);
+    let n = ds[0].n;
+    let rows = if split { n / 2 } else { n };
+    {
+        let [mut gx_a, mut gx_z] = cut(&mut gx, |l| rows * ds[l].inp);
+        let chain = |r0: usize, gx: &mut [&mut [f32]]| {
+            for l in (0..layers).rev() {
+                let d = &ds[l];
+                let (below, above) = gx.split_at_mut(l + 1);
+                let gx = &mut *below[l];
+                if gx.is_empty() {
+                    continue;
+                }
+                let count = gx.len() / d.inp;
+                let gp = if l + 1 == layers { &g_out[r0 * d.out..(r0 + count) * d.out] } else { &*above[0] };
+                input_grad(path, gp, ws[l], gx, d.inp, d.out);
+                if l > 0 {
+                    relu_mask(path, gx, &xs[l][r0 * d.inp..(r0 + count) * d.inp]);
+                }
+            }
+        };
+        if split {
+            second_core::join(|| chain(0, &mut gx_a), || chain(rows, &mut gx_z));
+        } else {
+            chain(0, &mut gx_a);
+        }
+    }
+    if gw.iter().all(|g| g.is_empty()) {
+        return;
+    }
+    // gradient of each layer's output before its activation
+    let gps: Vec<&[f32]> = (0..layers).map(|l| if l + 1 == layers { g_out } else { &*gx[l + 1] }).collect();
+    let units = |l: usize| if split { ds[l].out / 2 } else { ds[l].out };
+    let [mut gw_a, mut gw_z] = cut(&mut gw, |l| units(l) * ds[l].inp);
+    let [mut gb_a, mut gb_z] = cut(&mut gb, units);
+    let weights = |first_unit: &dyn Fn(usize) -> usize, gw: &mut [&mut [f32]], gb: &mut [&mut [f32]]| {
+        for (l, d) in ds.iter().enumerate() {
+            if !gb[l].is_empty() {
+                weight_grads(path, &gps[l][first_unit(l)..], d.out, xs[l], gw[l], gb[l], d.n, d.inp);
+            }
+        }
+    };
+    if split {
+        second_core::join(|| weights(&|_| 0, &mut gw_a, &mut gb_a), || weights(&units, &mut gw_z, &mut gb_z));
+    } else {
+        weights(&|_| 0, &mut gw_a, &mut gb_a);
+    }
+}
+
+/// The backward pass of stacked networks (k >= 2) from `g_out [k, n, out]`, the gradient of the
+/// last layer's output, down to the first layer, member by member; `xs[l]` is layer l's input
+/// (`x` shared or `[k, n, in]`, then the hidden outputs). Large stacks run in two halves of the
+/// members with one hand-off to the helper thread. Each member's arithmetic is
+/// [`layer_backward`]'s, and a shared input's gradient is the same sum, member 0 first.
+pub(super) fn members_stack_backward(
+    path: KernelPath,
+    ds: &[Dims],
+    xs: &[&[f32]],
+    ws: &[&[f32]],
+    g_out: &[f32],
+    grads: StackGrads<'_>,
+) {
+    let d0 = &ds[0];
+    assert!(d0.k >= 2, "members_stack_backward is for stacked networks");
+    let StackGrads { mut gw, mut gb, mut gx } = grads;
+    if !split_stack(ds) {
+        members_backward(path, ds, xs, ws, g_out, &mut gw, &mut gb, &mut gx, 0, d0.k);
+    } else {
+        let first = d0.k / 2;
+        let [mut gw_a, mut gw_z] = cut(&mut gw, |l| first * ds[l].out * ds[l].inp);
+        let [mut gb_a, mut gb_z] = cut(&mut gb, |l| first * ds[l].out);
+        let [mut gx_a, mut gx_z] = cut(&mut gx, |l| first * ds[l].n * ds[l].inp);
+        second_core::join(
+            || members_backward(path, ds, xs, ws, g_out, &mut gw_a, &mut gb_a, &mut gx_a, 0, first),
+            || members_backward(path, ds, xs, ws, g_out, &mut gw_z, &mut gb_z, &mut gx_z, first, d0.k - first),
+        );
+    }
+    let gx0 = &mut gx[0];
+    if d0.shared_x && !gx0.is_empty() {
+        let len = d0.n * d0.inp;
+        let (total, rest) = gx0.split_at_mut(len);
+        for member in rest.chunks_exact(len) {
+            let total = &mut *total;
+            wide(path, move || total.iter_mut().zip(member).for_each(|(t, m)| *t += m));
+        }
+    }
+}
+
+/// Members `g0..g0 + count` of [`members_stack_backward`], whose blocks `gw`, `gb` and `gx` hold.
+#[allow(clippy::too_many_arguments)]
+fn members_backward(
+    path: KernelPath,
+    ds: &[Dims],
+    xs: &[&[f32]],
+    ws: &[&[f32]],
+    g_out: &[f32],
+    gw: &mut [&mut [f32]],
+    gb: &mut [&mut [f32]],
+    gx: &mut [&mut [f32]],
+    g0: usize,
+    count: usize,
+) {
+    let layers = ds.len();
+    for l in (0..layers).rev() {
+        let d = &ds[l];
+        let (n, inp, out) = (d.n, d.inp, d.out);
+        let (below, above) = gx.split_at_mut(l + 1);
+        for i in 0..count {
+            let g = g0 + i;
+            let gp = if l + 1 == layers {
+                &g_out[g * n * out..(g + 1) * n * out]
+            } else {
+                &above[0][i * n * out..(i + 1) * n * out]
+            };
+            let x = if l == 0 { &xs[0][d.x_range(g)] } else { &xs[l][g * n * inp..(g + 1) * n * inp] };
+            if !gw[l].is_empty() {
+                let gw = &mut gw[l][i * out * inp..(i + 1) * out * inp];
+                let gb = &mut gb[l][i * out..(i + 1) * out];
+                weight_grads(path, gp, out, x, gw, gb, n, inp);
+            }
+            if !below[l].is_empty() {
+                let gx = &mut below[l][i * n * inp..(i + 1) * n * inp];
+                input_grad(path, gp, &ws[l][g * out * inp..(g + 1) * out * inp], gx, inp, out);
+                if l > 0 {
+                    relu_mask(path, gx, x);
+                }
+            }
         }
     }
 }

@@ -1,5 +1,6 @@
 //! The numeric engine under the agents: the dense layer, the fused stack of dense layers the
-//! off-policy agents train through, the matrix-multiply kernels they run on, the in-place
+//! off-policy agents train through, SAC's policy head as one node ([`squashed`]), the
+//! matrix-multiply kernels they run on, the in-place
 //! optimiser and target-network steps, and the settings every network computation runs under
 //! (flush-to-zero, the helper thread, the allocator).
 //!
@@ -17,6 +18,7 @@ pub mod kernel_path;
 pub mod matmul;
 pub mod optim;
 pub mod second_core;
+pub mod squashed;
 pub mod stack;
 pub(crate) mod wide;
 

@@ -14,8 +14,8 @@ use std::sync::{Arc, Mutex, MutexGuard};
 
 use candle_core::{bail, CpuStorage, CustomOp2, Layout, Result, Shape, Tensor};
 
-use super::dense::{dims, layer_backward, layer_forward, Dims};
-use super::inplace::{contiguous, cpu_contiguous, Activation};
+use super::dense::{dims, members_stack_backward, rows_stack_backward, stack_forward, Dims, StackGrads};
+use super::inplace::{contiguous, cpu_contiguous};
 use super::kernel_path::{self, KernelPath};
 
 /// Where the backward pass leaves one parameter's gradient until the optimiser takes it.
@@ -141,6 +141,84 @@ impl Stack {
     }
 }
 
+impl Stack {
+    /// Every layer's dims for an input of `x_dims` (n rows).
+    fn layer_dims(&self, x_dims: &[usize], w0_dims: &[usize], n: usize) -> Result<Vec<Dims>> {
+        let mut ds = vec![dims(x_dims, w0_dims, self.first_bias.elem_count())?];
+        for (w, b) in &self.rest {
+            ds.push(hidden_layer_dims(w, b, n)?);
+        }
+        Ok(ds)
+    }
+
+    /// The backward pass into buffers and gradient slots, by `rows_stack_backward` for one
+    /// network and `members_stack_backward` for stacked ones; returns x's gradient.
+    #[allow(clippy::too_many_arguments)]
+    fn stack_bwd(
+        &self,
+        ds: &[Dims],
+        x: &Tensor,
+        w0: &Tensor,
+        x_values: &[f32],
+        hidden: &[Vec<f32>],
+        g_out: &[f32],
+        need_grad_x: bool,
+    ) -> Result<Option<Tensor>> {
+        let w_guards: Vec<_> = self.rest.iter().map(|(w, _)| w.storage_and_layout()).collect();
+        let (w0_guard, w0_layout) = w0.storage_and_layout();
+        let mut ws = vec![values(&w0_guard, w0_layout)?];
+        for (guard, layout) in &w_guards {
+            ws.push(values(guard, layout)?);
+        }
+        let mut xs = vec![x_values];
+        xs.extend(hidden.iter().zip(&ds[1..]).map(|(h, d)| &h[..d.k * d.n * d.inp]));
+        let wanted = |l: usize, d: &Dims| if l > 0 || need_grad_x { d.k * d.n * d.inp } else { 0 };
+        let mut gx_buffers: Vec<Vec<f32>> = ds.iter().enumerate().map(|(l, d)| take_buffer(wanted(l, d))).collect();
+        let mut slots: Vec<MutexGuard<'_, Slot>> =
+            self.grads.iter().flat_map(|s| s.iter().map(GradSlot::lock)).collect();
+        let mut params: Vec<(Vec<f32>, usize)> = slots
+            .iter_mut()
+            .enumerate()
+            .map(|(i, slot)| {
+                let d = &ds[i / 2];
+                let len = if i % 2 == 0 { d.k * d.out * d.inp } else { d.k * d.out };
+                (deposit_buffer(slot, len), len)
+            })
+            .collect();
+        {
+            let (mut gw, mut gb): (Vec<&mut [f32]>, Vec<&mut [f32]>) = (Vec::new(), Vec::new());
+            let frozen = params.is_empty();
+            for (i, (buffer, len)) in params.iter_mut().enumerate() {
+                if i % 2 == 0 { &mut gw } else { &mut gb }.push(&mut buffer[..*len]);
+            }
+            if frozen {
+                gw = ds.iter().map(|_| <&mut [f32]>::default()).collect();
+                gb = ds.iter().map(|_| <&mut [f32]>::default()).collect();
+            }
+            let gx = gx_buffers.iter_mut().enumerate().map(|(l, b)| &mut b[..wanted(l, &ds[l])]).collect();
+            let grads = StackGrads { gw, gb, gx };
+            if ds[0].k == 1 {
+                rows_stack_backward(self.path, ds, &xs, &ws, g_out, grads);
+            } else {
+                members_stack_backward(self.path, ds, &xs, &ws, g_out, grads);
+            }
+        }
+        for (slot, (buffer, len)) in slots.iter_mut().zip(params) {
+            deposit(slot, buffer, len);
+        }
+        let mut gx_buffers = gx_buffers.into_iter();
+        let mut gx0 = gx_buffers.next().expect("a first layer");
+        gx_buffers.for_each(give_buffer);
+        if !need_grad_x {
+            give_buffer(gx0);
+            return Ok(None);
+        }
+        let d = &ds[0];
+        gx0.truncate(if d.shared_x { d.n * d.inp } else { d.k * d.n * d.inp });
+        Ok(Some(Tensor::from_vec(gx0, x.shape(), x.device())?))
+    }
+}
+
 impl CustomOp2 for Stack {
     fn name(&self) -> &'static str {
         "dense-stack"
@@ -150,34 +228,31 @@ impl CustomOp2 for Stack {
         let x = contiguous(s1, l1, "dense stack")?;
         let layers = self.rest.len() + 1;
         let n = l1.dims()[l1.dims().len() - 2];
-        let mut hidden = self.hidden.lock().unwrap_or_else(|e| e.into_inner());
-        for l in 0..layers {
-            let w_lock = (l > 0).then(|| self.rest[l - 1].0.storage_and_layout());
-            let w = match &w_lock {
-                Some((guard, layout)) => values(guard, layout)?,
-                None => contiguous(s2, l2, "dense stack")?,
-            };
-            let (b_guard, b_layout) = self.bias(l).storage_and_layout();
-            let b = values(&b_guard, b_layout)?;
-            let d = if l == 0 {
-                dims(l1.dims(), l2.dims(), b.len())?
-            } else {
-                hidden_layer_dims(&self.rest[l - 1].0, self.bias(l), n)?
-            };
-            let input = if l == 0 { x } else { &hidden[l - 1][..d.k * d.n * d.inp] };
-            let len = d.k * d.n * d.out;
-            if l + 1 == layers {
-                let mut output = vec![0f32; len];
-                layer_forward(self.path, &d, input, w, b, Activation::Identity, &mut output);
-                let w_dims = if l == 0 { l2.dims() } else { self.rest[l - 1].0.dims() };
-                let shape: Shape = if w_dims.len() == 2 { (d.n, d.out).into() } else { (d.k, d.n, d.out).into() };
-                return Ok((CpuStorage::F32(output), shape));
-            }
-            let mut y = take_buffer(len);
-            layer_forward(self.path, &d, input, w, b, Activation::Relu, &mut y[..len]);
-            hidden.push(y);
+        let guards: Vec<_> = self.rest.iter().map(|(w, _)| w.storage_and_layout()).collect();
+        let bias_guards: Vec<_> = (0..layers).map(|l| self.bias(l).storage_and_layout()).collect();
+        let mut weights = vec![contiguous(s2, l2, "dense stack")?];
+        for (guard, layout) in &guards {
+            weights.push(values(guard, layout)?);
         }
-        unreachable!("the last layer returns")
+        let biases = bias_guards.iter().map(|(guard, layout)| values(guard, layout)).collect::<Result<Vec<_>>>()?;
+        let mut ds = vec![dims(l1.dims(), l2.dims(), biases[0].len())?];
+        for l in 1..layers {
+            ds.push(hidden_layer_dims(&self.rest[l - 1].0, self.bias(l), n)?);
+        }
+        let mut hidden = self.hidden.lock().unwrap_or_else(|e| e.into_inner());
+        let mut outputs: Vec<Vec<f32>> = ds[..layers - 1].iter().map(|d| take_buffer(d.k * d.n * d.out)).collect();
+        let last = &ds[layers - 1];
+        outputs.push(vec![0f32; last.k * last.n * last.out]);
+        let mut slices: Vec<&mut [f32]> =
+            outputs.iter_mut().zip(&ds).map(|(y, d)| &mut y[..d.k * d.n * d.out]).collect();
+        stack_forward(self.path, &ds, x, &weights, &biases, &mut slices);
+        drop(slices);
+        let output = outputs.pop().expect("the last layer's output");
+        *hidden = outputs;
+        let w_dims = if layers == 1 { l2.dims() } else { self.rest[layers - 2].0.dims() };
+        let shape: Shape =
+            if w_dims.len() == 2 { (last.n, last.out).into() } else { (last.k, last.n, last.out).into() };
+        Ok((CpuStorage::F32(output), shape))
     }
 
     fn bwd(&self, x: &Tensor, w0: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
@@ -192,55 +267,8 @@ impl CustomOp2 for Stack {
         let (gs, gl) = grad.storage_and_layout();
         let (xs, xl) = x.storage_and_layout();
         let x_values = values(&xs, xl)?;
-        // gp: the gradient of layer l's output before its activation (the last layer has none)
-        let mut gp_buffer: Option<Vec<f32>> = None;
-        let mut grad_x = None;
-        for l in (0..layers).rev() {
-            let (w_tensor, b_tensor) =
-                if l == 0 { (w0, &self.first_bias) } else { (&self.rest[l - 1].0, &self.rest[l - 1].1) };
-            let d = if l == 0 {
-                dims(x.dims(), w_tensor.dims(), b_tensor.elem_count())?
-            } else {
-                hidden_layer_dims(w_tensor, b_tensor, n)?
-            };
-            let (w_guard, w_layout) = w_tensor.storage_and_layout();
-            let w = values(&w_guard, w_layout)?;
-            let input: &[f32] = if l == 0 { x_values } else { &hidden[l - 1][..d.k * d.n * d.inp] };
-            let gp_len = d.k * d.n * d.out;
-            let gp: &[f32] = match &gp_buffer {
-                Some(buffer) => &buffer[..gp_len],
-                None => values(&gs, gl)?,
-            };
-            let want_gx = l > 0 || need_grad_x;
-            let gx_len = d.k * d.n * d.inp;
-            let mut gx = want_gx.then(|| take_buffer(gx_len));
-            let gx_slice = gx.as_mut().map(|g| &mut g[..gx_len]);
-            match &self.grads {
-                Some(slots) => {
-                    let (mut w_slot, mut b_slot) = (slots[2 * l].lock(), slots[2 * l + 1].lock());
-                    let (w_len, b_len) = (d.k * d.out * d.inp, d.k * d.out);
-                    let (mut gw, mut gb) = (deposit_buffer(&mut w_slot, w_len), deposit_buffer(&mut b_slot, b_len));
-                    let params = Some((&mut gw[..w_len], &mut gb[..b_len]));
-                    layer_backward(self.path, &d, input, w, gp, params, gx_slice, l > 0);
-                    deposit(&mut w_slot, gw, w_len);
-                    deposit(&mut b_slot, gb, b_len);
-                }
-                None => layer_backward(self.path, &d, input, w, gp, None, gx_slice, l > 0),
-            }
-            if let Some(old) = gp_buffer.take() {
-                give_buffer(old);
-            }
-            let Some(mut gx) = gx else { break };
-            if l > 0 {
-                // (already through the ReLU that made this layer's input)
-                gp_buffer = Some(gx);
-            } else {
-                let len = if d.shared_x { d.n * d.inp } else { gx_len };
-                gx.truncate(len);
-                grad_x = Some(Tensor::from_vec(gx, x.shape(), x.device())?);
-            }
-        }
-        Ok((grad_x, None))
+        let ds = self.layer_dims(x.dims(), w0.dims(), n)?;
+        Ok((self.stack_bwd(&ds, x, w0, x_values, &hidden, values(&gs, gl)?, need_grad_x)?, None))
     }
 }
 
@@ -293,6 +321,7 @@ mod tests {
 
     use super::*;
     use crate::numeric::dense::dense;
+    use crate::numeric::inplace::Activation;
     use crate::numeric::second_core;
 
     fn values(n: usize, seed: f32) -> Vec<f32> {
@@ -309,12 +338,17 @@ mod tests {
 
     /// (input shape, members k (0: one network), layer sizes): small ones in one piece, large
     /// ones split in halves.
-    const CASES: [(&[usize], usize, &[usize]); 5] = [
+    const CASES: [(&[usize], usize, &[usize]); 8] = [
         (&[5, 3], 0, &[3, 8, 6, 2]),
         (&[5, 3], 2, &[3, 8, 6, 1]),
         (&[64, 23], 0, &[23, 400, 300, 12]),
         (&[64, 23], 2, &[23, 256, 256, 1]),
         (&[7, 4], 0, &[4, 3]),
+        // one network in stacked form (DDPG's single critic), an odd number of members, and
+        // members with inputs of their own
+        (&[64, 23], 1, &[23, 400, 300, 1]),
+        (&[64, 23], 3, &[23, 256, 128, 1]),
+        (&[2, 64, 23], 2, &[23, 256, 256, 1]),
     ];
 
     fn layers(k: usize, sizes: &[usize]) -> Vec<(Var, Var)> {
