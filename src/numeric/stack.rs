@@ -139,9 +139,7 @@ impl Stack {
             &self.rest[l - 1].1
         }
     }
-}
 
-impl Stack {
     /// Every layer's dims for an input of `x_dims` (n rows).
     fn layer_dims(&self, x_dims: &[usize], w0_dims: &[usize], n: usize) -> Result<Vec<Dims>> {
         let mut ds = vec![dims(x_dims, w0_dims, self.first_bias.elem_count())?];
