@@ -12,7 +12,7 @@ use rand_chacha::ChaCha8Rng;
 use super::buffer::Batch;
 use super::config::{Algo, TanhCorrection, TrainConfig};
 use super::nets::{batch_tensor, scalar_var, DenseStack, Mlp, Output};
-use super::sac::{sample_squashed, temperature, temperature_loss, LOG_STD_MAX, LOG_STD_MIN};
+use super::sac::{sample_squashed, squashed_mean, temperature, temperature_loss};
 use super::{layer_sizes, Agent, Losses};
 use crate::numeric::batch_renorm::{batch_renorm, RenormLimits, RenormMode};
 use crate::numeric::dense::dense;
@@ -197,13 +197,6 @@ impl CrossqAgent {
         temperature(&self.log_alpha)
     }
 
-    fn mean_log_std(&self, obs: &Tensor, train: bool) -> Result<(Tensor, Tensor)> {
-        let out = self.actor.forward(obs, train, self.actor_passes, false)?;
-        let mean = out.narrow(1, 0, self.act_dim)?;
-        let log_std = out.narrow(1, self.act_dim, self.act_dim)?.clamp(LOG_STD_MIN as f32, LOG_STD_MAX as f32)?;
-        Ok((mean, log_std))
-    }
-
     fn sample(&self, obs: &Tensor, train: bool, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
         sample_squashed(&self.actor.forward(obs, train, self.actor_passes, false)?, TanhCorrection::Exact, rng)
     }
@@ -215,8 +208,7 @@ impl Agent for CrossqAgent {
     }
 
     fn act(&self, obs: &[f32]) -> Result<Vec<f32>> {
-        let (mean, _) = self.mean_log_std(&batch_tensor(obs, 1, self.obs_dim)?, false)?;
-        mean.tanh()?.flatten_all()?.to_vec1::<f32>()
+        squashed_mean(&self.actor.forward(&batch_tensor(obs, 1, self.obs_dim)?, false, self.actor_passes, false)?)
     }
 
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {

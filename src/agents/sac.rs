@@ -58,6 +58,12 @@ pub(crate) fn sample_squashed(
     Ok((sample.narrow(1, 0, act_dim)?, sample.narrow(1, act_dim, 1)?))
 }
 
+/// The deterministic action of the squashed Gaussian policy with output `out` (`[1, 2 act_dim]`):
+/// tanh of the mean half.
+pub(crate) fn squashed_mean(out: &Tensor) -> Result<Vec<f32>> {
+    out.narrow(1, 0, out.dims2()?.1 / 2)?.tanh()?.flatten_all()?.to_vec1::<f32>()
+}
+
 /// The temperature exp(log_alpha).
 pub(crate) fn temperature(log_alpha: &Var) -> Result<f64> {
     Ok(log_alpha.as_tensor().exp()?.flatten_all()?.to_vec1::<f32>()?[0] as f64)
@@ -115,13 +121,6 @@ impl SacAgent {
         temperature(&self.log_alpha)
     }
 
-    fn mean_log_std(&self, obs: &Tensor) -> Result<(Tensor, Tensor)> {
-        let out = self.actor.forward(obs)?;
-        let mean = out.narrow(1, 0, self.act_dim)?;
-        let log_std = out.narrow(1, self.act_dim, self.act_dim)?.clamp(LOG_STD_MIN as f32, LOG_STD_MAX as f32)?;
-        Ok((mean, log_std))
-    }
-
     /// A reparameterised sample: (tanh(u), log pi(a|s)) with eps drawn from `rng`.
     fn sample(&self, obs: &Tensor, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
         sample_squashed(&self.actor.forward(obs)?, self.tanh_correction, rng)
@@ -138,8 +137,7 @@ impl Agent for SacAgent {
     }
 
     fn act(&self, obs: &[f32]) -> Result<Vec<f32>> {
-        let (mean, _) = self.mean_log_std(&batch_tensor(obs, 1, self.obs_dim)?)?;
-        mean.tanh()?.flatten_all()?.to_vec1::<f32>()
+        squashed_mean(&self.actor.forward(&batch_tensor(obs, 1, self.obs_dim)?)?)
     }
 
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {

@@ -115,34 +115,29 @@ pub(super) fn stack_forward(
     ys: &mut [&mut [f32]],
 ) {
     let d0 = &ds[0];
-    let macs: usize = ds.iter().map(|d| d.k * d.n * d.inp * d.out).sum();
-    let whole = |ys: &mut [&mut [f32]]| {
-        if d0.k == 1 {
+    if !split_stack(ds) {
+        return if d0.k == 1 {
             rows_forward(path, ds, x, ws, bs, ys)
         } else {
             members_forward(path, ds, x, ws, bs, ys, 0)
-        }
-    };
-    if macs < SPLIT_MACS || (d0.k < 2 && d0.n < 2) {
-        return whole(ys);
+        };
     }
-    // where each layer's output is cut: after `cut` rows of every member, or after `cut` members
-    let (cut, by_rows) = if d0.k == 1 { (d0.n / 2, true) } else { (d0.k / 2, false) };
-    let (mut a, mut z): (Vec<&mut [f32]>, Vec<&mut [f32]>) = ys
-        .iter_mut()
-        .zip(ds)
-        .map(|(y, d)| y.split_at_mut(if by_rows { cut * d.out } else { cut * d.n * d.out }))
-        .unzip();
-    if by_rows {
-        let (x_a, x_z) = x.split_at(cut * d0.inp);
+    if d0.k == 1 {
+        // every layer's output cut after half the rows
+        let rows = d0.n / 2;
+        let [mut a, mut z] = cut(ys, |l| rows * ds[l].out);
+        let (x_a, x_z) = x.split_at(rows * d0.inp);
         second_core::join(
             || rows_forward(path, ds, x_a, ws, bs, &mut a),
             || rows_forward(path, ds, x_z, ws, bs, &mut z),
         );
     } else {
+        // every layer's output cut after half the members
+        let first = d0.k / 2;
+        let [mut a, mut z] = cut(ys, |l| first * ds[l].n * ds[l].out);
         second_core::join(
             || members_forward(path, ds, x, ws, bs, &mut a, 0),
-            || members_forward(path, ds, x, ws, bs, &mut z, cut),
+            || members_forward(path, ds, x, ws, bs, &mut z, first),
         );
     }
 }
@@ -327,11 +322,17 @@ pub(super) fn layer_backward(
         second_core::join(|| members(0, first, gw_a, gb_a, gx_a), || members(first, d.k - first, gw_z, gb_z, gx_z));
     }
     if need_grad_x && d.shared_x && d.k > 1 {
-        let (total, rest) = gx.split_at_mut(gx_len);
-        for member in rest.chunks_exact(gx_len) {
-            let total = &mut *total;
-            wide(path, move || total.iter_mut().zip(member).for_each(|(t, m)| *t += m));
-        }
+        sum_members_into_first(path, gx, gx_len);
+    }
+}
+
+/// The members' gradients of a shared input (`len` values each, one after another) summed into
+/// the first: member 0 + member 1 + ..., in that order.
+fn sum_members_into_first(path: KernelPath, gx: &mut [f32], len: usize) {
+    let (total, rest) = gx.split_at_mut(len);
+    for member in rest.chunks_exact(len) {
+        let total = &mut *total;
+        wide(path, move || total.iter_mut().zip(member).for_each(|(t, m)| *t += m));
     }
 }
 
@@ -456,14 +457,8 @@ pub(super) fn members_stack_backward(
             || members_backward(path, ds, xs, ws, g_out, &mut gw_z, &mut gb_z, &mut gx_z, first, d0.k - first),
         );
     }
-    let gx0 = &mut gx[0];
-    if d0.shared_x && !gx0.is_empty() {
-        let len = d0.n * d0.inp;
-        let (total, rest) = gx0.split_at_mut(len);
-        for member in rest.chunks_exact(len) {
-            let total = &mut *total;
-            wide(path, move || total.iter_mut().zip(member).for_each(|(t, m)| *t += m));
-        }
+    if d0.shared_x && !gx[0].is_empty() {
+        sum_members_into_first(path, gx[0], d0.n * d0.inp);
     }
 }
 

@@ -99,6 +99,9 @@ impl SquashedSample {
                 let std = log_std.exp();
                 let u = mean + std * e;
                 let gaussian = (e * e) * -0.5 + -half_log_2pi - log_std;
+                // candle's graph takes tanh(u) twice (the action, and the epsilon correction's
+                // argument); both are this value
+                let action = u.tanh();
                 let s = &mut saved[j];
                 let squash = match self.correction {
                     TanhCorrection::Exact => {
@@ -110,14 +113,12 @@ impl SquashedSample {
                         ((-u - softplus) * 1.0 + ln_2) * 2.0 + 0.0
                     }
                     TanhCorrection::Epsilon => {
-                        let t = u.tanh();
-                        let shifted = (t * t) * -1.0 + one_plus_eps;
+                        let shifted = (action * action) * -1.0 + one_plus_eps;
                         s.shifted = shifted;
                         shifted.ln()
                     }
                 };
                 log_prob += gaussian - squash;
-                let action = u.tanh();
                 (s.raw, s.floored, s.log_std, s.std, s.action) = (raw, floored, log_std, std, action);
                 y[j] = action;
             }

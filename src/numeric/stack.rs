@@ -79,8 +79,11 @@ thread_local! {
     static FREE: RefCell<Vec<Vec<f32>>> = const { RefCell::new(Vec::new()) };
 }
 
-/// A buffer of at least `len` values (old contents).
+/// A buffer of at least `len` values (old contents); none from the pool when `len` is 0.
 fn take_buffer(len: usize) -> Vec<f32> {
+    if len == 0 {
+        return Vec::new();
+    }
     FREE.with(|free| {
         let mut free = free.borrow_mut();
         let best = free.iter().enumerate().filter(|(_, b)| b.len() >= len).min_by_key(|(_, b)| b.len()).map(|(i, _)| i);
@@ -184,14 +187,14 @@ impl Stack {
             })
             .collect();
         {
-            let (mut gw, mut gb): (Vec<&mut [f32]>, Vec<&mut [f32]>) = (Vec::new(), Vec::new());
-            let frozen = params.is_empty();
+            // weights held constant: an empty buffer per layer
+            let (mut gw, mut gb): (Vec<&mut [f32]>, Vec<&mut [f32]>) = if params.is_empty() {
+                (ds.iter().map(|_| Default::default()).collect(), ds.iter().map(|_| Default::default()).collect())
+            } else {
+                (Vec::new(), Vec::new())
+            };
             for (i, (buffer, len)) in params.iter_mut().enumerate() {
                 if i % 2 == 0 { &mut gw } else { &mut gb }.push(&mut buffer[..*len]);
-            }
-            if frozen {
-                gw = ds.iter().map(|_| <&mut [f32]>::default()).collect();
-                gb = ds.iter().map(|_| <&mut [f32]>::default()).collect();
             }
             let gx = gx_buffers.iter_mut().enumerate().map(|(l, b)| &mut b[..wanted(l, &ds[l])]).collect();
             let grads = StackGrads { gw, gb, gx };
@@ -233,10 +236,7 @@ impl CustomOp2 for Stack {
             weights.push(values(guard, layout)?);
         }
         let biases = bias_guards.iter().map(|(guard, layout)| values(guard, layout)).collect::<Result<Vec<_>>>()?;
-        let mut ds = vec![dims(l1.dims(), l2.dims(), biases[0].len())?];
-        for l in 1..layers {
-            ds.push(hidden_layer_dims(&self.rest[l - 1].0, self.bias(l), n)?);
-        }
+        let ds = self.layer_dims(l1.dims(), l2.dims(), n)?;
         let mut hidden = self.hidden.lock().unwrap_or_else(|e| e.into_inner());
         let mut outputs: Vec<Vec<f32>> = ds[..layers - 1].iter().map(|d| take_buffer(d.k * d.n * d.out)).collect();
         let last = &ds[layers - 1];
