@@ -4,7 +4,8 @@
 //!
 //! `cargo bench --bench throughput -- --roofline [--algo td3|sac] [--threads 1|2]` instead prints
 //! the update's matmul GFLOP/s against the FP32 peak of the cores used (an FMA loop at the kernel
-//! path's vector width, see `fma_peak_gflops`) and against gemm's 1024^3 rate, and `-- --matmul` the GFLOP/s of every kernel path
+//! path's vector width, see `fma_peak_gflops`) and against gemm's 1024^3 rate, with the
+//! core-to-core round trip before and after (`core_to_core_round_trip_ns`), and `-- --matmul` the GFLOP/s of every kernel path
 //! (`numeric::kernel_path`) on the update's products. `LOCOBENCH_KERNELS` picks the path the
 //! other modes run on; each JSON line names it.
 //!
@@ -42,6 +43,33 @@ fn config(algo: Algo) -> TrainConfig {
     cfg.hidden = if algo == Algo::Sac { vec![256, 256] } else { vec![400, 300] };
     cfg.batch_size = BATCH;
     cfg
+}
+
+/// The round trip of one cache line between two threads (this one and a new one, placed by the
+/// OS as the helper thread is), in ns: the cost of every hand-off between the training thread and
+/// its helper. On a VM it depends on where the host runs the two virtual CPUs; two-thread rates
+/// are only comparable at similar round trips. Measured before and after the updates.
+fn core_to_core_round_trip_ns() -> f64 {
+    use std::sync::atomic::{AtomicU64, Ordering};
+    #[repr(align(64))]
+    struct Line(AtomicU64);
+    const TRIPS: u64 = 200_000;
+    let line = Line(AtomicU64::new(0));
+    let started = std::thread::scope(|s| {
+        s.spawn(|| {
+            for i in 0..TRIPS {
+                while line.0.load(Ordering::Acquire) != 2 * i + 1 {}
+                line.0.store(2 * i + 2, Ordering::Release);
+            }
+        });
+        let started = Instant::now();
+        for i in 0..TRIPS {
+            line.0.store(2 * i + 1, Ordering::Release);
+            while line.0.load(Ordering::Acquire) != 2 * i + 2 {}
+        }
+        started
+    });
+    started.elapsed().as_secs_f64() / TRIPS as f64 * 1e9
 }
 
 fn updates_per_second(algo: Algo, updates: usize) -> Result<f64> {
@@ -322,10 +350,12 @@ fn main() -> Result<()> {
         } / 1e9;
         let path = locobench::numeric::kernel_path::active();
         let (peak, gemm) = (fma_peak_gflops(path), gemm_1024_gflops()?);
+        let round_trip_before = core_to_core_round_trip_ns();
         let ups = updates_per_second(algo, arg("--updates").map(|v| v.parse()).transpose()?.unwrap_or(300))?;
+        let round_trip_after = core_to_core_round_trip_ns();
         let cores = threads() as f64;
         println!(
-            "{{\"algo\": \"{}\", \"threads\": {}, \"kernels\": \"{path}\", \"fma_peak_gflops_per_core\": {peak:.1}, \"gemm_1024_gflops_one_core\": {gemm:.1}, \"gflop_per_update\": {flops:.3}, \"updates_per_s\": {ups:.1}, \"gflops\": {:.1}, \"fraction_of_fma_peak_of_cores_used\": {:.2}, \"fraction_of_gemm_rate_of_cores_used\": {:.2}}}",
+            "{{\"algo\": \"{}\", \"threads\": {}, \"kernels\": \"{path}\", \"fma_peak_gflops_per_core\": {peak:.1}, \"gemm_1024_gflops_one_core\": {gemm:.1}, \"gflop_per_update\": {flops:.3}, \"updates_per_s\": {ups:.1}, \"gflops\": {:.1}, \"fraction_of_fma_peak_of_cores_used\": {:.2}, \"fraction_of_gemm_rate_of_cores_used\": {:.2}, \"core_to_core_round_trip_ns\": [{round_trip_before:.0}, {round_trip_after:.0}]}}",
             algo.name(),
             threads(),
             ups * flops,

@@ -9,6 +9,8 @@ use std::collections::HashMap;
 
 use rand::Rng;
 
+use crate::numeric::second_core;
+
 const TERMINATED: u8 = 1;
 const TRUNCATED: u8 = 2;
 
@@ -27,6 +29,45 @@ pub struct ReplayBuffer {
     newest_next: Vec<f32>,
     write: usize,
     len: usize,
+}
+
+/// Batches at least this large are copied in two halves.
+const SPLIT_ROWS: usize = 64;
+
+/// Consecutive rows of a [`Batch`], borrowed for filling.
+struct BatchRows<'a> {
+    obs: &'a mut [f32],
+    actions: &'a mut [f32],
+    rewards: &'a mut [f32],
+    next_obs: &'a mut [f32],
+    terminated: &'a mut [f32],
+}
+
+impl<'a> BatchRows<'a> {
+    /// Rows before `row` and rows from it on.
+    fn split_at(self, row: usize, obs_dim: usize, act_dim: usize) -> (BatchRows<'a>, BatchRows<'a>) {
+        let (obs_a, obs_z) = self.obs.split_at_mut(row * obs_dim);
+        let (actions_a, actions_z) = self.actions.split_at_mut(row * act_dim);
+        let (rewards_a, rewards_z) = self.rewards.split_at_mut(row);
+        let (next_a, next_z) = self.next_obs.split_at_mut(row * obs_dim);
+        let (terminated_a, terminated_z) = self.terminated.split_at_mut(row);
+        (
+            BatchRows {
+                obs: obs_a,
+                actions: actions_a,
+                rewards: rewards_a,
+                next_obs: next_a,
+                terminated: terminated_a,
+            },
+            BatchRows {
+                obs: obs_z,
+                actions: actions_z,
+                rewards: rewards_z,
+                next_obs: next_z,
+                terminated: terminated_z,
+            },
+        )
+    }
 }
 
 /// A sampled minibatch, row-major, reused between samples (no per-sample allocation).
@@ -175,17 +216,37 @@ impl ReplayBuffer {
         self.rewards[i]
     }
 
-    /// Fills `batch` with `batch.size` transitions drawn uniformly (with replacement).
+    /// Fills `batch` with `batch.size` transitions drawn uniformly (with replacement). The
+    /// indices are drawn first, in row order; the rows are then copied in two halves, the second
+    /// on the helper thread when there is one (the copies are random reads from a large buffer).
     pub fn sample_into(&self, batch: &mut Batch, rng: &mut impl Rng) {
         assert!(self.len > 0, "sampling an empty replay buffer");
+        let picks: Vec<usize> = (0..batch.size).map(|_| rng.random_range(0..self.len)).collect();
+        let all = BatchRows {
+            obs: &mut batch.obs,
+            actions: &mut batch.actions,
+            rewards: &mut batch.rewards,
+            next_obs: &mut batch.next_obs,
+            terminated: &mut batch.terminated,
+        };
+        if batch.size < SPLIT_ROWS {
+            return self.copy_rows(&picks, all);
+        }
+        let half = batch.size / 2;
+        let (a, z) = all.split_at(half, self.obs_dim, self.act_dim);
+        let (picks_a, picks_z) = picks.split_at(half);
+        second_core::join(|| self.copy_rows(picks_a, a), || self.copy_rows(picks_z, z));
+    }
+
+    /// Copies transitions `picks` into consecutive rows of `rows`.
+    fn copy_rows(&self, picks: &[usize], rows: BatchRows<'_>) {
         let (od, ad) = (self.obs_dim, self.act_dim);
-        for k in 0..batch.size {
-            let i = rng.random_range(0..self.len);
-            batch.obs[k * od..(k + 1) * od].copy_from_slice(self.obs(i));
-            batch.actions[k * ad..(k + 1) * ad].copy_from_slice(self.action(i));
-            batch.rewards[k] = self.rewards[i];
-            batch.next_obs[k * od..(k + 1) * od].copy_from_slice(self.next_obs(i));
-            batch.terminated[k] = if self.terminated(i) { 1.0 } else { 0.0 };
+        for (k, &i) in picks.iter().enumerate() {
+            rows.obs[k * od..(k + 1) * od].copy_from_slice(self.obs(i));
+            rows.actions[k * ad..(k + 1) * ad].copy_from_slice(self.action(i));
+            rows.rewards[k] = self.rewards[i];
+            rows.next_obs[k * od..(k + 1) * od].copy_from_slice(self.next_obs(i));
+            rows.terminated[k] = if self.terminated(i) { 1.0 } else { 0.0 };
         }
     }
 
@@ -403,5 +464,50 @@ mod tests {
         let mut corrupt = buf.export();
         corrupt.rewards.pop();
         assert!(ReplayBuffer::import(corrupt).is_err());
+    }
+
+    /// Row by row, drawing each index just before copying it: what `sample_into` must equal.
+    fn sample_row_by_row(buf: &ReplayBuffer, size: usize, rng: &mut impl Rng) -> Batch {
+        let mut b = Batch::new(size, buf.obs_dim, buf.act_dim);
+        for k in 0..size {
+            let i = rng.random_range(0..buf.len());
+            b.obs[k * buf.obs_dim..(k + 1) * buf.obs_dim].copy_from_slice(buf.obs(i));
+            b.actions[k * buf.act_dim..(k + 1) * buf.act_dim].copy_from_slice(buf.action(i));
+            b.rewards[k] = buf.reward(i);
+            b.next_obs[k * buf.obs_dim..(k + 1) * buf.obs_dim].copy_from_slice(buf.next_obs(i));
+            b.terminated[k] = if buf.terminated(i) { 1.0 } else { 0.0 };
+        }
+        b
+    }
+
+    #[test]
+    fn sampling_in_halves_equals_row_by_row_with_and_without_the_helper() {
+        let mut buf = ReplayBuffer::new(300, 2, 1);
+        fill(&mut buf, &[(120, true), (90, false), (140, true), (7, false)]);
+        std::thread::spawn(move || {
+            for helper in [false, true] {
+                if helper {
+                    second_core::enable_on_this_thread();
+                }
+                // below the split, at it, odd, and a training batch
+                for size in [1, SPLIT_ROWS - 1, SPLIT_ROWS, 257, 256] {
+                    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(size as u64);
+                    let mut got = Batch::new(size, 2, 1);
+                    buf.sample_into(&mut got, &mut rng);
+                    let after: u64 = rng.random();
+                    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(size as u64);
+                    let want = sample_row_by_row(&buf, size, &mut rng);
+                    let what = format!("size {size}, helper {helper}");
+                    assert_eq!(got.obs, want.obs, "{what}");
+                    assert_eq!(got.actions, want.actions, "{what}");
+                    assert_eq!(got.rewards, want.rewards, "{what}");
+                    assert_eq!(got.next_obs, want.next_obs, "{what}");
+                    assert_eq!(got.terminated, want.terminated, "{what}");
+                    assert_eq!(after, rng.random::<u64>(), "the RNG advances as row by row ({what})");
+                }
+            }
+        })
+        .join()
+        .unwrap();
     }
 }
