@@ -10,7 +10,8 @@
 //! The loops are those of Goto and van de Geijn ("Anatomy of High-Performance Matrix
 //! Multiplication", ACM TOMS 34(3), 2008): `k` is cut into chunks of [`K_CHUNK`] terms, a chunk of
 //! B is packed into column panels so that the innermost loop reads its vectors from one
-//! contiguous stream in L1, and a register tile (8 rows by three vectors with AVX-512, 6 rows by
+//! contiguous stream in L1 (unless the product has one or two row tiles and B is row-major: B
+//! is then read where it lies, as a panel would be read only once or twice), and a register tile (8 rows by three vectors with AVX-512, 6 rows by
 //! two with AVX2) takes one chunk at a time. A is not packed: each term of a tile needs only one
 //! broadcast element per row, which the tile reads where it lies (packing A measured at a sixth of
 //! a TD3 update, mostly in per-term copies of a few floats). Cutting `k` keeps the order exact because a tile carries its partial
@@ -169,6 +170,9 @@ fn product(
         }
         return;
     }
+    // With one or two row tiles, a packed panel would be read once or twice: a row-major B is
+    // read where it lies instead (the product of a value layer's weight gradient, 1 row).
+    let direct = b.col_stride == 1 && m <= DIRECT_B_TILES * tile_rows;
     SCRATCH.with(|scratch| {
         let b_pack = &mut *scratch.borrow_mut();
         for p0 in (0..k).step_by(K_CHUNK) {
@@ -176,7 +180,12 @@ fn product(
             let last_chunk = p0 + kc == k;
             for j0 in (0..n).step_by(panel) {
                 let cols = panel.min(n - j0);
-                pack_b(b, p0, kc, j0, cols, panel, path != KernelPath::Portable, b_pack);
+                let b_tile = if direct {
+                    (b.data[p0 * b.row_stride + j0..].as_ptr(), b.row_stride)
+                } else {
+                    pack_b(b, p0, kc, j0, cols, panel, path != KernelPath::Portable, b_pack);
+                    (b_pack.as_ptr(), panel)
+                };
                 let tile_start = match start {
                     _ if p0 > 0 => TileStart::C,
                     Start::Zero => TileStart::Zero,
@@ -190,14 +199,15 @@ fn product(
                     // A is read where it lies: rows i0.., terms p0.. (within bounds by `holds`).
                     let a_tile = a.data[i0 * a.row_stride + p0 * a.col_stride..].as_ptr();
                     // SAFETY: the CPU has the path's features (asserted above); A holds rows
-                    // i0..i0+rows and terms p0..p0+kc at its strides (`holds`), the packed panel
-                    // kc terms of `panel` columns, c `rows` rows of `cols` elements at
-                    // `dst_stride` (asserted), and a bias row `cols` values from j0.
+                    // i0..i0+rows and terms p0..p0+kc at its strides (`holds`), B kc terms of
+                    // `cols` columns at its stride (the packed panel, or B itself, which holds
+                    // terms p0..p0+kc of columns j0..j0+cols by `holds`), c `rows` rows of `cols`
+                    // elements at `dst_stride` (asserted), and a bias row `cols` values from j0.
                     unsafe {
                         tile(
                             Tile { rows, cols, kc },
                             (a_tile, a.row_stride, a.col_stride),
-                            b_pack.as_ptr(),
+                            b_tile,
                             (c.as_mut_ptr(), dst_stride),
                             tile_start,
                             relu && last_chunk,
@@ -213,6 +223,9 @@ fn product(
 /// (128 measured faster than 192 and 256 on the TD3 products, `cargo bench --bench throughput --
 /// --matmul`).
 const K_CHUNK: usize = 128;
+
+/// Products of at most this many row tiles read a row-major B unpacked.
+const DIRECT_B_TILES: usize = 2;
 
 /// A path's register tile: `tile_rows` rows of A (read where they lie) by `panel` columns (a
 /// packed column panel of B, whole vectors).
@@ -346,23 +359,22 @@ enum TileStart {
     Row(*const f32),
 }
 
-/// Adds `kc` terms of A times a packed B panel (`panel` floats per term) to `rows x cols` of C
-/// (pointer and row stride), starting from `TileStart`, and stores them through the ReLU when
-/// the flag is set.
-type TileKernel = unsafe fn(Tile, TileA, *const f32, (*mut f32, usize), TileStart, bool);
+/// Adds `kc` terms of A times B (pointer and distance between terms: a packed panel, or B where it
+/// lies) to `rows x cols` of C (pointer and row stride), starting from `TileStart`, and stores
+/// them through the ReLU when the flag is set. Only B's first `cols` values of each term are read.
+type TileKernel = unsafe fn(Tile, TileA, (*const f32, usize), (*mut f32, usize), TileStart, bool);
 
 /// One element at a time, in the order every path follows.
 ///
-/// SAFETY (caller): as for [`TileKernel`]: A and the packed panel hold kc terms, C its tile.
+/// SAFETY (caller): as for [`TileKernel`]: A and B hold kc terms, C its tile.
 unsafe fn portable_tile(
     Tile { rows, cols, kc }: Tile,
     (a, a_rs, a_cs): TileA,
-    b: *const f32,
+    (b, b_stride): (*const f32, usize),
     (c, c_stride): (*mut f32, usize),
     start: TileStart,
     relu: bool,
 ) {
-    let panel = PORTABLE.panel;
     // SAFETY: forwarded from the caller.
     unsafe {
         for r in 0..rows {
@@ -374,7 +386,7 @@ unsafe fn portable_tile(
                     TileStart::Row(row) => *row.add(j),
                 };
                 for p in 0..kc {
-                    acc = (*a.add(r * a_rs + p * a_cs)).mul_add(*b.add(p * panel + j), acc);
+                    acc = (*a.add(r * a_rs + p * a_cs)).mul_add(*b.add(p * b_stride + j), acc);
                 }
                 *out = if relu { relu_of(acc) } else { acc };
             }
@@ -407,7 +419,7 @@ macro_rules! vector_kernels {
             pub(super) unsafe fn tile(
                 Tile { rows, cols, kc }: Tile,
                 a: TileA,
-                b: *const f32,
+                b: (*const f32, usize),
                 c: (*mut f32, usize),
                 start: TileStart,
                 relu: bool,
@@ -438,7 +450,7 @@ macro_rules! vector_kernels {
                 full: bool,
                 kc: usize,
                 a: TileA,
-                b: *const f32,
+                b: (*const f32, usize),
                 c: (*mut f32, usize),
                 start: TileStart,
                 relu: bool,
@@ -464,15 +476,15 @@ macro_rules! vector_kernels {
             unsafe fn rows_tile<const R: usize, const V: usize, const FULL: bool>(
                 kc: usize,
                 (a, a_rs, a_cs): TileA,
-                b: *const f32,
+                (b, b_stride): (*const f32, usize),
                 (c, c_stride): (*mut f32, usize),
                 start: TileStart,
                 relu: bool,
                 mask: $mask,
             ) {
-                // SAFETY: (whole body) A holds R rows of kc terms at its strides, b is packed
-                // (PANEL floats per term, kc terms); C is read and written in rows < R and lanes
-                // inside the mask, and a start row holds the tile's columns.
+                // SAFETY: (whole body) A holds R rows of kc terms at its strides, B kc terms at
+                // `b_stride`, read in lanes inside the mask; C is read and written in rows < R
+                // and lanes inside the mask, and a start row holds the tile's columns.
                 unsafe {
                     let mut acc: [[$vec; V]; R] = [[$zero; V]; R];
                     let lanes = |p: *const f32, v: usize| {
@@ -500,9 +512,11 @@ macro_rules! vector_kernels {
                     }
                     let (mut a, mut b) = (a, b);
                     for _ in 0..kc {
+                        // a partial last vector of B: masked, as B may end there (the lanes past
+                        // `cols` are zero, as in a packed panel, and never stored)
                         let mut b_vec: [$vec; V] = [$zero; V];
                         for (v, bv) in b_vec.iter_mut().enumerate() {
-                            *bv = ($load)(b.add(v * W));
+                            *bv = lanes(b, v);
                         }
                         for (r, acc_r) in acc.iter_mut().enumerate() {
                             let a_r = ($splat)(*a.add(r * a_rs));
@@ -511,7 +525,7 @@ macro_rules! vector_kernels {
                             }
                         }
                         a = a.add(a_cs);
-                        b = b.add(PANEL);
+                        b = b.add(b_stride);
                     }
                     if relu {
                         acc.iter_mut().flatten().for_each(|v| *v = ($max)(*v, $zero));
