@@ -66,6 +66,19 @@ fn improvement(row: &BudgetRow, controller: &SpeedPoint, seed: u64) -> Estimate 
     estimate(&per_seed, stats::mean, seed)
 }
 
+/// A number that names a row (its group and budget; FNV-1a), so that its bootstrap seed, and so
+/// its intervals, do not change when rows are added to or removed from the report.
+fn row_identity(row: &BudgetRow) -> u64 {
+    let g = &row.group;
+    let budget = row.budget.to_string();
+    let parts = [g.env.as_str(), g.algo.as_str(), g.reward.as_str(), g.settings.as_str(), g.variant.as_str(), &budget];
+    let mut hash = 0xcbf2_9ce4_8422_2325u64;
+    for byte in parts.iter().flat_map(|p| p.bytes().chain([0xff])) {
+        hash = (hash ^ byte as u64).wrapping_mul(0x0100_0000_01b3);
+    }
+    hash
+}
+
 /// A grid point's mean return with its 95% bootstrap interval over episodes (the controller has
 /// no seeds to resample).
 pub(crate) fn return_interval(point: &SpeedPoint) -> stats::Interval {
@@ -102,8 +115,9 @@ pub(crate) fn controller_section(
     for (i, row) in matchable() {
         let rl_speed = row.speed();
         let controller = family.matched(&grid, rl_speed)?;
-        let beats_matched = controller.as_ref().ok().map(|c| improvement(row, c, seed ^ i as u64));
-        let beats_best = best.as_ref().map(|b| improvement(row, b, seed ^ 0x100 ^ i as u64));
+        let row_seed = seed ^ row_identity(row);
+        let beats_matched = controller.as_ref().ok().map(|c| improvement(row, c, row_seed));
+        let beats_best = best.as_ref().map(|b| improvement(row, b, row_seed ^ 0x100));
         matched.push(MatchedRow { row: i, rl_speed, controller, beats_matched, beats_best });
     }
     Ok(ControllerSection { grid, best, matched, pushes: Vec::new() })
@@ -117,4 +131,50 @@ pub(crate) fn controller_pushes(family: &mut ControllerFamily, speed: f64, label
         survived.push((p.episodes.len() - p.falls(), p.episodes.len()));
     }
     Ok(PushRow { policy: label, speed, survived })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::report::runs::Group;
+
+    fn row(env: &str, algo: &str, settings: &str, budget: u64) -> BudgetRow {
+        let group = Group {
+            env: env.into(),
+            algo: algo.into(),
+            reward: String::new(),
+            settings: settings.into(),
+            variant: String::new(),
+        };
+        BudgetRow {
+            group,
+            budget,
+            evaluated: Vec::new(),
+            missing: Vec::new(),
+            env_config: None,
+            provenance: String::new(),
+            mixed_provenance: false,
+            wall_time: None,
+            duplicate_seeds: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn a_rows_bootstrap_seed_follows_the_row_not_its_place_in_the_report() {
+        let td3 = row("minitaur", "td3", "", 1_000_000);
+        let mut same = row("minitaur", "td3", "", 1_000_000);
+        same.provenance = "another machine".into();
+        assert_eq!(row_identity(&td3), row_identity(&same));
+        let others = [
+            row("ant", "td3", "", 1_000_000),
+            row("minitaur", "sac", "", 1_000_000),
+            row("minitaur", "td3", "hidden=[64,64]", 1_000_000),
+            row("minitaur", "td3", "", 300_000),
+            // the fields are separated: "td" + "3..." is not "td3" + "..."
+            row("minitaur", "td", "3", 1_000_000),
+        ];
+        for other in &others {
+            assert_ne!(row_identity(&td3), row_identity(other), "{:?}", other.group);
+        }
+    }
 }

@@ -38,7 +38,19 @@ pub fn rate(k: usize, n: usize) -> String {
 
 /// `300k`, `1M`.
 pub fn budget(steps: u64) -> String {
-    super::plots::step_label(steps as f64)
+    // exact, unlike a tick label: an on-policy run ends past its budget (2,015,232 steps is
+    // 2.015232M, not a second "2M")
+    for (unit, suffix) in [(1_000_000u64, "M"), (1_000, "k")] {
+        if steps >= unit {
+            let (whole, rest) = (steps / unit, steps % unit);
+            if rest == 0 {
+                return format!("{whole}{suffix}");
+            }
+            let digits = format!("{rest:0width$}", width = unit.ilog10() as usize);
+            return format!("{whole}.{}{suffix}", digits.trim_end_matches('0'));
+        }
+    }
+    steps.to_string()
 }
 
 #[cfg(test)]
@@ -55,5 +67,10 @@ mod tests {
         assert_eq!(interval(Interval::point(3.0), fmt_return), "3.00");
         assert_eq!(rate(0, 10), "0/10 (0.00-0.28)");
         assert_eq!(budget(300_000), "300k");
+        assert_eq!(budget(2_000_000), "2M");
+        assert_eq!(budget(2_015_232), "2.015232M");
+        assert_eq!(budget(1_500_000), "1.5M");
+        assert_eq!(budget(25_600), "25.6k");
+        assert_eq!(budget(999), "999");
     }
 }
