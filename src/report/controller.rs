@@ -146,17 +146,7 @@ mod tests {
             settings: settings.into(),
             variant: String::new(),
         };
-        BudgetRow {
-            group,
-            budget,
-            evaluated: Vec::new(),
-            missing: Vec::new(),
-            env_config: None,
-            provenance: String::new(),
-            mixed_provenance: false,
-            wall_time: None,
-            duplicate_seeds: Vec::new(),
-        }
+        BudgetRow::empty(group, budget)
     }
 
     #[test]

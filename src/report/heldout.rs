@@ -76,6 +76,21 @@ pub fn estimate(per_seed: &[Vec<f64>], statistic: fn(&[f64]) -> f64, seed: u64) 
 }
 
 impl BudgetRow {
+    /// A row of `group` at `budget` with nothing evaluated or recorded yet.
+    pub(crate) fn empty(group: Group, budget: u64) -> BudgetRow {
+        BudgetRow {
+            group,
+            budget,
+            evaluated: Vec::new(),
+            missing: Vec::new(),
+            env_config: None,
+            provenance: String::new(),
+            mixed_provenance: false,
+            wall_time: None,
+            duplicate_seeds: Vec::new(),
+        }
+    }
+
     /// Number of runs evaluated.
     pub fn seeds(&self) -> usize {
         self.evaluated.len()
@@ -118,17 +133,7 @@ pub(crate) fn evaluate_row(
     protocol: &Protocol,
     push: Option<Push>,
 ) -> Result<BudgetRow> {
-    let mut row = BudgetRow {
-        group: group.clone(),
-        budget,
-        evaluated: Vec::new(),
-        missing: Vec::new(),
-        env_config: None,
-        provenance: String::new(),
-        mixed_provenance: false,
-        wall_time: None,
-        duplicate_seeds: Vec::new(),
-    };
+    let mut row = BudgetRow::empty(group.clone(), budget);
     let mut machines = BTreeSet::new();
     let mut walls = Vec::new();
     for run in runs.iter().filter(|r| reached(r) >= budget) {
