@@ -66,17 +66,14 @@ fn improvement(row: &BudgetRow, controller: &SpeedPoint, seed: u64) -> Estimate 
     estimate(&per_seed, stats::mean, seed)
 }
 
-/// A number that names a row (its group and budget; FNV-1a), so that its bootstrap seed, and so
-/// its intervals, do not change when rows are added to or removed from the report.
+/// A number that names a row (its group and budget), so that its bootstrap seed, and so its
+/// intervals, do not change when rows are added to or removed from the report.
 fn row_identity(row: &BudgetRow) -> u64 {
     let g = &row.group;
     let budget = row.budget.to_string();
     let parts = [g.env.as_str(), g.algo.as_str(), g.reward.as_str(), g.settings.as_str(), g.variant.as_str(), &budget];
-    let mut hash = 0xcbf2_9ce4_8422_2325u64;
-    for byte in parts.iter().flat_map(|p| p.bytes().chain([0xff])) {
-        hash = (hash ^ byte as u64).wrapping_mul(0x0100_0000_01b3);
-    }
-    hash
+    // 0xff (in no UTF-8 text) ends each field
+    super::fnv1a(parts.iter().flat_map(|p| p.bytes().chain([0xff])))
 }
 
 /// A grid point's mean return with its 95% bootstrap interval over episodes (the controller has

@@ -93,6 +93,12 @@ pub struct Report {
 }
 
 /// Groups runs by (env, algorithm, reward, settings), sorted.
+/// FNV-1a of `bytes` (Fowler, Noll and Vo): a hash that is the same in every build and on every
+/// machine, for names and seeds derived from a group's fields.
+pub(crate) fn fnv1a(bytes: impl IntoIterator<Item = u8>) -> u64 {
+    bytes.into_iter().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3))
+}
+
 pub(crate) fn group_runs(runs: &[Run]) -> BTreeMap<Group, Vec<&Run>> {
     let mut groups: BTreeMap<Group, Vec<&Run>> = BTreeMap::new();
     for r in runs {

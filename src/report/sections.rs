@@ -663,7 +663,7 @@ fn file_stem(g: &Group) -> String {
         return g.algo.clone();
     }
     let text = format!("{}|{}", g.reward, g.settings);
-    let hash = text.bytes().fold(0xcbf2_9ce4_8422_2325u64, |h, b| (h ^ b as u64).wrapping_mul(0x100_0000_01b3));
+    let hash = super::fnv1a(text.bytes());
     format!("{}-{:08x}", g.algo, hash as u32)
 }
 
