@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # What exactness costs, measured in one run: GFLOP/s of every kernel path on the TD3 update's
-# products, then TD3 / SAC / DDPG gradient updates per second (HalfCheetah sizes, batch 256) on
-# one and two threads, on the default exact kernels (auto) and on the gemm crate's (library).
+# products, ns per element of the policy head's exp, ln and tanh, then TD3 / SAC / DDPG gradient
+# updates per second (HalfCheetah sizes, batch 256) on one and two threads, on the default exact
+# kernels (auto) and on the gemm crate's (library).
 # Prints markdown with the machine and commit.
 #
 #   bash benches/kernels.sh [UPDATES]     (default 300 updates per figure; ~5 min on 2 cores)
@@ -14,6 +15,10 @@ echo
 echo "\`cargo bench --bench throughput -- --matmul\` (GFLOP/s, one thread):"
 echo
 cargo bench --locked --bench throughput --quiet -- --matmul 2>/dev/null
+echo
+echo "\`cargo bench --bench throughput -- --libm\` (ns per element, one thread; the same bits in every column):"
+echo
+cargo bench --locked --bench throughput --quiet -- --libm 2>/dev/null
 echo
 echo "\`LOCOBENCH_KERNELS=K cargo bench --bench throughput -- --bench --algo A --threads T --updates $updates --steps 0\` (updates/s):"
 echo

@@ -335,11 +335,50 @@ fn matmul_paths() -> Result<()> {
     Ok(())
 }
 
+/// Nanoseconds per element of SAC's policy-head transcendentals on a batch's worth of inputs
+/// (256 x 6): the system libm, one call per element (what `f32::exp` and the others do), against
+/// `numeric::glibc_math` (the same bits) on each exact path this CPU supports. One thread.
+fn libm_paths() -> Result<()> {
+    use locobench::numeric::{glibc_math, KernelPath};
+    type Function = (&'static str, fn(f32) -> f32, fn(KernelPath, &mut [f32]), fn(f32) -> f32);
+    let functions: [Function; 3] = [
+        ("exp, x in [-4, 0]", f32::exp, glibc_math::exp_in_place, |s| -4.0 * s.abs()),
+        ("ln, x in [1, 2]", f32::ln, glibc_math::ln_in_place, |s| 1.0 + s.abs()),
+        ("tanh, x in [-3, 3]", f32::tanh, glibc_math::tanh_in_place, |s| 3.0 * s),
+    ];
+    let paths: Vec<KernelPath> = KernelPath::ALL.into_iter().filter(|p| p.is_exact() && p.is_supported()).collect();
+    println!("| function | system libm | {} |", paths.iter().map(|p| p.name()).collect::<Vec<_>>().join(" | "));
+    println!("|---|---|{}", "---|".repeat(paths.len()));
+    let reps = 2000;
+    for (name, system, ours, input) in functions {
+        let xs: Vec<f32> = (0..BATCH * ACT).map(|i| input((i as f32 * 0.37).sin())).collect();
+        let mut buf = xs.clone();
+        let mut time = |apply: &dyn Fn(&mut [f32])| {
+            let started = Instant::now();
+            for _ in 0..reps {
+                buf.copy_from_slice(&xs);
+                apply(&mut buf);
+                std::hint::black_box(&mut buf);
+            }
+            started.elapsed().as_secs_f64() * 1e9 / (reps * xs.len()) as f64
+        };
+        let mut row = format!("| {name} | {:.2} |", time(&|b| b.iter_mut().for_each(|x| *x = system(*x))));
+        for &path in &paths {
+            row += &format!(" {:.2} |", time(&|b| ours(path, b)));
+        }
+        println!("{row}");
+    }
+    Ok(())
+}
+
 fn main() -> Result<()> {
     // candle's pools on one thread, as the CLI runs them (before any candle call)
     locobench::runtime::configure_process();
     if std::env::args().any(|a| a == "--matmul") {
         return matmul_paths();
+    }
+    if std::env::args().any(|a| a == "--libm") {
+        return libm_paths();
     }
     if std::env::args().any(|a| a == "--roofline") {
         let algo = Algo::parse(&arg("--algo").unwrap_or_else(|| "td3".into()))?;

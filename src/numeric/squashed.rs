@@ -10,7 +10,8 @@
 //! bits are the same (tested against that graph, `agents::sac`'s `sample_squashed_graph`):
 //! - the forward pass computes each intermediate value as candle's op computes it (`affine` is a
 //!   multiply then an add, `clamp` is `maximum` then `minimum`, the sum over the action runs
-//!   from zero in index order, and exp, ln and tanh are Rust's, as candle's are);
+//!   from zero in index order, and exp, ln and tanh give the bits of Rust's, which candle calls:
+//!   they are [`glibc_math`]'s, glibc's code over whole arrays at the path's vector width);
 //! - the backward pass follows candle's rules (`backprop.rs` in candle-core 0.11): each node's
 //!   gradient starts from zero and receives its consumers' contributions in the order candle's
 //!   topological sort visits them for SAC's actor loss, `mean(alpha * log_pi - Q(s, a))`: the
@@ -29,6 +30,7 @@ use std::sync::Mutex;
 use candle_core::{bail, CpuStorage, CustomOp1, Layout, Result, Shape, Tensor};
 use serde::{Deserialize, Serialize};
 
+use super::glibc_math;
 use super::inplace::contiguous;
 use super::kernel_path::{self, KernelPath};
 use super::second_core;
@@ -79,48 +81,65 @@ fn half_log_2pi() -> f32 {
 
 impl SquashedSample {
     /// Rows of `out` (`[rows, 2 act_dim]`) into rows of `y` (`[rows, act_dim + 1]`) and `saved`.
+    ///
+    /// The exponentials, tanh and logarithms run over whole arrays ([`glibc_math`], glibc's bits at
+    /// the path's vector width); the rest is a loop over the elements in row order.
     fn forward_rows(&self, out: &[f32], eps: &[f32], y: &mut [f32], saved: &mut [Saved]) {
         let a = self.act_dim;
         let (lo, hi) = self.log_std_range;
         let half_log_2pi = half_log_2pi();
         let ln_2 = 2f64.ln() as f32;
         let one_plus_eps = (1.0 + 1e-6f64) as f32;
-        for (((row, eps), y), saved) in out
-            .chunks_exact(2 * a)
-            .zip(eps.chunks_exact(a))
-            .zip(y.chunks_exact_mut(a + 1))
-            .zip(saved.chunks_exact_mut(a))
-        {
+        let path = self.path;
+        let exact = self.correction == TanhCorrection::Exact;
+        let means = || out.chunks_exact(2 * a).flat_map(|row| &row[..a]);
+
+        // the clamp (`maximum`, then `minimum`), and std = exp(log_std)
+        for (raw, s) in out.chunks_exact(2 * a).flat_map(|row| &row[a..]).zip(saved.iter_mut()) {
+            let floored = if *raw < lo { lo } else { *raw };
+            let log_std = if floored > hi { hi } else { floored };
+            (s.raw, s.floored, s.log_std) = (*raw, floored, log_std);
+        }
+        let mut std: Vec<f32> = saved.iter().map(|s| s.log_std).collect();
+        glibc_math::exp_in_place(path, &mut std);
+
+        // u = mean + std * eps; the action tanh(u), and for the exact correction exp(-|-2u|)
+        let u: Vec<f32> = means().zip(&std).zip(eps).map(|((mean, std), e)| mean + std * e).collect();
+        let mut action = u.clone();
+        glibc_math::tanh_in_place(path, &mut action);
+        let mut exp_term = Vec::new();
+        if exact {
+            exp_term = u.iter().map(|u| -(u * -2.0 + 0.0).abs()).collect();
+            glibc_math::exp_in_place(path, &mut exp_term);
+        }
+
+        // the argument of the correction's logarithm
+        let shifted: Vec<f32> = if exact {
+            exp_term.iter().map(|e| e * 1.0 + 1.0).collect()
+        } else {
+            action.iter().map(|t| (t * t) * -1.0 + one_plus_eps).collect()
+        };
+        let mut log_shifted = shifted.clone();
+        glibc_math::ln_in_place(path, &mut log_shifted);
+
+        for (r, (y, saved)) in y.chunks_exact_mut(a + 1).zip(saved.chunks_exact_mut(a)).enumerate() {
             let mut log_prob = 0f32;
-            for j in 0..a {
-                let (mean, raw, e) = (row[j], row[a + j], eps[j]);
-                let floored = if raw < lo { lo } else { raw };
-                let log_std = if floored > hi { hi } else { floored };
-                let std = log_std.exp();
-                let u = mean + std * e;
-                let gaussian = (e * e) * -0.5 + -half_log_2pi - log_std;
-                // candle's graph takes tanh(u) twice (the action, and the epsilon correction's
-                // argument); both are this value
-                let action = u.tanh();
-                let s = &mut saved[j];
-                let squash = match self.correction {
-                    TanhCorrection::Exact => {
-                        let minus_2u = u * -2.0 + 0.0;
-                        let exp_term = (-minus_2u.abs()).exp();
-                        let shifted = exp_term * 1.0 + 1.0;
-                        let softplus = minus_2u.max(0.0) + shifted.ln();
-                        (s.minus_2u, s.exp_term, s.shifted) = (minus_2u, exp_term, shifted);
-                        ((-u - softplus) * 1.0 + ln_2) * 2.0 + 0.0
-                    }
-                    TanhCorrection::Epsilon => {
-                        let shifted = (action * action) * -1.0 + one_plus_eps;
-                        s.shifted = shifted;
-                        shifted.ln()
-                    }
+            for (j, s) in saved.iter_mut().enumerate() {
+                let i = r * a + j;
+                let (e, u) = (eps[i], u[i]);
+                let gaussian = (e * e) * -0.5 + -half_log_2pi - s.log_std;
+                let squash = if exact {
+                    let minus_2u = u * -2.0 + 0.0;
+                    let softplus = minus_2u.max(0.0) + log_shifted[i];
+                    (s.minus_2u, s.exp_term, s.shifted) = (minus_2u, exp_term[i], shifted[i]);
+                    ((-u - softplus) * 1.0 + ln_2) * 2.0 + 0.0
+                } else {
+                    s.shifted = shifted[i];
+                    log_shifted[i]
                 };
                 log_prob += gaussian - squash;
-                (s.raw, s.floored, s.log_std, s.std, s.action) = (raw, floored, log_std, std, action);
-                y[j] = action;
+                (s.std, s.action) = (std[i], action[i]);
+                y[j] = action[i];
             }
             y[a] = log_prob;
         }
