@@ -58,9 +58,16 @@ impl Critics {
         relu_stack(x, &first.collect::<Result<Vec<_>>>()?, None)?.squeeze(0)
     }
 
-    /// min over members (`[n, 1]`) with the weights held constant. SAC's actor loss.
+    /// Q values `[k, n, 1]` with the weights held constant: gradients reach `x` only. SAC's
+    /// actor loss.
+    pub(crate) fn forward_frozen(&self, x: &Tensor) -> Result<Tensor> {
+        self.body.forward_frozen(x)
+    }
+
+    /// min over members (`[n, 1]`) with the weights held constant.
+    #[cfg(test)]
     pub(crate) fn min_frozen(&self, x: &Tensor) -> Result<Tensor> {
-        self.body.forward_frozen(x)?.min(0)
+        self.forward_frozen(x)?.min(0)
     }
 
     /// min over members, `[n, 1]`.

@@ -10,6 +10,7 @@ use super::config::{Algo, SacVersion, TanhCorrection, TrainConfig, WeightInit};
 use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
 use super::{layer_sizes, Agent, Losses};
+use crate::numeric::actor_objective::{actor_objective, critic_input};
 use crate::numeric::optim::Adam;
 use crate::numeric::squashed::squashed_sample;
 
@@ -51,11 +52,17 @@ pub(crate) fn sample_squashed(
     correction: TanhCorrection,
     rng: &mut ChaCha8Rng,
 ) -> Result<(Tensor, Tensor)> {
+    let sample = sample_squashed_joint(out, correction, rng)?;
+    let act_dim = sample.dims2()?.1 - 1;
+    Ok((sample.narrow(1, 0, act_dim)?, sample.narrow(1, act_dim, 1)?))
+}
+
+/// [`sample_squashed`]'s action and log-density side by side, `[n, act_dim + 1]`.
+pub(crate) fn sample_squashed_joint(out: &Tensor, correction: TanhCorrection, rng: &mut ChaCha8Rng) -> Result<Tensor> {
     let (n, width) = out.dims2()?;
     let act_dim = width / 2;
     let eps: Vec<f32> = (0..n * act_dim).map(|_| StandardNormal.sample(rng)).collect();
-    let sample = squashed_sample(out, eps, (LOG_STD_MIN as f32, LOG_STD_MAX as f32), correction)?;
-    Ok((sample.narrow(1, 0, act_dim)?, sample.narrow(1, act_dim, 1)?))
+    squashed_sample(out, eps, (LOG_STD_MIN as f32, LOG_STD_MAX as f32), correction)
 }
 
 /// The deterministic action of the squashed Gaussian policy with output `out` (`[1, 2 act_dim]`):
@@ -169,15 +176,18 @@ impl Agent for SacAgent {
         self.critic_opt.step(&critic_loss.backward()?)?;
         losses.critic = critic_loss.to_scalar::<f32>()? as f64;
 
-        let (pi_a, logp) = self.sample(&obs, rng)?;
-        let q_pi = self.critics.min_frozen(&Self::critic_input(&obs, &pi_a)?)?;
+        // the action and its log-density side by side, and the objective as two nodes
+        // (numeric::actor_objective: the graph's bits without its small nodes)
+        let pi = sample_squashed_joint(&self.actor.forward(&obs)?, self.tanh_correction, rng)?;
+        let logp = pi.narrow(1, self.act_dim, 1)?;
+        let q = self.critics.forward_frozen(&critic_input(&obs, &pi)?)?;
         if let Some(v) = &mut self.value {
-            let v_target = (&q_pi - logp.affine(alpha, 0.0)?)?.detach();
+            let v_target = (q.min(0)? - logp.affine(alpha, 0.0)?)?.detach();
             let value_loss = v.net.forward(&obs)?.sub(&v_target)?.sqr()?.mean_all()?;
             v.opt.step(&value_loss.backward()?)?;
             losses.value = Some(value_loss.to_scalar::<f32>()? as f64);
         }
-        let actor_loss = (logp.affine(alpha, 0.0)? - q_pi)?.mean_all()?;
+        let actor_loss = actor_objective(&q, &pi, alpha)?;
         self.actor_opt.step(&actor_loss.backward()?)?;
         losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
 
@@ -350,6 +360,92 @@ mod tests {
             .join()
             .unwrap();
         }
+    }
+
+    /// SAC's actor loss and its gradient at the policy output, through candle's graph (the head's
+    /// output narrowed, `cat`, `min`, `affine`, `mean_all`) and through `actor_objective`'s two
+    /// nodes, from the same noise.
+    fn actor_objective_both_ways(
+        out: &[f32],
+        obs: &[f32],
+        n: usize,
+        act_dim: usize,
+        critics: &Critics,
+        correction: TanhCorrection,
+    ) -> [[Vec<f32>; 2]; 2] {
+        let obs_dim = obs.len() / n;
+        let obs = tensor(obs, (n, obs_dim));
+        let alpha = 0.37;
+        let run = |fused: bool| {
+            let out = Var::from_tensor(&tensor(out, (n, 2 * act_dim))).unwrap();
+            let mut rng = ChaCha8Rng::seed_from_u64(9);
+            let loss = if fused {
+                let pi = sample_squashed_joint(out.as_tensor(), correction, &mut rng).unwrap();
+                let q = critics.forward_frozen(&critic_input(&obs, &pi).unwrap()).unwrap();
+                actor_objective(&q, &pi, alpha).unwrap()
+            } else {
+                let (pi_a, logp) = sample_squashed(out.as_tensor(), correction, &mut rng).unwrap();
+                let q_pi = critics.min_frozen(&Tensor::cat(&[&obs, &pi_a], 1).unwrap()).unwrap();
+                (logp.affine(alpha, 0.0).unwrap() - q_pi).unwrap().mean_all().unwrap()
+            };
+            let grads = loss.backward().unwrap();
+            [vec![loss.to_scalar::<f32>().unwrap()], flat(grads.get(out.as_tensor()).unwrap())]
+        };
+        [run(false), run(true)]
+    }
+
+    #[test]
+    fn the_actor_objective_gives_the_bits_of_candles_graph() {
+        for helper in [false, true] {
+            std::thread::spawn(move || {
+                if helper {
+                    second_core::enable_on_this_thread();
+                }
+                let mut rng = ChaCha8Rng::seed_from_u64(6);
+                for (n, obs_dim, act_dim) in [(1, 3, 2), (5, 4, 3), (256, 17, 6)] {
+                    for twins in [false, true] {
+                        let sizes = [obs_dim + act_dim, 32, 32, 1];
+                        let critics = Critics::new(2, &sizes, WeightInit::Uniform, &mut rng).unwrap();
+                        if twins {
+                            // equal members: every row's minimum is a tie, whose gradient both get
+                            for (w, b) in critics.named_vars("c").chunks(2).map(|p| (&p[0].1, &p[1].1)) {
+                                let w0 = w.as_tensor().narrow(0, 0, 1).unwrap();
+                                let b0 = b.as_tensor().narrow(0, 0, 1).unwrap();
+                                w.set(&Tensor::cat(&[&w0, &w0], 0).unwrap()).unwrap();
+                                b.set(&Tensor::cat(&[&b0, &b0], 0).unwrap()).unwrap();
+                            }
+                        }
+                        for correction in [TanhCorrection::Exact, TanhCorrection::Epsilon] {
+                            let out = policy_output(n, act_dim, &mut rng);
+                            let obs: Vec<f32> = (0..n * obs_dim).map(|_| StandardNormal.sample(&mut rng)).collect();
+                            let [graph, fused] =
+                                actor_objective_both_ways(&out, &obs, n, act_dim, &critics, correction);
+                            for (what, (g, f)) in ["loss", "gradient"].iter().zip(graph.iter().zip(&fused)) {
+                                assert_eq!(
+                                    bits(g),
+                                    bits(f),
+                                    "{what}: n {n}, act_dim {act_dim}, twins {twins}, {correction:?}, helper {helper}"
+                                );
+                            }
+                            assert!(fused[1].iter().any(|g| *g != 0.0));
+                        }
+                    }
+                }
+            })
+            .join()
+            .unwrap();
+        }
+    }
+
+    #[test]
+    fn the_actor_objective_refuses_mismatched_shapes() {
+        let q = Tensor::zeros((2, 4, 1), candle_core::DType::F32, &Device::Cpu).unwrap();
+        let y = Tensor::zeros((3, 7), candle_core::DType::F32, &Device::Cpu).unwrap();
+        let err = actor_objective(&q, &y, 0.2).unwrap_err().to_string();
+        assert!(err.contains("[3, 7]"), "{err}");
+        let obs = Tensor::zeros((4, 5), candle_core::DType::F32, &Device::Cpu).unwrap();
+        let err = critic_input(&obs, &y).unwrap_err().to_string();
+        assert!(err.contains("4 observations"), "{err}");
     }
 
     #[test]

@@ -1,8 +1,9 @@
 //! The numeric engine under the agents: the dense layer, the fused stack of dense layers the
-//! off-policy agents train through, SAC's policy head as one node ([`squashed`]), the
-//! matrix-multiply kernels they run on, glibc's `expf`, `logf` and `tanhf` in vectorised form
-//! ([`glibc_math`]), the in-place optimiser and target-network steps, and the settings every
-//! network computation runs under (flush-to-zero, the helper thread, the allocator).
+//! off-policy agents train through, SAC's policy head as one node ([`squashed`]) and its actor
+//! objective as two ([`actor_objective`]), the matrix-multiply kernels they run on, glibc's
+//! `expf`, `logf` and `tanhf` in vectorised form ([`glibc_math`]), the in-place optimiser and
+//! target-network steps, and the settings every network computation runs under (flush-to-zero,
+//! the helper thread, the allocator).
 //!
 //! Results are the same bits on every x86-64 CPU with AVX2 and FMA, with or without AVX-512, for
 //! a fixed seed and thread count: the matrix products follow one order of operations on every
@@ -10,6 +11,7 @@
 //! [`glibc_math`]'s) use only operations IEEE 754 rounds one at a time, so their vector width
 //! does not change a bit; and everything else here is plain Rust compiled for the baseline x86-64
 //! target.
+pub mod actor_objective;
 pub(crate) mod allocator;
 pub mod batch_renorm;
 pub(crate) mod denormals;
