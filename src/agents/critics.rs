@@ -6,6 +6,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::config::WeightInit;
 use super::nets::{DenseStack, Mlp, Output};
+use crate::numeric::objectives::critic_mse;
 use crate::numeric::optim::Param;
 use crate::numeric::stack::relu_stack;
 
@@ -35,11 +36,6 @@ impl Critics {
     /// An independent copy with equal weights (for target networks).
     pub(crate) fn deep_copy(&self) -> Result<Critics> {
         Ok(Critics { body: self.body.deep_copy()? })
-    }
-
-    /// Number of networks.
-    fn k(&self) -> usize {
-        self.body.layers()[0].0.dims()[0]
     }
 
     /// Q values `[k, n, 1]` of every member for inputs `x` `[n, in]`.
@@ -77,8 +73,7 @@ impl Critics {
 
     /// sum over members of the mean squared error against `y` `[n, 1]`.
     pub(crate) fn mse_sum(&self, x: &Tensor, y: &Tensor) -> Result<Tensor> {
-        let q = self.forward(x)?;
-        q.broadcast_sub(y)?.sqr()?.mean_all()? * self.k() as f64
+        critic_mse(&self.forward(x)?, y)
     }
 
     #[cfg(test)]
@@ -107,6 +102,47 @@ mod tests {
     use super::*;
     use candle_core::Device;
     use rand::SeedableRng;
+
+    #[test]
+    fn the_critic_loss_node_gives_the_bits_of_candles_graph() {
+        use crate::numeric::second_core;
+        use rand_distr::{Distribution, StandardNormal};
+        for helper in [false, true] {
+            std::thread::spawn(move || {
+                if helper {
+                    second_core::enable_on_this_thread();
+                }
+                let mut rng = ChaCha8Rng::seed_from_u64(8);
+                for (k, n, inputs) in [(2, 1, 3), (2, 7, 5), (3, 256, 23)] {
+                    let critics = Critics::new(k, &[inputs, 32, 32, 1], WeightInit::Uniform, &mut rng).unwrap();
+                    let mut normal =
+                        |count: usize| -> Vec<f32> { (0..count).map(|_| StandardNormal.sample(&mut rng)).collect() };
+                    let x = Tensor::from_vec(normal(n * inputs), (n, inputs), &Device::Cpu).unwrap();
+                    let y = Tensor::from_vec(normal(n), (n, 1), &Device::Cpu).unwrap();
+                    let run = |fused: bool| {
+                        let q = critics.forward(&x).unwrap();
+                        let loss = if fused {
+                            critics.mse_sum(&x, &y).unwrap()
+                        } else {
+                            (q.broadcast_sub(&y).unwrap().sqr().unwrap().mean_all().unwrap() * k as f64).unwrap()
+                        };
+                        let grads = loss.backward().unwrap();
+                        let mut out = vec![loss.to_scalar::<f32>().unwrap().to_bits()];
+                        assert!(critics.body.vars().iter().all(|v| grads.get(v.as_tensor()).is_none()));
+                        for g in critics.body.take_grads() {
+                            out.extend(g.expect("a gradient for every weight").iter().map(|v| v.to_bits()));
+                        }
+                        out
+                    };
+                    let graph = run(false);
+                    let fused = run(true);
+                    assert_eq!(graph, fused, "k {k}, n {n}, helper {helper}");
+                }
+            })
+            .join()
+            .unwrap();
+        }
+    }
 
     #[test]
     fn stacked_critics_equal_separate_networks_in_value_and_gradient() {

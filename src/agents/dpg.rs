@@ -11,6 +11,7 @@ use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, Mlp, Output};
 use super::noise::{Noise, NoiseKind};
 use super::{layer_sizes, Agent, Losses};
+use crate::numeric::objectives::{critic_minimum, td_target};
 use crate::numeric::optim::Adam;
 
 /// TD3 and DDPG: a deterministic actor, one or two critics, and target networks.
@@ -105,10 +106,9 @@ impl DeterministicAgent {
             next_action =
                 (next_action + Tensor::from_vec(eps, (n, self.act_dim), &Device::Cpu)?)?.clamp(-1f32, 1f32)?;
         }
-        let q_next = self.critic_targets.min(&Self::critic_input(&next_obs, &next_action)?)?;
-        let rewards = batch_tensor(&batch.rewards, n, 1)?;
-        let not_done = batch_tensor(&batch.terminated, n, 1)?.affine(-1.0, 1.0)?;
-        Ok((rewards + (not_done * q_next)?.affine(self.gamma, 0.0)?)?.detach())
+        let q = self.critic_targets.forward(&Self::critic_input(&next_obs, &next_action)?)?;
+        let q_next = critic_minimum(&q.flatten_all()?.to_vec1::<f32>()?, n);
+        td_target(&batch.rewards, &batch.terminated, &q_next, self.gamma)
     }
 }
 

@@ -67,6 +67,23 @@ impl DenseStack {
         self.grads[i].peek()
     }
 
+    /// Every waiting gradient, in the order of `vars`, each taken from its slot.
+    #[cfg(test)]
+    pub(crate) fn take_grads(&self) -> Vec<Option<Vec<f32>>> {
+        self.grads
+            .iter()
+            .map(|slot| {
+                let mut taken = None;
+                slot.take(|g| {
+                    taken = Some(g.to_vec());
+                    Ok(())
+                })
+                .unwrap();
+                taken
+            })
+            .collect()
+    }
+
     /// (weight, bias) per layer.
     pub fn layers(&self) -> &[(Var, Var)] {
         &self.layers

@@ -10,7 +10,7 @@ use super::config::{Algo, SacVersion, TanhCorrection, TrainConfig, WeightInit};
 use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
 use super::{layer_sizes, Agent, Losses};
-use crate::numeric::actor_objective::{actor_objective, critic_input};
+use crate::numeric::objectives::{actor_objective, critic_input, soft_value, td_target};
 use crate::numeric::optim::Adam;
 use crate::numeric::squashed::squashed_sample;
 
@@ -157,8 +157,6 @@ impl Agent for SacAgent {
         let obs = batch_tensor(&batch.obs, n, self.obs_dim)?;
         let actions = batch_tensor(&batch.actions, n, self.act_dim)?;
         let next_obs = batch_tensor(&batch.next_obs, n, self.obs_dim)?;
-        let rewards = batch_tensor(&batch.rewards, n, 1)?;
-        let not_done = batch_tensor(&batch.terminated, n, 1)?.affine(-1.0, 1.0)?;
         let alpha = self.alpha()?;
         let mut losses = Losses::default();
 
@@ -166,18 +164,18 @@ impl Agent for SacAgent {
         // target value network (v1).
         let next_value = match &self.value {
             None => {
-                let (next_a, next_logp) = self.sample(&next_obs, rng)?;
-                (self.critic_targets.min(&Self::critic_input(&next_obs, &next_a)?)? - next_logp.affine(alpha, 0.0)?)?
+                let next = sample_squashed_joint(&self.actor.forward(&next_obs)?, self.tanh_correction, rng)?;
+                soft_value(&self.critic_targets.forward(&critic_input(&next_obs, &next)?)?, &next, alpha)?
             }
-            Some(v) => v.target.forward(&next_obs)?,
+            Some(v) => v.target.forward(&next_obs)?.flatten_all()?.to_vec1::<f32>()?,
         };
-        let y = (rewards + (not_done * next_value)?.affine(self.gamma, 0.0)?)?.detach();
+        let y = td_target(&batch.rewards, &batch.terminated, &next_value, self.gamma)?;
         let critic_loss = self.critics.mse_sum(&Self::critic_input(&obs, &actions)?, &y)?;
         self.critic_opt.step(&critic_loss.backward()?)?;
         losses.critic = critic_loss.to_scalar::<f32>()? as f64;
 
         // the action and its log-density side by side, and the objective as two nodes
-        // (numeric::actor_objective: the graph's bits without its small nodes)
+        // (numeric::objectives: the graph's bits without its small nodes)
         let pi = sample_squashed_joint(&self.actor.forward(&obs)?, self.tanh_correction, rng)?;
         let logp = pi.narrow(1, self.act_dim, 1)?;
         let q = self.critics.forward_frozen(&critic_input(&obs, &pi)?)?;

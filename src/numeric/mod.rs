@@ -11,7 +11,6 @@
 //! [`glibc_math`]'s) use only operations IEEE 754 rounds one at a time, so their vector width
 //! does not change a bit; and everything else here is plain Rust compiled for the baseline x86-64
 //! target.
-pub mod actor_objective;
 pub(crate) mod allocator;
 pub mod batch_renorm;
 pub(crate) mod denormals;
@@ -20,6 +19,7 @@ pub mod glibc_math;
 pub(crate) mod inplace;
 pub mod kernel_path;
 pub mod matmul;
+pub mod objectives;
 pub mod optim;
 pub mod second_core;
 pub mod squashed;
