@@ -10,8 +10,9 @@
 //! thread alone while the helper thread waited: about 20 us of a two-thread SAC update.
 //!
 //! The nodes give the bits of those graphs (tested in `agents::sac` and `agents::critics`):
-//! - a loss is computed by the same candle operations, on plain tensors inside the node (its sum
-//!   is candle's, whose order depends on whether the CPU has AVX2, nothing else);
+//! - a loss is computed by the graph's own candle operations on the detached values, before the
+//!   node, which holds it (candle's sum takes an order that depends on whether the CPU has AVX2,
+//!   nothing else);
 //! - the gradients follow candle's rules (`backprop.rs` in candle-core 0.11): the minimum's
 //!   gradient goes to each critic whose value equals it (`mask * g`), a difference gives `+g` and
 //!   `-g`, a square `(d * g) * 2`, an `affine` multiplies by its factor, and every gradient that
@@ -92,6 +93,8 @@ pub fn critic_minimum(q: &[f32], n: usize) -> Vec<f32> {
 
 struct ActorObjective {
     alpha: f64,
+    /// The loss, computed before the node by candle's operations (for candle's sum).
+    loss: f32,
 }
 
 impl CustomOp2 for ActorObjective {
@@ -99,16 +102,8 @@ impl CustomOp2 for ActorObjective {
         "actor-objective"
     }
 
-    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        let q = contiguous(s1, l1, "actor objective")?;
-        let y = contiguous(s2, l2, "actor objective")?;
-        let (n, width) = l2.shape().dims2()?;
-        let log_pi: Vec<f32> = y.chunks_exact(width).map(|row| row[width - 1]).collect();
-        // candle's operations on plain tensors, for candle's sum
-        let log_pi = Tensor::from_vec(log_pi, (n, 1), &Device::Cpu)?;
-        let q_min = Tensor::from_vec(critic_minimum(q, n), (n, 1), &Device::Cpu)?;
-        let loss = (log_pi.affine(self.alpha, 0.0)? - q_min)?.mean_all()?;
-        Ok((CpuStorage::F32(vec![loss.to_scalar::<f32>()?]), Shape::from(())))
+    fn cpu_fwd(&self, _: &CpuStorage, _: &Layout, _: &CpuStorage, _: &Layout) -> Result<(CpuStorage, Shape)> {
+        Ok((CpuStorage::F32(vec![self.loss]), Shape::from(())))
     }
 
     fn bwd(&self, q: &Tensor, y: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
@@ -145,11 +140,16 @@ pub fn actor_objective(q: &Tensor, y: &Tensor, alpha: f64) -> Result<Tensor> {
     if one != 1 || ny != n || width < 2 {
         bail!("actor objective: critic values of shape {:?} and a policy output of shape [{ny}, {width}]", q.dims());
     }
-    q.apply_op2(y, ActorObjective { alpha })
+    // the graph this node replaces, on the values alone
+    let log_pi = y.detach().narrow(1, width - 1, 1)?;
+    let loss = (log_pi.affine(alpha, 0.0)? - q.detach().min(0)?)?.mean_all()?.to_scalar::<f32>()?;
+    q.apply_op2(y, ActorObjective { alpha, loss })
 }
 
 struct CriticMse {
     members: usize,
+    /// The loss, computed before the node by candle's operations (for candle's sum).
+    loss: f32,
 }
 
 impl CustomOp2 for CriticMse {
@@ -157,12 +157,8 @@ impl CustomOp2 for CriticMse {
         "critic-mse"
     }
 
-    fn cpu_fwd(&self, s1: &CpuStorage, l1: &Layout, s2: &CpuStorage, l2: &Layout) -> Result<(CpuStorage, Shape)> {
-        // candle's operations on plain tensors, for candle's sum
-        let q = Tensor::from_slice(contiguous(s1, l1, "critic mse")?, l1.shape(), &Device::Cpu)?;
-        let y = Tensor::from_slice(contiguous(s2, l2, "critic mse")?, l2.shape(), &Device::Cpu)?;
-        let loss = (q.broadcast_sub(&y)?.sqr()?.mean_all()? * self.members as f64)?;
-        Ok((CpuStorage::F32(vec![loss.to_scalar::<f32>()?]), Shape::from(())))
+    fn cpu_fwd(&self, _: &CpuStorage, _: &Layout, _: &CpuStorage, _: &Layout) -> Result<(CpuStorage, Shape)> {
+        Ok((CpuStorage::F32(vec![self.loss]), Shape::from(())))
     }
 
     fn bwd(&self, q: &Tensor, y: &Tensor, _res: &Tensor, grad: &Tensor) -> Result<(Option<Tensor>, Option<Tensor>)> {
@@ -192,7 +188,10 @@ pub fn critic_mse(q: &Tensor, y: &Tensor) -> Result<Tensor> {
     if one != 1 || y.dims() != [n, 1] {
         bail!("critic mse: critic values of shape {:?} and targets of shape {:?}", q.dims(), y.dims());
     }
-    q.apply_op2(&y.detach(), CriticMse { members: k })
+    // the graph this node replaces, on the values alone
+    let y = y.detach();
+    let loss = (q.detach().broadcast_sub(&y)?.sqr()?.mean_all()? * k as f64)?.to_scalar::<f32>()?;
+    q.apply_op2(&y, CriticMse { members: k, loss })
 }
 
 /// The critics' regression target `r + gamma (1 - terminated) v'` per row (`[n, 1]`, no
