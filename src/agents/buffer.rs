@@ -484,30 +484,23 @@ mod tests {
     fn sampling_in_halves_equals_row_by_row_with_and_without_the_helper() {
         let mut buf = ReplayBuffer::new(300, 2, 1);
         fill(&mut buf, &[(120, true), (90, false), (140, true), (7, false)]);
-        std::thread::spawn(move || {
-            for helper in [false, true] {
-                if helper {
-                    second_core::enable_on_this_thread();
-                }
-                // below the split, at it, odd, and a training batch
-                for size in [1, SPLIT_ROWS - 1, SPLIT_ROWS, 257, 256] {
-                    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(size as u64);
-                    let mut got = Batch::new(size, 2, 1);
-                    buf.sample_into(&mut got, &mut rng);
-                    let after: u64 = rng.random();
-                    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(size as u64);
-                    let want = sample_row_by_row(&buf, size, &mut rng);
-                    let what = format!("size {size}, helper {helper}");
-                    assert_eq!(got.obs, want.obs, "{what}");
-                    assert_eq!(got.actions, want.actions, "{what}");
-                    assert_eq!(got.rewards, want.rewards, "{what}");
-                    assert_eq!(got.next_obs, want.next_obs, "{what}");
-                    assert_eq!(got.terminated, want.terminated, "{what}");
-                    assert_eq!(after, rng.random::<u64>(), "the RNG advances as row by row ({what})");
-                }
+        second_core::with_and_without_helper(|helper| {
+            // below the split, at it, odd, and a training batch
+            for size in [1, SPLIT_ROWS - 1, SPLIT_ROWS, 257, 256] {
+                let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(size as u64);
+                let mut got = Batch::new(size, 2, 1);
+                buf.sample_into(&mut got, &mut rng);
+                let after: u64 = rng.random();
+                let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(size as u64);
+                let want = sample_row_by_row(&buf, size, &mut rng);
+                let what = format!("size {size}, helper {helper}");
+                assert_eq!(got.obs, want.obs, "{what}");
+                assert_eq!(got.actions, want.actions, "{what}");
+                assert_eq!(got.rewards, want.rewards, "{what}");
+                assert_eq!(got.next_obs, want.next_obs, "{what}");
+                assert_eq!(got.terminated, want.terminated, "{what}");
+                assert_eq!(after, rng.random::<u64>(), "the RNG advances as row by row ({what})");
             }
-        })
-        .join()
-        .unwrap();
+        });
     }
 }

@@ -107,41 +107,34 @@ mod tests {
     fn the_critic_loss_node_gives_the_bits_of_candles_graph() {
         use crate::numeric::second_core;
         use rand_distr::{Distribution, StandardNormal};
-        for helper in [false, true] {
-            std::thread::spawn(move || {
-                if helper {
-                    second_core::enable_on_this_thread();
-                }
-                let mut rng = ChaCha8Rng::seed_from_u64(8);
-                for (k, n, inputs) in [(2, 1, 3), (2, 7, 5), (3, 256, 23)] {
-                    let critics = Critics::new(k, &[inputs, 32, 32, 1], WeightInit::Uniform, &mut rng).unwrap();
-                    let mut normal =
-                        |count: usize| -> Vec<f32> { (0..count).map(|_| StandardNormal.sample(&mut rng)).collect() };
-                    let x = Tensor::from_vec(normal(n * inputs), (n, inputs), &Device::Cpu).unwrap();
-                    let y = Tensor::from_vec(normal(n), (n, 1), &Device::Cpu).unwrap();
-                    let run = |fused: bool| {
-                        let q = critics.forward(&x).unwrap();
-                        let loss = if fused {
-                            critics.mse_sum(&x, &y).unwrap()
-                        } else {
-                            (q.broadcast_sub(&y).unwrap().sqr().unwrap().mean_all().unwrap() * k as f64).unwrap()
-                        };
-                        let grads = loss.backward().unwrap();
-                        let mut out = vec![loss.to_scalar::<f32>().unwrap().to_bits()];
-                        assert!(critics.body.vars().iter().all(|v| grads.get(v.as_tensor()).is_none()));
-                        for g in critics.body.take_grads() {
-                            out.extend(g.expect("a gradient for every weight").iter().map(|v| v.to_bits()));
-                        }
-                        out
+        second_core::with_and_without_helper(|helper| {
+            let mut rng = ChaCha8Rng::seed_from_u64(8);
+            for (k, n, inputs) in [(2, 1, 3), (2, 7, 5), (3, 256, 23)] {
+                let critics = Critics::new(k, &[inputs, 32, 32, 1], WeightInit::Uniform, &mut rng).unwrap();
+                let mut normal =
+                    |count: usize| -> Vec<f32> { (0..count).map(|_| StandardNormal.sample(&mut rng)).collect() };
+                let x = Tensor::from_vec(normal(n * inputs), (n, inputs), &Device::Cpu).unwrap();
+                let y = Tensor::from_vec(normal(n), (n, 1), &Device::Cpu).unwrap();
+                let run = |fused: bool| {
+                    let q = critics.forward(&x).unwrap();
+                    let loss = if fused {
+                        critics.mse_sum(&x, &y).unwrap()
+                    } else {
+                        (q.broadcast_sub(&y).unwrap().sqr().unwrap().mean_all().unwrap() * k as f64).unwrap()
                     };
-                    let graph = run(false);
-                    let fused = run(true);
-                    assert_eq!(graph, fused, "k {k}, n {n}, helper {helper}");
-                }
-            })
-            .join()
-            .unwrap();
-        }
+                    let grads = loss.backward().unwrap();
+                    let mut out = vec![loss.to_scalar::<f32>().unwrap().to_bits()];
+                    assert!(critics.body.vars().iter().all(|v| grads.get(v.as_tensor()).is_none()));
+                    for g in critics.body.take_grads() {
+                        out.extend(g.expect("a gradient for every weight").iter().map(|v| v.to_bits()));
+                    }
+                    out
+                };
+                let graph = run(false);
+                let fused = run(true);
+                assert_eq!(graph, fused, "k {k}, n {n}, helper {helper}");
+            }
+        });
     }
 
     #[test]

@@ -324,40 +324,31 @@ mod tests {
     /// corrections, in one piece and in halves on two threads.
     #[test]
     fn the_fused_head_gives_the_bits_of_candles_graph() {
-        for helper in [false, true] {
-            std::thread::spawn(move || {
-                if helper {
-                    second_core::enable_on_this_thread();
-                }
-                let mut rng = ChaCha8Rng::seed_from_u64(5);
-                for (n, act_dim) in [(1, 6), (5, 3), (256, 6), (77, 17)] {
-                    for correction in [TanhCorrection::Exact, TanhCorrection::Epsilon] {
-                        let out = policy_output(n, act_dim, &mut rng);
-                        let eps: Vec<f32> = (0..n * act_dim).map(|_| StandardNormal.sample(&mut rng)).collect();
-                        let eps_tensor = tensor(&eps, (n, act_dim));
-                        let graph =
-                            actor_loss_through(&out, n, act_dim, |o| sample_squashed_graph(o, &eps_tensor, correction));
-                        let fused = actor_loss_through(&out, n, act_dim, |o| {
-                            let y =
-                                squashed_sample(o, eps.clone(), (LOG_STD_MIN as f32, LOG_STD_MAX as f32), correction)
-                                    .unwrap();
-                            (y.narrow(1, 0, act_dim).unwrap(), y.narrow(1, act_dim, 1).unwrap())
-                        });
-                        for (what, (g, f)) in ["action", "log-density", "gradient"].iter().zip(graph.iter().zip(&fused))
-                        {
-                            assert_eq!(
-                                bits(g),
-                                bits(f),
-                                "{what}: n {n}, act_dim {act_dim}, {correction:?}, helper {helper}"
-                            );
-                        }
-                        assert!(fused[2].iter().all(|g| g.is_finite()));
+        second_core::with_and_without_helper(|helper| {
+            let mut rng = ChaCha8Rng::seed_from_u64(5);
+            for (n, act_dim) in [(1, 6), (5, 3), (256, 6), (77, 17)] {
+                for correction in [TanhCorrection::Exact, TanhCorrection::Epsilon] {
+                    let out = policy_output(n, act_dim, &mut rng);
+                    let eps: Vec<f32> = (0..n * act_dim).map(|_| StandardNormal.sample(&mut rng)).collect();
+                    let eps_tensor = tensor(&eps, (n, act_dim));
+                    let graph =
+                        actor_loss_through(&out, n, act_dim, |o| sample_squashed_graph(o, &eps_tensor, correction));
+                    let fused = actor_loss_through(&out, n, act_dim, |o| {
+                        let y = squashed_sample(o, eps.clone(), (LOG_STD_MIN as f32, LOG_STD_MAX as f32), correction)
+                            .unwrap();
+                        (y.narrow(1, 0, act_dim).unwrap(), y.narrow(1, act_dim, 1).unwrap())
+                    });
+                    for (what, (g, f)) in ["action", "log-density", "gradient"].iter().zip(graph.iter().zip(&fused)) {
+                        assert_eq!(
+                            bits(g),
+                            bits(f),
+                            "{what}: n {n}, act_dim {act_dim}, {correction:?}, helper {helper}"
+                        );
                     }
+                    assert!(fused[2].iter().all(|g| g.is_finite()));
                 }
-            })
-            .join()
-            .unwrap();
-        }
+            }
+        });
     }
 
     /// SAC's actor loss and its gradient at the policy output, through candle's graph (the head's
@@ -394,45 +385,37 @@ mod tests {
 
     #[test]
     fn the_actor_objective_gives_the_bits_of_candles_graph() {
-        for helper in [false, true] {
-            std::thread::spawn(move || {
-                if helper {
-                    second_core::enable_on_this_thread();
-                }
-                let mut rng = ChaCha8Rng::seed_from_u64(6);
-                for (n, obs_dim, act_dim) in [(1, 3, 2), (5, 4, 3), (256, 17, 6)] {
-                    for twins in [false, true] {
-                        let sizes = [obs_dim + act_dim, 32, 32, 1];
-                        let critics = Critics::new(2, &sizes, WeightInit::Uniform, &mut rng).unwrap();
-                        if twins {
-                            // equal members: every row's minimum is a tie, whose gradient both get
-                            for (w, b) in critics.named_vars("c").chunks(2).map(|p| (&p[0].1, &p[1].1)) {
-                                let w0 = w.as_tensor().narrow(0, 0, 1).unwrap();
-                                let b0 = b.as_tensor().narrow(0, 0, 1).unwrap();
-                                w.set(&Tensor::cat(&[&w0, &w0], 0).unwrap()).unwrap();
-                                b.set(&Tensor::cat(&[&b0, &b0], 0).unwrap()).unwrap();
-                            }
-                        }
-                        for correction in [TanhCorrection::Exact, TanhCorrection::Epsilon] {
-                            let out = policy_output(n, act_dim, &mut rng);
-                            let obs: Vec<f32> = (0..n * obs_dim).map(|_| StandardNormal.sample(&mut rng)).collect();
-                            let [graph, fused] =
-                                actor_objective_both_ways(&out, &obs, n, act_dim, &critics, correction);
-                            for (what, (g, f)) in ["loss", "gradient"].iter().zip(graph.iter().zip(&fused)) {
-                                assert_eq!(
-                                    bits(g),
-                                    bits(f),
-                                    "{what}: n {n}, act_dim {act_dim}, twins {twins}, {correction:?}, helper {helper}"
-                                );
-                            }
-                            assert!(fused[1].iter().any(|g| *g != 0.0));
+        second_core::with_and_without_helper(|helper| {
+            let mut rng = ChaCha8Rng::seed_from_u64(6);
+            for (n, obs_dim, act_dim) in [(1, 3, 2), (5, 4, 3), (256, 17, 6)] {
+                for twins in [false, true] {
+                    let sizes = [obs_dim + act_dim, 32, 32, 1];
+                    let critics = Critics::new(2, &sizes, WeightInit::Uniform, &mut rng).unwrap();
+                    if twins {
+                        // equal members: every row's minimum is a tie, whose gradient both get
+                        for (w, b) in critics.named_vars("c").chunks(2).map(|p| (&p[0].1, &p[1].1)) {
+                            let w0 = w.as_tensor().narrow(0, 0, 1).unwrap();
+                            let b0 = b.as_tensor().narrow(0, 0, 1).unwrap();
+                            w.set(&Tensor::cat(&[&w0, &w0], 0).unwrap()).unwrap();
+                            b.set(&Tensor::cat(&[&b0, &b0], 0).unwrap()).unwrap();
                         }
                     }
+                    for correction in [TanhCorrection::Exact, TanhCorrection::Epsilon] {
+                        let out = policy_output(n, act_dim, &mut rng);
+                        let obs: Vec<f32> = (0..n * obs_dim).map(|_| StandardNormal.sample(&mut rng)).collect();
+                        let [graph, fused] = actor_objective_both_ways(&out, &obs, n, act_dim, &critics, correction);
+                        for (what, (g, f)) in ["loss", "gradient"].iter().zip(graph.iter().zip(&fused)) {
+                            assert_eq!(
+                                bits(g),
+                                bits(f),
+                                "{what}: n {n}, act_dim {act_dim}, twins {twins}, {correction:?}, helper {helper}"
+                            );
+                        }
+                        assert!(fused[1].iter().any(|g| *g != 0.0));
+                    }
                 }
-            })
-            .join()
-            .unwrap();
-        }
+            }
+        });
     }
 
     #[test]

@@ -717,30 +717,23 @@ mod tests {
     /// Weights held constant: the input gradient is unchanged and no weight gradient is made.
     #[test]
     fn frozen_weights_pass_the_input_gradient_and_get_none() {
-        for helper in [false, true] {
-            std::thread::spawn(move || {
-                if helper {
-                    second_core::enable_on_this_thread();
+        second_core::with_and_without_helper(|_| {
+            for case in CASES {
+                let (xs, ws, bs) = case;
+                for act in [Activation::Identity, Activation::Relu] {
+                    let trained = run(case, act);
+                    let (x, w, b) = (var(xs, 0.1), var(ws, 0.7), var(bs, 1.9));
+                    let shape = out_shape(xs, ws);
+                    let probe = Tensor::from_vec(values(shape.iter().product(), 2.3), shape, &Device::Cpu).unwrap();
+                    let (w, b) = (w.as_tensor().detach(), b.as_tensor().detach());
+                    let y = dense(x.as_tensor(), &w, &b, act).unwrap();
+                    let grads = (&y * &probe).unwrap().sum_all().unwrap().backward().unwrap();
+                    assert_eq!(flat(&y), trained[0], "{xs:?} {act:?}");
+                    assert_eq!(flat(grads.get(x.as_tensor()).unwrap()), trained[1], "{xs:?} {act:?}");
+                    // (candle would store a gradient for the detached tensors had one been made)
+                    assert!(grads.get(&w).is_none() && grads.get(&b).is_none(), "{xs:?} {act:?}");
                 }
-                for case in CASES {
-                    let (xs, ws, bs) = case;
-                    for act in [Activation::Identity, Activation::Relu] {
-                        let trained = run(case, act);
-                        let (x, w, b) = (var(xs, 0.1), var(ws, 0.7), var(bs, 1.9));
-                        let shape = out_shape(xs, ws);
-                        let probe = Tensor::from_vec(values(shape.iter().product(), 2.3), shape, &Device::Cpu).unwrap();
-                        let (w, b) = (w.as_tensor().detach(), b.as_tensor().detach());
-                        let y = dense(x.as_tensor(), &w, &b, act).unwrap();
-                        let grads = (&y * &probe).unwrap().sum_all().unwrap().backward().unwrap();
-                        assert_eq!(flat(&y), trained[0], "{xs:?} {act:?}");
-                        assert_eq!(flat(grads.get(x.as_tensor()).unwrap()), trained[1], "{xs:?} {act:?}");
-                        // (candle would store a gradient for the detached tensors had one been made)
-                        assert!(grads.get(&w).is_none() && grads.get(&b).is_none(), "{xs:?} {act:?}");
-                    }
-                }
-            })
-            .join()
-            .unwrap();
-        }
+            }
+        });
     }
 }

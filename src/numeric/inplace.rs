@@ -187,49 +187,42 @@ mod tests {
     fn split_updates_give_the_bits_of_one_pass() {
         let n = SPLIT_LEN * 2 + 7;
         let wave = move |seed: f32| (0..n).map(|i| ((i as f32) * 0.013 + seed).sin()).collect::<Vec<f32>>();
-        for helper in [false, true] {
-            std::thread::spawn(move || {
-                if helper {
-                    second_core::enable_on_this_thread();
-                }
-                let (theta0, grad, m0, v0) =
-                    (wave(0.1), wave(0.7), wave(1.3), wave(2.1).iter().map(|x| x * x).collect::<Vec<_>>());
-                let (lr, b1, b2, eps, bc1, bc2) = (1e-3f32, 0.9f32, 0.999f32, 1e-8f32, 0.19f32, 0.0297f32);
-                let (mut m, mut v) = (m0.clone(), v0.clone());
-                let theta = Tensor::new(theta0.as_slice(), &Device::Cpu).unwrap();
-                let g = Tensor::new(grad.as_slice(), &Device::Cpu).unwrap();
-                theta
-                    .inplace_op2(
-                        &g,
-                        &AdamStep {
-                            lr,
-                            beta1: b1,
-                            beta2: b2,
-                            eps,
-                            bias_correction1: bc1,
-                            bias_correction2: bc2,
-                            m: RefCell::new(&mut m),
-                            v: RefCell::new(&mut v),
-                        },
-                    )
-                    .unwrap();
-                let (step_size, inv) = (lr / bc1, 1.0 / bc2.sqrt());
-                for i in 0..n {
-                    let m_i = b1 * m0[i] + (1.0 - b1) * grad[i];
-                    let v_i = b2 * v0[i] + (1.0 - b2) * grad[i] * grad[i];
-                    let t_i = theta0[i] - step_size * m_i / (v_i.sqrt() * inv + eps);
-                    assert_eq!((m[i].to_bits(), v[i].to_bits()), (m_i.to_bits(), v_i.to_bits()), "moment {i}");
-                    assert_eq!(theta.get(i).unwrap().to_scalar::<f32>().unwrap().to_bits(), t_i.to_bits(), "theta {i}");
-                }
-                let target = Tensor::new(theta0.as_slice(), &Device::Cpu).unwrap();
-                target.inplace_op2(&g, &Polyak { tau: 0.005 }).unwrap();
-                let averaged = target.to_vec1::<f32>().unwrap();
-                for i in 0..n {
-                    assert_eq!(averaged[i].to_bits(), (0.005 * grad[i] + (1.0 - 0.005) * theta0[i]).to_bits(), "{i}");
-                }
-            })
-            .join()
-            .unwrap();
-        }
+        second_core::with_and_without_helper(|_| {
+            let (theta0, grad, m0, v0) =
+                (wave(0.1), wave(0.7), wave(1.3), wave(2.1).iter().map(|x| x * x).collect::<Vec<_>>());
+            let (lr, b1, b2, eps, bc1, bc2) = (1e-3f32, 0.9f32, 0.999f32, 1e-8f32, 0.19f32, 0.0297f32);
+            let (mut m, mut v) = (m0.clone(), v0.clone());
+            let theta = Tensor::new(theta0.as_slice(), &Device::Cpu).unwrap();
+            let g = Tensor::new(grad.as_slice(), &Device::Cpu).unwrap();
+            theta
+                .inplace_op2(
+                    &g,
+                    &AdamStep {
+                        lr,
+                        beta1: b1,
+                        beta2: b2,
+                        eps,
+                        bias_correction1: bc1,
+                        bias_correction2: bc2,
+                        m: RefCell::new(&mut m),
+                        v: RefCell::new(&mut v),
+                    },
+                )
+                .unwrap();
+            let (step_size, inv) = (lr / bc1, 1.0 / bc2.sqrt());
+            for i in 0..n {
+                let m_i = b1 * m0[i] + (1.0 - b1) * grad[i];
+                let v_i = b2 * v0[i] + (1.0 - b2) * grad[i] * grad[i];
+                let t_i = theta0[i] - step_size * m_i / (v_i.sqrt() * inv + eps);
+                assert_eq!((m[i].to_bits(), v[i].to_bits()), (m_i.to_bits(), v_i.to_bits()), "moment {i}");
+                assert_eq!(theta.get(i).unwrap().to_scalar::<f32>().unwrap().to_bits(), t_i.to_bits(), "theta {i}");
+            }
+            let target = Tensor::new(theta0.as_slice(), &Device::Cpu).unwrap();
+            target.inplace_op2(&g, &Polyak { tau: 0.005 }).unwrap();
+            let averaged = target.to_vec1::<f32>().unwrap();
+            for i in 0..n {
+                assert_eq!(averaged[i].to_bits(), (0.005 * grad[i] + (1.0 - 0.005) * theta0[i]).to_bits(), "{i}");
+            }
+        });
     }
 }

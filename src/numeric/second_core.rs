@@ -149,6 +149,25 @@ pub fn join<A: FnOnce(), B: FnOnce() + Send>(a: A, b: B) {
     }
 }
 
+/// Runs `f(helper)` twice, each time on a new thread: without a helper thread, then with one
+/// (`helper` true). A panic in `f` is passed on. For tests of code that splits its work.
+#[cfg(test)]
+pub(crate) fn with_and_without_helper(f: impl Fn(bool) + Sync) {
+    for helper in [false, true] {
+        std::thread::scope(|scope| {
+            let run = scope.spawn(|| {
+                if helper {
+                    enable_on_this_thread();
+                }
+                f(helper)
+            });
+            if let Err(panic) = run.join() {
+                resume_unwind(panic);
+            }
+        });
+    }
+}
+
 /// Spins for up to SPIN, then parks, until `state` is one of `wanted`.
 fn wait_for(state: &AtomicU32, wanted: &[u32]) -> u32 {
     let started = Instant::now();

@@ -415,24 +415,17 @@ mod tests {
     /// (as f32 equality: candle adds every gradient to a zero, which turns a -0 into +0).
     #[test]
     fn a_stack_gives_the_bits_of_its_layers_one_node_at_a_time() {
-        for helper in [false, true] {
-            std::thread::spawn(move || {
-                if helper {
-                    second_core::enable_on_this_thread();
-                }
-                for case in 0..CASES.len() {
-                    for twice in [false, true] {
-                        let [reference, fused] = both(case, twice);
-                        assert_eq!(reference.len(), fused.len());
-                        for (i, (r, f)) in reference.iter().zip(&fused).enumerate() {
-                            assert_eq!(r, f, "case {case}, twice {twice}, helper {helper}, item {i}");
-                        }
+        second_core::with_and_without_helper(|helper| {
+            for case in 0..CASES.len() {
+                for twice in [false, true] {
+                    let [reference, fused] = both(case, twice);
+                    assert_eq!(reference.len(), fused.len());
+                    for (i, (r, f)) in reference.iter().zip(&fused).enumerate() {
+                        assert_eq!(r, f, "case {case}, twice {twice}, helper {helper}, item {i}");
                     }
                 }
-            })
-            .join()
-            .unwrap();
-        }
+            }
+        });
     }
 
     /// Without slots the weights are constants: the input gradient is unchanged, no weight
