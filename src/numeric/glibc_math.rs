@@ -2,7 +2,7 @@
 //! with FMA), bit for bit, in branch-free code that vectorises.
 //!
 //! Rust's `f32::exp`, `ln` and `tanh` call the system's libm one element at a time; in SAC's
-//! policy head those calls took about a tenth of a two-thread update. These functions follow the
+//! policy head those calls took about a twentieth of a two-thread update. These functions follow the
 //! same operations in the same order as glibc's code, so they return the same bits, and because
 //! every lane does the same IEEE 754 operations they do so at any vector width:
 //! - [`exp`]: glibc's `sysdeps/ieee754/flt-32/e_expf.c` (from Arm's optimized-routines), in
@@ -192,10 +192,11 @@ fn expm1_for_tanh(x: f32) -> f32 {
     let half = if negative { -0.5f32 } else { 0.5 };
 
     // argument reduction: x = k ln2 + hi - lo, and c the rounding error of hi - lo
-    let near = hx < 0x3f85_1592; // |x| < 1.5 ln 2 (k = +-1)
-                                 // k = (int) (x / ln 2 +- 1/2), truncated, as C converts. `as i32` would saturate, which the
-                                 // compiler does one lane at a time; the arguments tanhf passes are far inside the range, and
-                                 // any other (infinite or NaN, whose result is not used) is replaced first.
+    // |x| < 1.5 ln 2: k = +-1
+    let near = hx < 0x3f85_1592;
+    // k = (int) (x / ln 2 +- 1/2), truncated, as C converts. `as i32` would saturate, which the
+    // compiler does one lane at a time; the arguments tanhf passes are far inside the range, and
+    // any other (infinite or NaN, whose result is not used) is replaced first.
     let q = EXPM1_INV_LN2 * x + half;
     let q = if q.abs() < 1e9 { q } else { 0.0 };
     // SAFETY: q is finite and |q| < 1e9, so its truncation fits in an i32.
