@@ -128,9 +128,10 @@ impl SacAgent {
         temperature(&self.log_alpha)
     }
 
-    /// A reparameterised sample: (tanh(u), log pi(a|s)) with eps drawn from `rng`.
-    fn sample(&self, obs: &Tensor, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
-        sample_squashed(&self.actor.forward(obs)?, self.tanh_correction, rng)
+    /// A reparameterised sample, `[n, act_dim + 1]`: tanh(u) and log pi(a|s) side by side, with
+    /// eps drawn from `rng`.
+    fn sample(&self, obs: &Tensor, rng: &mut ChaCha8Rng) -> Result<Tensor> {
+        sample_squashed_joint(&self.actor.forward(obs)?, self.tanh_correction, rng)
     }
 
     fn critic_input(obs: &Tensor, action: &Tensor) -> Result<Tensor> {
@@ -148,8 +149,8 @@ impl Agent for SacAgent {
     }
 
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
-        let (a, _) = self.sample(&batch_tensor(obs, 1, self.obs_dim)?, rng)?;
-        a.flatten_all()?.to_vec1::<f32>()
+        let sample = self.sample(&batch_tensor(obs, 1, self.obs_dim)?, rng)?;
+        sample.narrow(1, 0, self.act_dim)?.flatten_all()?.to_vec1::<f32>()
     }
 
     fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
@@ -164,7 +165,7 @@ impl Agent for SacAgent {
         // target value network (v1).
         let next_value = match &self.value {
             None => {
-                let next = sample_squashed_joint(&self.actor.forward(&next_obs)?, self.tanh_correction, rng)?;
+                let next = self.sample(&next_obs, rng)?;
                 soft_value(&self.critic_targets.forward(&critic_input(&next_obs, &next)?)?, &next, alpha)?
             }
             Some(v) => v.target.forward(&next_obs)?.flatten_all()?.to_vec1::<f32>()?,
@@ -176,7 +177,7 @@ impl Agent for SacAgent {
 
         // the action and its log-density side by side, and the objective as two nodes
         // (numeric::objectives: the graph's bits without its small nodes)
-        let pi = sample_squashed_joint(&self.actor.forward(&obs)?, self.tanh_correction, rng)?;
+        let pi = self.sample(&obs, rng)?;
         let logp = pi.narrow(1, self.act_dim, 1)?;
         let q = self.critics.forward_frozen(&critic_input(&obs, &pi)?)?;
         if let Some(v) = &mut self.value {
