@@ -27,7 +27,8 @@ use super::metrics::{self, MetricsRow};
 use super::recording::TrainingRecorder;
 use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
 use super::{
-    log_evaluation, progress_bar, save_budget_policy, Outcome, RunConfig, RunControl, RunSummary, POLICY_BUDGETS,
+    finish_run, log_evaluation, progress_bar, save_budget_policy, LoopEnd, Outcome, RunConfig, RunControl, RunSummary,
+    POLICY_BUDGETS,
 };
 use crate::agents::ppo::{PpoBatch, PpoLosses, RunningMeanStd};
 use crate::agents::{Losses, PpoAgent, PpoConfig, TrainConfig};
@@ -219,19 +220,9 @@ impl OnPolicyTrainer {
             save_budget_policy(&self.run_dir, self.step, &self.agent)?;
         }
         let checkpoint = self.save(wall(self.wall_offset))?;
-        metrics::write(&self.run_dir.join("metrics.csv"), &self.metrics)?;
         drop(recorder);
-        if let Some(r) = recording {
-            r.finish()?;
-        }
-        Ok(RunSummary {
-            run_dir: self.run_dir.clone(),
-            outcome,
-            steps: self.step,
-            last_eval,
-            best_eval_mean: best_eval,
-            checkpoint,
-        })
+        let end = LoopEnd { outcome, steps: self.step, last_eval, best_eval_mean: best_eval, checkpoint };
+        finish_run(&self.run_dir, &self.metrics, recording, end)
     }
 
     /// Steps every copy `num_steps` times with the current policy.
