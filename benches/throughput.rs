@@ -214,76 +214,54 @@ fn fma_peak_gflops(path: locobench::numeric::KernelPath) -> f64 {
 mod fma_chains {
     use std::arch::asm;
 
-    /// Independent accumulators per iteration (AVX2 has 16 registers: 14 + the two inputs).
-    pub const CHAINS_512: usize = 16;
-    pub const CHAINS_256: usize = 14;
+    /// `pub unsafe fn $name(iters)` and `pub const $chains`: one `vfmadd231ps acc, m, c` per
+    /// accumulator register per iteration, `m` and `c` broadcast into their own registers.
+    macro_rules! fma_loop {
+        ($(#[$doc:meta])* $name:ident, $chains:ident, $feature:literal, $m:tt, $c:tt, [$($acc:tt),+]) => {
+            /// Independent accumulators per iteration.
+            pub const $chains: usize = [$($acc),+].len();
 
-    /// # Safety
-    /// The CPU has AVX-512F.
-    #[target_feature(enable = "avx512f")]
-    pub unsafe fn avx512(iters: usize) {
-        let (m, c) = (std::hint::black_box(0.999_999f32), std::hint::black_box(1e-6f32));
-        // SAFETY: registers only; the caller checked the feature.
-        unsafe {
-            asm!(
-                "vbroadcastss zmm16, dword ptr [{m}]",
-                "vbroadcastss zmm17, dword ptr [{c}]",
-                "vxorps zmm0, zmm0, zmm0", "vxorps zmm1, zmm1, zmm1", "vxorps zmm2, zmm2, zmm2", "vxorps zmm3, zmm3, zmm3",
-                "vxorps zmm4, zmm4, zmm4", "vxorps zmm5, zmm5, zmm5", "vxorps zmm6, zmm6, zmm6", "vxorps zmm7, zmm7, zmm7",
-                "vxorps zmm8, zmm8, zmm8", "vxorps zmm9, zmm9, zmm9", "vxorps zmm10, zmm10, zmm10", "vxorps zmm11, zmm11, zmm11",
-                "vxorps zmm12, zmm12, zmm12", "vxorps zmm13, zmm13, zmm13", "vxorps zmm14, zmm14, zmm14", "vxorps zmm15, zmm15, zmm15",
-                "2:",
-                "vfmadd231ps zmm0, zmm16, zmm17", "vfmadd231ps zmm1, zmm16, zmm17", "vfmadd231ps zmm2, zmm16, zmm17",
-                "vfmadd231ps zmm3, zmm16, zmm17", "vfmadd231ps zmm4, zmm16, zmm17", "vfmadd231ps zmm5, zmm16, zmm17",
-                "vfmadd231ps zmm6, zmm16, zmm17", "vfmadd231ps zmm7, zmm16, zmm17", "vfmadd231ps zmm8, zmm16, zmm17",
-                "vfmadd231ps zmm9, zmm16, zmm17", "vfmadd231ps zmm10, zmm16, zmm17", "vfmadd231ps zmm11, zmm16, zmm17",
-                "vfmadd231ps zmm12, zmm16, zmm17", "vfmadd231ps zmm13, zmm16, zmm17", "vfmadd231ps zmm14, zmm16, zmm17",
-                "vfmadd231ps zmm15, zmm16, zmm17",
-                "dec {n}",
-                "jnz 2b",
-                m = in(reg) &m,
-                c = in(reg) &c,
-                n = inout(reg) iters => _,
-                out("zmm0") _, out("zmm1") _, out("zmm2") _, out("zmm3") _, out("zmm4") _, out("zmm5") _,
-                out("zmm6") _, out("zmm7") _, out("zmm8") _, out("zmm9") _, out("zmm10") _, out("zmm11") _,
-                out("zmm12") _, out("zmm13") _, out("zmm14") _, out("zmm15") _, out("zmm16") _, out("zmm17") _,
-                options(nostack, readonly),
-            );
-        }
+            $(#[$doc])*
+            #[target_feature(enable = $feature)]
+            pub unsafe fn $name(iters: usize) {
+                let (m, c) = (std::hint::black_box(0.999_999f32), std::hint::black_box(1e-6f32));
+                // SAFETY: registers only; the caller checked the features.
+                unsafe {
+                    asm!(
+                        concat!("vbroadcastss ", $m, ", dword ptr [{m}]"),
+                        concat!("vbroadcastss ", $c, ", dword ptr [{c}]"),
+                        $(concat!("vxorps ", $acc, ", ", $acc, ", ", $acc),)+
+                        "2:",
+                        $(concat!("vfmadd231ps ", $acc, ", ", $m, ", ", $c),)+
+                        "dec {n}",
+                        "jnz 2b",
+                        m = in(reg) &m,
+                        c = in(reg) &c,
+                        n = inout(reg) iters => _,
+                        $(out($acc) _,)+ out($m) _, out($c) _,
+                        options(nostack, readonly),
+                    );
+                }
+            }
+        };
     }
 
-    /// # Safety
-    /// The CPU has AVX2 and FMA.
-    #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn avx2(iters: usize) {
-        let (m, c) = (std::hint::black_box(0.999_999f32), std::hint::black_box(1e-6f32));
-        // SAFETY: registers only; the caller checked the features.
-        unsafe {
-            asm!(
-                "vbroadcastss ymm14, dword ptr [{m}]",
-                "vbroadcastss ymm15, dword ptr [{c}]",
-                "vxorps ymm0, ymm0, ymm0", "vxorps ymm1, ymm1, ymm1", "vxorps ymm2, ymm2, ymm2", "vxorps ymm3, ymm3, ymm3",
-                "vxorps ymm4, ymm4, ymm4", "vxorps ymm5, ymm5, ymm5", "vxorps ymm6, ymm6, ymm6", "vxorps ymm7, ymm7, ymm7",
-                "vxorps ymm8, ymm8, ymm8", "vxorps ymm9, ymm9, ymm9", "vxorps ymm10, ymm10, ymm10", "vxorps ymm11, ymm11, ymm11",
-                "vxorps ymm12, ymm12, ymm12", "vxorps ymm13, ymm13, ymm13",
-                "2:",
-                "vfmadd231ps ymm0, ymm14, ymm15", "vfmadd231ps ymm1, ymm14, ymm15", "vfmadd231ps ymm2, ymm14, ymm15",
-                "vfmadd231ps ymm3, ymm14, ymm15", "vfmadd231ps ymm4, ymm14, ymm15", "vfmadd231ps ymm5, ymm14, ymm15",
-                "vfmadd231ps ymm6, ymm14, ymm15", "vfmadd231ps ymm7, ymm14, ymm15", "vfmadd231ps ymm8, ymm14, ymm15",
-                "vfmadd231ps ymm9, ymm14, ymm15", "vfmadd231ps ymm10, ymm14, ymm15", "vfmadd231ps ymm11, ymm14, ymm15",
-                "vfmadd231ps ymm12, ymm14, ymm15", "vfmadd231ps ymm13, ymm14, ymm15",
-                "dec {n}",
-                "jnz 2b",
-                m = in(reg) &m,
-                c = in(reg) &c,
-                n = inout(reg) iters => _,
-                out("ymm0") _, out("ymm1") _, out("ymm2") _, out("ymm3") _, out("ymm4") _, out("ymm5") _,
-                out("ymm6") _, out("ymm7") _, out("ymm8") _, out("ymm9") _, out("ymm10") _, out("ymm11") _,
-                out("ymm12") _, out("ymm13") _, out("ymm14") _, out("ymm15") _,
-                options(nostack, readonly),
-            );
-        }
-    }
+    fma_loop!(
+        /// # Safety
+        /// The CPU has AVX-512F.
+        avx512, CHAINS_512, "avx512f", "zmm16", "zmm17",
+        ["zmm0", "zmm1", "zmm2", "zmm3", "zmm4", "zmm5", "zmm6", "zmm7",
+         "zmm8", "zmm9", "zmm10", "zmm11", "zmm12", "zmm13", "zmm14", "zmm15"]
+    );
+
+    // AVX2 has 16 registers: 14 accumulators and the two inputs.
+    fma_loop!(
+        /// # Safety
+        /// The CPU has AVX2 and FMA.
+        avx2, CHAINS_256, "avx2,fma", "ymm14", "ymm15",
+        ["ymm0", "ymm1", "ymm2", "ymm3", "ymm4", "ymm5", "ymm6", "ymm7",
+         "ymm8", "ymm9", "ymm10", "ymm11", "ymm12", "ymm13"]
+    );
 }
 
 /// GFLOP/s of each kernel path this CPU supports on the products of a TD3 400-300 critic update
