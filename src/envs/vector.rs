@@ -22,6 +22,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::{check_action, make, Env, EnvConfig, EnvError, EnvSpec, Info};
 use crate::numeric::denormals::{float_mode, set_float_mode};
+use crate::numeric::second_core::{self, OwnedHelper};
 
 /// The reset seed of episode `episode` of copy `copy` after a vector reset with `seed`: one ChaCha8
 /// stream per copy, one word pair per episode, so distinct copies and seeds get unrelated seeds
@@ -106,6 +107,10 @@ pub struct VecEnv {
     threads: usize,
     seed: u64,
     seeds: EpisodeSeeds,
+    /// The helper thread of two-thread steps made without a training thread's helper, started
+    /// on the first such step and kept: a thread spawned per step cost about as much as the
+    /// half of a small environment's step it took over.
+    helper: Option<OwnedHelper>,
 }
 
 impl VecEnv {
@@ -121,7 +126,7 @@ impl VecEnv {
             .map(|_| make(config).map(|env| Copy { env, episodes: 0, actions: Vec::new() }))
             .collect::<Result<Vec<_>, _>>()?;
         let spec = copies[0].env.spec().clone();
-        Ok(VecEnv { copies, spec, threads: threads.max(1), seed: 0, seeds: default_seeds })
+        Ok(VecEnv { copies, spec, threads: threads.max(1), seed: 0, seeds: default_seeds, helper: None })
     }
 
     /// Number of copies.
@@ -247,26 +252,33 @@ impl VecEnv {
     }
 
     /// `f` on every copy, results in copy order. Copies are split into contiguous blocks: two,
-    /// when the calling thread has a helper thread (`numeric::second_core`), else `threads`
-    /// blocks on scoped threads. Every thread computes with the caller's floating-point mode
-    /// (flush-to-zero), so a copy computes the same bits on any thread.
+    /// when the calling thread has a helper thread (`numeric::second_core`) or `threads` is 2
+    /// (this environment's own helper then takes the second), else `threads` blocks on scoped
+    /// threads. Every thread computes with the caller's floating-point mode (flush-to-zero), so a
+    /// copy computes the same bits on any thread.
     fn run<R: Send>(&mut self, f: impl Fn(usize, &mut Copy) -> R + Sync) -> Vec<R> {
         let n = self.copies.len();
         let threads = self.threads.min(n);
         if threads == 1 {
             return self.copies.iter_mut().enumerate().map(|(i, c)| f(i, c)).collect();
         }
-        if crate::numeric::second_core::has_helper() {
-            // The training thread's helper (`runtime::Runtime` with two threads) takes the second
-            // half: a thread that already runs, instead of one spawned per step.
+        let training_helper = second_core::has_helper();
+        if training_helper || threads == 2 {
+            // A thread that already runs takes the second half, instead of one spawned per step:
+            // the training thread's helper (`runtime::Runtime` with two threads), or ours.
             let (first, second) = self.copies.split_at_mut(n.div_ceil(2));
             let offset = first.len();
             let (mut a, mut b) = (Vec::new(), Vec::new());
             let f = &f;
-            crate::numeric::second_core::join(
+            let halves = (
                 || a = first.iter_mut().enumerate().map(|(i, c)| f(i, c)).collect(),
                 || b = second.iter_mut().enumerate().map(|(j, c)| f(offset + j, c)).collect(),
             );
+            if training_helper {
+                second_core::join(halves.0, halves.1);
+            } else {
+                self.helper.get_or_insert_with(OwnedHelper::start).join(halves.0, halves.1);
+            }
             a.extend(b);
             return a;
         }

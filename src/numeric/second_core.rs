@@ -2,7 +2,8 @@
 //! critics of TD3 and SAC, or the two halves of a batch) run on both cores.
 //!
 //! Not a pool: a thread enables its own helper with [`enable_on_this_thread`], and [`join`]
-//! offers the helper one closure while the caller runs the other. If the helper has not picked
+//! offers the helper one closure while the caller runs the other. (An [`OwnedHelper`] is the
+//! same helper held by a value, for callers that are not a training thread.) If the helper has not picked
 //! the offered closure up by the time the caller is done with its own, the caller takes it back
 //! and runs it too, so a sleeping or descheduled helper (another process on the core) costs at
 //! most the speed of one thread, never a wait. The helper spins for a short while after each job
@@ -49,12 +50,14 @@ struct Shared {
     /// The owner's MXCSR (flush-to-zero bits) at the time of posting.
     mxcsr: AtomicU32,
     panic: UnsafeCell<Option<Box<dyn std::any::Any + Send>>>,
-    owner: Thread,
+    /// The thread that posted the job (woken when it is done). Written with `job`, read by the
+    /// helper before it stores DONE: an [`OwnedHelper`] may post from another thread each time.
+    owner: UnsafeCell<Option<Thread>>,
 }
 
-// SAFETY: `job` and `panic` are only touched by one side at a time, handed over through the
-// acquire/release transitions of `state` (owner writes job -> POSTED -> helper runs it, writes
-// panic -> DONE -> owner reads both).
+// SAFETY: `job`, `owner` and `panic` are only touched by one side at a time, handed over through
+// the acquire/release transitions of `state` (owner writes job and owner -> POSTED -> helper runs
+// the job, reads owner, writes panic -> DONE -> owner reads panic).
 unsafe impl Sync for Shared {}
 // SAFETY: as for `Sync`: the hand-over through `state` orders every access.
 unsafe impl Send for Shared {}
@@ -120,6 +123,35 @@ pub fn join<A: FnOnce(), B: FnOnce() + Send>(a: A, b: B) {
         b();
         return;
     };
+    let outcome = run_pair(&helper, a, b);
+    HELPER.with(|h| *h.borrow_mut() = Some(helper));
+    if let Err(p) = outcome {
+        resume_unwind(p);
+    }
+}
+
+/// A helper thread owned by a value instead of a thread: whichever thread holds it runs `join`'s
+/// second closure on it. For work that does not run under a training thread's helper (a vector
+/// environment stepped from Python, say), where a thread spawned per call would cost more than
+/// the half it runs.
+pub(crate) struct OwnedHelper(Helper);
+
+impl OwnedHelper {
+    pub(crate) fn start() -> OwnedHelper {
+        OwnedHelper(Helper::start())
+    }
+
+    /// As [`join`], on this helper.
+    pub(crate) fn join<A: FnOnce(), B: FnOnce() + Send>(&mut self, a: A, b: B) {
+        if let Err(p) = run_pair(&self.0, a, b) {
+            resume_unwind(p);
+        }
+    }
+}
+
+/// `a` here and `b` on `helper` (or here, after `a`, if the helper has not picked it up); the
+/// first panic of either.
+fn run_pair<A: FnOnce(), B: FnOnce() + Send>(helper: &Helper, a: A, b: B) -> std::thread::Result<()> {
     let mut b = Some(b);
     let mut b_once = move || {
         if let Some(b) = b.take() {
@@ -140,13 +172,8 @@ pub fn join<A: FnOnce(), B: FnOnce() + Send>(a: A, b: B) {
         helper.wait_done();
         helper.take_panic()
     };
-    HELPER.with(|h| *h.borrow_mut() = Some(helper));
-    if let Err(p) = outcome {
-        resume_unwind(p);
-    }
-    if let Some(p) = helper_panic {
-        resume_unwind(p);
-    }
+    outcome?;
+    helper_panic.map_or(Ok(()), Err)
 }
 
 /// Runs `f(helper)` twice, each time on a new thread: without a helper thread, then with one
@@ -197,7 +224,7 @@ impl Helper {
             job: UnsafeCell::new(None),
             mxcsr: AtomicU32::new(float_mode()),
             panic: UnsafeCell::new(None),
-            owner: std::thread::current(),
+            owner: UnsafeCell::new(None),
         });
         let theirs = shared.clone();
         let thread = std::thread::Builder::new()
@@ -230,14 +257,21 @@ impl Helper {
                 // SAFETY: the owner reads `panic` only after DONE.
                 unsafe { *shared.panic.get() = Some(p) };
             }
+            // SAFETY: written before POSTED; the owner writes it again only after DONE.
+            let owner = unsafe { (*shared.owner.get()).clone() };
             shared.state.store(DONE, Ordering::Release);
-            shared.owner.unpark();
+            if let Some(owner) = owner {
+                owner.unpark();
+            }
         }
     }
 
     fn post(&self, job: Job) {
-        // SAFETY: the helper is IDLE, so it does not touch `job` until POSTED is stored.
-        unsafe { *self.shared.job.get() = Some(job) };
+        // SAFETY: the helper is IDLE, so it does not touch `job` or `owner` until POSTED is stored.
+        unsafe {
+            *self.shared.job.get() = Some(job);
+            *self.shared.owner.get() = Some(std::thread::current());
+        }
         self.shared.mxcsr.store(float_mode(), Ordering::Relaxed);
         self.shared.state.store(POSTED, Ordering::Release);
         self.thread.as_ref().expect("helper thread").thread().unpark();
@@ -340,5 +374,43 @@ mod tests {
         })
         .join()
         .unwrap();
+    }
+
+    #[test]
+    fn an_owned_helper_serves_whichever_thread_holds_it() {
+        let mut helper = OwnedHelper::start();
+        for round in 0..2 {
+            // each round on a new thread; the helper's half outlasts SPIN, so the holder parks and
+            // must be woken by the helper (a helper that woke the thread that started it would
+            // leave the holder parked)
+            helper = std::thread::spawn(move || {
+                super::super::denormals::flush_denormals_to_zero();
+                let me = std::thread::current().id();
+                let started = std::sync::atomic::AtomicBool::new(false);
+                let (mut seen, mut tiny) = (None, 1.0f32);
+                helper.join(
+                    // returns once the helper has the other half, so that half cannot be taken back
+                    || {
+                        while !started.load(Ordering::Acquire) {
+                            std::thread::yield_now();
+                        }
+                    },
+                    || {
+                        started.store(true, Ordering::Release);
+                        std::thread::sleep(SPIN * 3);
+                        seen = Some(std::thread::current().id());
+                        tiny = std::hint::black_box(f32::MIN_POSITIVE) / 4.0;
+                    },
+                );
+                assert!(seen.is_some_and(|t| t != me), "round {round}: the helper ran the second half");
+                #[cfg(target_arch = "x86_64")]
+                assert_eq!(tiny, 0.0, "round {round}: the helper ran with the holder's float mode");
+                let caught = catch_unwind(AssertUnwindSafe(|| helper.join(|| {}, || panic!("in the helper"))));
+                assert!(caught.is_err(), "round {round}: the helper's panic reaches the holder");
+                helper
+            })
+            .join()
+            .unwrap();
+        }
     }
 }
