@@ -2,10 +2,10 @@
 //! critics of TD3 and SAC, or the two halves of a batch) run on both cores.
 //!
 //! Not a pool: a thread enables its own helper with [`enable_on_this_thread`], and [`join`]
-//! offers the helper one closure while the caller runs the other. (An [`OwnedHelper`] is the
-//! same helper held by a value, for callers that are not a training thread.) If the helper has not picked
-//! the offered closure up by the time the caller is done with its own, the caller takes it back
-//! and runs it too, so a sleeping or descheduled helper (another process on the core) costs at
+//! offers the helper one closure while the caller runs the other (an `OwnedHelper` is the same
+//! helper held by a value, for callers that are not a training thread). If the helper has not
+//! picked the offered closure up by the time the caller is done with its own, the caller takes it
+//! back and runs it too, so a sleeping or descheduled helper (another process on the core) costs at
 //! most the speed of one thread, never a wait. The helper spins for a short while after each job
 //! (the next one of an update usually follows within microseconds) and then parks, so an idle
 //! helper sleeps and a busy machine is not made busier (measured here: candle's default pools
@@ -50,14 +50,12 @@ struct Shared {
     /// The owner's MXCSR (flush-to-zero bits) at the time of posting.
     mxcsr: AtomicU32,
     panic: UnsafeCell<Option<Box<dyn std::any::Any + Send>>>,
-    /// The thread that posted the job (woken when it is done). Written with `job`, read by the
-    /// helper before it stores DONE: an [`OwnedHelper`] may post from another thread each time.
-    owner: UnsafeCell<Option<Thread>>,
+    owner: Thread,
 }
 
-// SAFETY: `job`, `owner` and `panic` are only touched by one side at a time, handed over through
-// the acquire/release transitions of `state` (owner writes job and owner -> POSTED -> helper runs
-// the job, reads owner, writes panic -> DONE -> owner reads panic).
+// SAFETY: `job` and `panic` are only touched by one side at a time, handed over through the
+// acquire/release transitions of `state` (owner writes job -> POSTED -> helper runs it, writes
+// panic -> DONE -> owner reads both).
 unsafe impl Sync for Shared {}
 // SAFETY: as for `Sync`: the hand-over through `state` orders every access.
 unsafe impl Send for Shared {}
@@ -133,17 +131,25 @@ pub fn join<A: FnOnce(), B: FnOnce() + Send>(a: A, b: B) {
 /// A helper thread owned by a value instead of a thread: whichever thread holds it runs `join`'s
 /// second closure on it. For work that does not run under a training thread's helper (a vector
 /// environment stepped from Python, say), where a thread spawned per call would cost more than
-/// the half it runs.
-pub(crate) struct OwnedHelper(Helper);
+/// the half it runs. A helper wakes the thread that started it, so a holder on another thread
+/// starts a new one (rare: the value moved), which keeps the hand-over every training update
+/// makes as it is.
+pub(crate) struct OwnedHelper {
+    helper: Helper,
+    holder: std::thread::ThreadId,
+}
 
 impl OwnedHelper {
     pub(crate) fn start() -> OwnedHelper {
-        OwnedHelper(Helper::start())
+        OwnedHelper { helper: Helper::start(), holder: std::thread::current().id() }
     }
 
     /// As [`join`], on this helper.
     pub(crate) fn join<A: FnOnce(), B: FnOnce() + Send>(&mut self, a: A, b: B) {
-        if let Err(p) = run_pair(&self.0, a, b) {
+        if self.holder != std::thread::current().id() {
+            *self = OwnedHelper::start();
+        }
+        if let Err(p) = run_pair(&self.helper, a, b) {
             resume_unwind(p);
         }
     }
@@ -224,7 +230,7 @@ impl Helper {
             job: UnsafeCell::new(None),
             mxcsr: AtomicU32::new(float_mode()),
             panic: UnsafeCell::new(None),
-            owner: UnsafeCell::new(None),
+            owner: std::thread::current(),
         });
         let theirs = shared.clone();
         let thread = std::thread::Builder::new()
@@ -257,21 +263,14 @@ impl Helper {
                 // SAFETY: the owner reads `panic` only after DONE.
                 unsafe { *shared.panic.get() = Some(p) };
             }
-            // SAFETY: written before POSTED; the owner writes it again only after DONE.
-            let owner = unsafe { (*shared.owner.get()).clone() };
             shared.state.store(DONE, Ordering::Release);
-            if let Some(owner) = owner {
-                owner.unpark();
-            }
+            shared.owner.unpark();
         }
     }
 
     fn post(&self, job: Job) {
-        // SAFETY: the helper is IDLE, so it does not touch `job` or `owner` until POSTED is stored.
-        unsafe {
-            *self.shared.job.get() = Some(job);
-            *self.shared.owner.get() = Some(std::thread::current());
-        }
+        // SAFETY: the helper is IDLE, so it does not touch `job` until POSTED is stored.
+        unsafe { *self.shared.job.get() = Some(job) };
         self.shared.mxcsr.store(float_mode(), Ordering::Relaxed);
         self.shared.state.store(POSTED, Ordering::Release);
         self.thread.as_ref().expect("helper thread").thread().unpark();
