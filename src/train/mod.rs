@@ -195,29 +195,14 @@ fn log_evaluation(
     }
 }
 
-/// Where a training loop ended: the fields of its [`RunSummary`] but the run directory.
-struct LoopEnd {
-    outcome: Outcome,
-    steps: u64,
-    last_eval: Option<Evaluation>,
-    best_eval_mean: Option<f64>,
-    checkpoint: PathBuf,
-}
-
-/// What both training loops do once their last checkpoint is written: rewrite `metrics.csv` in
-/// full, move the recording (if any) to its name, and sum the run up.
-fn finish_run(
-    run_dir: &Path,
-    metrics: &[MetricsRow],
-    recording: Option<Recording>,
-    end: LoopEnd,
-) -> Result<RunSummary> {
-    metrics::write(&run_dir.join("metrics.csv"), metrics)?;
+/// What both training loops do once their last checkpoint is written: rewrite the run's
+/// `metrics.csv` in full, move the recording (if any) to its name, and hand the summary back.
+fn finish_run(metrics: &[MetricsRow], recording: Option<Recording>, summary: RunSummary) -> Result<RunSummary> {
+    metrics::write(&summary.run_dir.join("metrics.csv"), metrics)?;
     if let Some(r) = recording {
         r.finish()?;
     }
-    let LoopEnd { outcome, steps, last_eval, best_eval_mean, checkpoint } = end;
-    Ok(RunSummary { run_dir: run_dir.to_path_buf(), outcome, steps, last_eval, best_eval_mean, checkpoint })
+    Ok(summary)
 }
 
 /// The commit this binary was built from (build.rs), not whatever the source tree holds now.
@@ -511,8 +496,10 @@ impl Trainer {
         }
         let checkpoint = self.save(need_reset, wall(self.wall_offset))?;
         drop(recorder);
-        let end = LoopEnd { outcome, steps: self.step, last_eval, best_eval_mean: best_eval, checkpoint };
-        finish_run(&self.run_dir, &self.metrics, recording, end)
+        let run_dir = self.run_dir.clone();
+        let summary =
+            RunSummary { run_dir, outcome, steps: self.step, last_eval, best_eval_mean: best_eval, checkpoint };
+        finish_run(&self.metrics, recording, summary)
     }
 
     fn save(&mut self, at_episode_boundary: bool, wall_time: f64) -> Result<PathBuf> {

@@ -27,7 +27,7 @@ use super::metrics::{self, MetricsRow};
 use super::recording::TrainingRecorder;
 use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
 use super::{
-    finish_run, log_evaluation, progress_bar, save_budget_policy, LoopEnd, Outcome, RunConfig, RunControl, RunSummary,
+    finish_run, log_evaluation, progress_bar, save_budget_policy, Outcome, RunConfig, RunControl, RunSummary,
     POLICY_BUDGETS,
 };
 use crate::agents::ppo::{PpoBatch, PpoLosses, RunningMeanStd};
@@ -221,8 +221,10 @@ impl OnPolicyTrainer {
         }
         let checkpoint = self.save(wall(self.wall_offset))?;
         drop(recorder);
-        let end = LoopEnd { outcome, steps: self.step, last_eval, best_eval_mean: best_eval, checkpoint };
-        finish_run(&self.run_dir, &self.metrics, recording, end)
+        let run_dir = self.run_dir.clone();
+        let summary =
+            RunSummary { run_dir, outcome, steps: self.step, last_eval, best_eval_mean: best_eval, checkpoint };
+        finish_run(&self.metrics, recording, summary)
     }
 
     /// Steps every copy `num_steps` times with the current policy.
