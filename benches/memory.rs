@@ -9,7 +9,6 @@
 //! transitions are synthetic, so the figure is the run's memory without its hours of stepping.
 //!
 //! `cargo bench --bench memory` (under `cargo test` it fills a 10k buffer and measures one pair).
-use std::collections::HashMap;
 
 use anyhow::{Context, Result};
 use locobench::agents::{make_agent, Algo, Batch, ReplayBuffer};
@@ -57,10 +56,12 @@ fn child(env_name: &str, algo: Algo, capacity: usize) -> Result<()> {
         at_episode_boundary: true,
         wall_time: 0.0,
         rng: RngState::of(&rng),
-        optimizer_steps: HashMap::new(),
-        counters: HashMap::new(),
+        optimizer_steps: Default::default(),
+        counters: Default::default(),
+        losses: None,
+        best_eval_mean: None,
     };
-    checkpoint::save(dir.path(), agent.as_mut(), &buf, &state)?;
+    checkpoint::save(dir.path(), agent.as_mut(), &buf, &state, &[])?;
     let peak = status_bytes("VmHWM:").context("no /proc/self/status")?;
     println!("{peak} {}", buf.bytes_per_transition() * capacity);
     Ok(())

@@ -4,9 +4,17 @@
 # sudo; needs a Rust toolchain.
 #
 #   bash python/install.sh [VENV]        (default .venv; then: source VENV/bin/activate)
+#
+# VENV may be absolute or relative to the directory the script is called from; the default is
+# .venv in the checkout.
 set -euo pipefail
-cd "$(dirname "$0")/.."
-venv=${1:-.venv}
+root=$(cd "$(dirname "$0")/.." && pwd)
+venv=${1:-$root/.venv}
+case "$venv" in
+  /*) ;;
+  *) venv="$PWD/$venv" ;;
+esac
+cd "$root"
 profile=${LOCOBENCH_PY_PROFILE:-release}
 bash scripts/setup.sh
 if ! python3 -m venv --help >/dev/null 2>&1 || ! python3 -c "import ensurepip" >/dev/null 2>&1; then
@@ -18,6 +26,6 @@ fi
 # dev builds share their compiled dependencies with `cargo test` (same target directory and
 # settings), which keeps the test command's clock short.
 if [ "$profile" = release ]; then flag=--release; else flag=; fi
-VIRTUAL_ENV="$PWD/$venv" PATH="$PWD/$venv/bin:$PATH" CARGO_INCREMENTAL=0 \
+VIRTUAL_ENV="$venv" PATH="$venv/bin:$PATH" CARGO_INCREMENTAL=0 \
   "$venv/bin/maturin" develop -q $flag -m python/Cargo.toml
 "$venv/bin/python" -c "import locobench; print('locobench', 'installed into $venv:', ', '.join(locobench.ENV_IDS.values()))"

@@ -34,3 +34,42 @@ pub fn write_atomic(path: &Path, fill: impl FnOnce(&mut dyn Write) -> Result<()>
 pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic(path, |w| Ok(w.write_all(bytes)?))
 }
+
+/// Whether `name` is one of [`write_atomic`]'s temporary files (tempfile's `.tmp` and six
+/// letters or digits), which only a killed writer leaves behind.
+pub fn is_temporary_name(name: &str) -> bool {
+    name.strip_prefix(".tmp").is_some_and(|rest| rest.len() == 6 && rest.chars().all(|c| c.is_ascii_alphanumeric()))
+}
+
+/// Removes the temporary files a killed writer left in `dir` (not below it). A directory that
+/// does not exist has none.
+pub fn remove_temporaries(dir: &Path) -> Result<()> {
+    for entry in std::fs::read_dir(dir).into_iter().flatten().flatten() {
+        let path = entry.path();
+        if is_temporary_name(&entry.file_name().to_string_lossy()) && path.is_file() {
+            std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_writers_own_temporary_names_are_removed() {
+        let dir = tempfile::tempdir().unwrap();
+        for name in [".tmpAb12cD", ".tmpx", "metrics.csv", ".tmpAb12cDe"] {
+            std::fs::write(dir.path().join(name), b"x").unwrap();
+        }
+        remove_temporaries(dir.path()).unwrap();
+        let mut left: Vec<String> = std::fs::read_dir(dir.path())
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        left.sort();
+        assert_eq!(left, [".tmpAb12cDe", ".tmpx", "metrics.csv"]);
+        remove_temporaries(&dir.path().join("missing")).unwrap();
+    }
+}

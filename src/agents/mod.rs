@@ -39,7 +39,7 @@ pub use sac::SacAgent;
 use crate::numeric::optim::Adam;
 
 /// Losses and temperature of one gradient update (None where the update did not touch them).
-#[derive(Debug, Clone, Copy, Default, PartialEq)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
 pub struct Losses {
     /// The critics' temporal-difference loss.
     pub critic: f64,

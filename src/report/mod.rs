@@ -123,6 +123,8 @@ pub(crate) fn summarise(group: &Group, runs: &[&Run]) -> GroupSummary {
 pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Result<Report> {
     let runs = find_runs(paths)?;
     std::fs::create_dir_all(out)?;
+    // A report killed while writing left its temporary files; this one writes every file again.
+    crate::io::remove_temporaries(out)?;
     let groups = group_runs(&runs);
     let mut envs: BTreeMap<String, Vec<(&Group, &Vec<&Run>)>> = BTreeMap::new();
     for (g, rs) in &groups {

@@ -1,10 +1,16 @@
 //! Checkpoints: `checkpoints/step_<N>/` holds `model.safetensors` (every network, targets
-//! included), `optim.safetensors` (Adam moments), `state.toml` (counters, RNG position) and the
-//! trainer's own state: `buffer.safetensors` (the off-policy replay buffer, only in the newest
-//! checkpoint) or `rollout.safetensors` (PPO: where the environment copies and the reward
-//! statistics stand). A checkpoint directory is
-//! assembled under a temporary name and renamed into place, so a crash never leaves half of one.
-use std::collections::HashMap;
+//! included), `optim.safetensors` (Adam moments), `state.toml` (counters, RNG position, the
+//! latest losses), `metrics.csv` (the run's rows up to step N) and the trainer's own state:
+//! `buffer.safetensors` (the off-policy replay buffer, kept in the newest two checkpoints) or
+//! `rollout.safetensors` (PPO: where the environment copies and the reward statistics stand).
+//! `checksums.toml`, written last, holds every other file's length and CRC-32.
+//!
+//! A checkpoint directory is assembled under a temporary name, synced to disk and renamed into
+//! place, so a crash never leaves half of one; the run's own `metrics.csv` is brought up to the
+//! checkpoint before it, so it never lags the newest checkpoint. A resume takes the newest
+//! checkpoint whose files match their checksums, and says so when it has to pass over a damaged
+//! one ([`newest_intact`]).
+use std::collections::{BTreeMap, HashMap};
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
@@ -12,9 +18,11 @@ use candle_core::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
 use crate::agents::buffer::ReplayBuffer;
-use crate::agents::Agent;
+use crate::agents::{Agent, Losses};
 use crate::io::write_bytes_atomic;
 
+use super::fault::{self, Point};
+use super::metrics::{self, MetricsRow};
 use super::seeds::RngState;
 
 /// Where a run stands, besides the tensors.
@@ -30,11 +38,26 @@ pub struct TrainState {
     pub wall_time: f64,
     /// The training stream's position.
     pub rng: RngState,
-    /// Each optimiser's update count.
-    pub optimizer_steps: HashMap<String, u64>,
+    /// Each optimiser's update count (ordered, so that the file is the same bytes every time).
+    pub optimizer_steps: BTreeMap<String, u64>,
     /// The agent's counters (`Agent::counters`).
-    pub counters: HashMap<String, u64>,
+    pub counters: BTreeMap<String, u64>,
+    /// The latest update's losses, which the next metrics rows carry until the next update
+    /// (a delayed actor update keeps the actor's). Absent in checkpoints written before it.
+    #[serde(default)]
+    pub losses: Option<Losses>,
+    /// The best in-training evaluation mean so far.
+    #[serde(default)]
+    pub best_eval_mean: Option<f64>,
 }
+
+/// The file of a checkpoint that lists the others' lengths and checksums.
+pub(crate) const CHECKSUMS_FILE: &str = "checksums.toml";
+/// The off-policy trainer's replay buffer in a checkpoint.
+pub(crate) const BUFFER_FILE: &str = "buffer.safetensors";
+/// How many of the newest checkpoints keep their replay buffer: the newest, and the one a resume
+/// falls back to when the newest is damaged.
+const CHECKPOINTS_WITH_BUFFER: usize = 2;
 
 /// An exported policy: the actor's tensors only (`train::export_policy`).
 pub(crate) const POLICY_FILE: &str = "policy.safetensors";
@@ -56,6 +79,8 @@ pub(crate) fn save_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
         use std::os::unix::fs::PermissionsExt;
         tmp.as_file().set_permissions(std::fs::Permissions::from_mode(0o644))?;
     }
+    tmp.as_file().sync_all()?;
+    fault::reach(Point::BudgetPolicyWrite);
     tmp.persist(path).with_context(|| format!("writing {}", path.display()))?;
     Ok(())
 }
@@ -84,10 +109,17 @@ pub(crate) fn checkpoints_dir(run_dir: &Path) -> PathBuf {
     run_dir.join("checkpoints")
 }
 
-/// Writes a checkpoint for `state.step` and makes it the latest. Older checkpoints keep their
-/// weights but lose their replay buffer (the only large file).
-pub fn save(run_dir: &Path, agent: &mut dyn Agent, buffer: &ReplayBuffer, state: &TrainState) -> Result<PathBuf> {
-    save_with(run_dir, agent, state, |dir| super::buffer_file::write(buffer, &dir.join("buffer.safetensors")))
+/// Writes a checkpoint for `state.step` and makes it the newest; `metrics` are the run's rows so
+/// far. Older checkpoints keep their weights; all but the newest two lose their replay buffer
+/// (the only large file).
+pub fn save(
+    run_dir: &Path,
+    agent: &mut dyn Agent,
+    buffer: &ReplayBuffer,
+    state: &TrainState,
+    metrics: &[MetricsRow],
+) -> Result<PathBuf> {
+    save_with(run_dir, agent, state, metrics, |dir| super::buffer_file::write(buffer, &dir.join(BUFFER_FILE)))
 }
 
 /// Writes a checkpoint like [`save`], with `trainer_files` writing the trainer's own state into
@@ -96,51 +128,265 @@ pub(crate) fn save_with(
     run_dir: &Path,
     agent: &mut dyn Agent,
     state: &TrainState,
+    metrics: &[MetricsRow],
     trainer_files: impl FnOnce(&Path) -> Result<()>,
 ) -> Result<PathBuf> {
-    let root = checkpoints_dir(run_dir);
-    std::fs::create_dir_all(&root)?;
     let name = format!("step_{:09}", state.step);
-    let tmp = tempfile::Builder::new().prefix(".incomplete-").tempdir_in(&root)?;
+    let root = checkpoints_dir(run_dir);
+    let written = (|| {
+        // The run's metrics first: a kill after this leaves it ahead of the newest checkpoint,
+        // never behind it (a resume checks, see `metrics::restore`).
+        metrics::write(&run_dir.join(metrics::FILE), metrics)?;
+        std::fs::create_dir_all(&root)?;
+        let tmp = tempfile::Builder::new().prefix(".incomplete-").tempdir_in(&root)?;
+        write_files(tmp.path(), agent, state, metrics, trainer_files)?;
+        let dest = root.join(&name);
+        if dest.exists() {
+            std::fs::remove_dir_all(&dest)?;
+        }
+        let tmp_path = tmp.keep();
+        if let Err(e) = std::fs::rename(&tmp_path, &dest) {
+            let _ = std::fs::remove_dir_all(&tmp_path);
+            return Err(e.into());
+        }
+        sync_dir(&root)?;
+        write_bytes_atomic(&root.join("latest"), name.as_bytes())?;
+        anyhow::Ok(dest)
+    })();
+    let dest = written.with_context(|| {
+        format!("writing checkpoint {} failed; the run's earlier checkpoints are untouched", root.join(&name).display())
+    })?;
+    prune_buffers(run_dir)?;
+    fault::reach(Point::AfterCheckpoint);
+    Ok(dest)
+}
 
+/// Writes a checkpoint's files into `dir`, each synced to disk, the checksums last.
+fn write_files(
+    dir: &Path,
+    agent: &mut dyn Agent,
+    state: &TrainState,
+    metrics: &[MetricsRow],
+    trainer_files: impl FnOnce(&Path) -> Result<()>,
+) -> Result<()> {
     let params: HashMap<String, Tensor> =
         agent.parameters().into_iter().map(|(n, v)| (n, v.as_tensor().clone())).collect();
-    candle_core::safetensors::save(&params, tmp.path().join("model.safetensors"))?;
+    candle_core::safetensors::save(&params, dir.join("model.safetensors"))?;
+    fault::reach(Point::CheckpointWrite);
 
     let mut optim = HashMap::new();
-    let mut optimizer_steps = HashMap::new();
+    let mut optimizer_steps = BTreeMap::new();
     for (name, opt) in agent.optimizers() {
         let (tensors, steps) = opt.state(name)?;
         optim.extend(tensors);
         optimizer_steps.insert(name.to_string(), steps);
     }
-    candle_core::safetensors::save(&optim, tmp.path().join("optim.safetensors"))?;
-    trainer_files(tmp.path())?;
+    candle_core::safetensors::save(&optim, dir.join("optim.safetensors"))?;
+    trainer_files(dir)?;
 
     let state = TrainState {
         optimizer_steps,
         counters: agent.counters().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
         ..state.clone()
     };
-    std::fs::write(tmp.path().join("state.toml"), toml::to_string(&state)?)?;
+    std::fs::write(dir.join("state.toml"), toml::to_string(&state)?)?;
+    metrics::write(&dir.join(metrics::FILE), metrics)?;
 
-    let dest = root.join(&name);
-    if dest.exists() {
-        std::fs::remove_dir_all(&dest)?;
+    let mut sums = BTreeMap::new();
+    for entry in std::fs::read_dir(dir)? {
+        let entry = entry?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        std::fs::File::open(entry.path())?.sync_all()?;
+        sums.insert(name, FileSum::of(&entry.path())?);
     }
-    let tmp_path = tmp.keep();
-    std::fs::rename(&tmp_path, &dest).with_context(|| format!("moving checkpoint into {}", dest.display()))?;
-    write_bytes_atomic(&root.join("latest"), name.as_bytes())?;
-    for entry in std::fs::read_dir(&root)?.flatten() {
-        let p = entry.path();
-        if p != dest && p.is_dir() && entry.file_name().to_string_lossy().starts_with("step_") {
-            let _ = std::fs::remove_file(p.join("buffer.safetensors"));
-        }
-    }
-    Ok(dest)
+    std::fs::write(dir.join(CHECKSUMS_FILE), toml::to_string(&Checksums { files: sums })?)?;
+    std::fs::File::open(dir.join(CHECKSUMS_FILE))?.sync_all()?;
+    sync_dir(dir)
 }
 
-/// The newest checkpoint of a run.
+/// Flushes a directory's entries (new names, renames) to disk.
+fn sync_dir(dir: &Path) -> Result<()> {
+    std::fs::File::open(dir)?.sync_all()?;
+    Ok(())
+}
+
+/// The step directories under `checkpoints/`, newest first.
+fn step_dirs(root: &Path) -> Vec<(u64, PathBuf)> {
+    let mut dirs: Vec<(u64, PathBuf)> = std::fs::read_dir(root)
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| {
+            let step = e.file_name().to_str()?.strip_prefix("step_")?.parse().ok()?;
+            e.path().is_dir().then(|| (step, e.path()))
+        })
+        .collect();
+    dirs.sort_by(|a, b| b.0.cmp(&a.0));
+    dirs
+}
+
+/// Removes the replay buffer from all but the newest [`CHECKPOINTS_WITH_BUFFER`] checkpoints.
+pub(crate) fn prune_buffers(run_dir: &Path) -> Result<()> {
+    for (_, dir) in step_dirs(&checkpoints_dir(run_dir)).into_iter().skip(CHECKPOINTS_WITH_BUFFER) {
+        let buffer = dir.join(BUFFER_FILE);
+        if buffer.exists() {
+            // The checksums first: a kill between the two leaves a buffer nobody vouches for,
+            // which the next pruning removes, never a checksum of a missing file.
+            let sums = dir.join(CHECKSUMS_FILE);
+            if let Ok(mut c) = read_checksums(&sums) {
+                if c.files.remove(BUFFER_FILE).is_some() {
+                    write_bytes_atomic(&sums, toml::to_string(&c)?.as_bytes())?;
+                }
+            }
+            std::fs::remove_file(&buffer).with_context(|| format!("removing {}", buffer.display()))?;
+        }
+    }
+    Ok(())
+}
+
+/// One file's length and CRC-32 (crc32fast, the IEEE polynomial of zlib and PNG).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+struct FileSum {
+    bytes: u64,
+    crc32: u32,
+}
+
+impl FileSum {
+    fn of(path: &Path) -> Result<FileSum> {
+        use std::io::Read;
+        let mut file = std::fs::File::open(path).with_context(|| format!("reading {}", path.display()))?;
+        let mut hasher = crc32fast::Hasher::new();
+        let mut buf = vec![0u8; 1 << 20];
+        let mut bytes = 0u64;
+        loop {
+            let n = file.read(&mut buf).with_context(|| format!("reading {}", path.display()))?;
+            if n == 0 {
+                break;
+            }
+            hasher.update(&buf[..n]);
+            bytes += n as u64;
+        }
+        Ok(FileSum { bytes, crc32: hasher.finalize() })
+    }
+}
+
+#[derive(Debug, Serialize, Deserialize)]
+struct Checksums {
+    files: BTreeMap<String, FileSum>,
+}
+
+fn read_checksums(path: &Path) -> Result<Checksums> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    toml::from_str(&text).with_context(|| format!("{} is corrupt", path.display()))
+}
+
+/// Why `checkpoint` cannot be resumed from, if it cannot: a file missing, cut short or changed
+/// since it was written (against `checksums.toml`; checkpoints from before that file are read
+/// instead), or no `trainer_file` (an off-policy checkpoint older than the newest two).
+fn damage(checkpoint: &Path, trainer_file: &str) -> Option<String> {
+    let check = || -> Result<()> {
+        load_state(checkpoint)?;
+        let sums = checkpoint.join(CHECKSUMS_FILE);
+        if sums.exists() {
+            for (name, expected) in read_checksums(&sums)?.files {
+                let path = checkpoint.join(&name);
+                let found = FileSum::of(&path)?;
+                if found.bytes != expected.bytes {
+                    bail!("{} has {} bytes where {} were written", path.display(), found.bytes, expected.bytes);
+                }
+                if found.crc32 != expected.crc32 {
+                    bail!("{} does not match its checksum", path.display());
+                }
+            }
+        } else {
+            read_tensors(&checkpoint.join("model.safetensors"))?;
+            read_tensors(&checkpoint.join("optim.safetensors"))?;
+        }
+        if !checkpoint.join(trainer_file).is_file() {
+            bail!(
+                "{} has no {trainer_file}{}",
+                checkpoint.display(),
+                if trainer_file == BUFFER_FILE {
+                    " (only the newest two checkpoints keep their replay buffer)"
+                } else {
+                    ""
+                }
+            );
+        }
+        Ok(())
+    };
+    check().err().map(|e| format!("{e:#}"))
+}
+
+/// Whether a run directory holds any checkpoint directory, intact or not.
+pub fn any(run_dir: &Path) -> bool {
+    !step_dirs(&checkpoints_dir(run_dir)).is_empty()
+}
+
+/// The newest checkpoint of a run that a resume can start from: its files match their checksums
+/// and it holds `trainer_file` (the replay buffer, or PPO's rollout state). Passing over damaged
+/// newer ones is said on stderr; none intact is an error that says why each is not.
+pub(crate) fn newest_intact(run_dir: &Path, trainer_file: &str) -> Result<PathBuf> {
+    let dirs = step_dirs(&checkpoints_dir(run_dir));
+    if dirs.is_empty() {
+        bail!("{} has no checkpoint (no checkpoints/step_*)", run_dir.display());
+    }
+    let mut passed_over = Vec::new();
+    for (_, dir) in dirs {
+        match damage(&dir, trainer_file) {
+            None => {
+                for why in &passed_over {
+                    eprintln!("warning: passing over a damaged checkpoint: {why}");
+                }
+                if !passed_over.is_empty() {
+                    eprintln!("warning: resuming from {} instead", dir.display());
+                }
+                return Ok(dir);
+            }
+            Some(why) => passed_over.push(why),
+        }
+    }
+    bail!(
+        "no checkpoint of {} can be resumed from:\n  {}\nstart the run afresh with --force",
+        run_dir.display(),
+        passed_over.join("\n  ")
+    )
+}
+
+/// Removes what a killed process left under temporary names: half-built checkpoint directories,
+/// and temporary files of the run directory, its `policies/` and its checkpoints. Call with the
+/// run lock held.
+pub(crate) fn remove_leftovers(run_dir: &Path) -> Result<()> {
+    let mut dirs = vec![run_dir.to_path_buf(), checkpoints_dir(run_dir), run_dir.join(super::BUDGET_POLICY_DIR)];
+    // A checkpoint's checksums are rewritten in place when its buffer is pruned.
+    dirs.extend(step_dirs(&checkpoints_dir(run_dir)).into_iter().map(|(_, dir)| dir));
+    for dir in dirs {
+        for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+            let name = entry.file_name().to_string_lossy().into_owned();
+            let path = entry.path();
+            if name.starts_with(".incomplete-") && path.is_dir() {
+                std::fs::remove_dir_all(&path).with_context(|| format!("removing {}", path.display()))?;
+            } else if name.starts_with(".policy-") && path.is_file() {
+                std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
+            }
+        }
+        crate::io::remove_temporaries(&dir)?;
+    }
+    Ok(())
+}
+
+/// Makes `checkpoint` the one `checkpoints/latest` names (a kill can come between a checkpoint's
+/// rename into place and that file's update).
+pub(crate) fn make_latest(run_dir: &Path, checkpoint: &Path) -> Result<()> {
+    let name = checkpoint.file_name().context("a checkpoint directory has a name")?.to_string_lossy().into_owned();
+    let file = checkpoints_dir(run_dir).join("latest");
+    if std::fs::read_to_string(&file).map(|s| s.trim() == name).unwrap_or(false) {
+        return Ok(());
+    }
+    write_bytes_atomic(&file, name.as_bytes())
+}
+
+/// The newest checkpoint of a run, as `checkpoints/latest` names it.
 pub fn latest(run_dir: &Path) -> Result<PathBuf> {
     let root = checkpoints_dir(run_dir);
     let name = std::fs::read_to_string(root.join("latest"))
@@ -188,7 +434,7 @@ pub fn load_state(checkpoint: &Path) -> Result<TrainState> {
 /// Restores weights, optimiser moments and counters, and returns the saved state and buffer.
 pub(crate) fn load_all(checkpoint: &Path, agent: &mut dyn Agent) -> Result<(TrainState, ReplayBuffer)> {
     let state = load_training(checkpoint, agent)?;
-    let buffer = super::buffer_file::read(&checkpoint.join("buffer.safetensors"))?;
+    let buffer = super::buffer_file::read(&checkpoint.join(BUFFER_FILE))?;
     Ok((state, buffer))
 }
 

@@ -76,6 +76,7 @@ pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed:
         eval.unstable_episodes += s.unstable as usize;
         eval.returns.push(s.episode_return);
         eval.lengths.push(s.length);
+        super::fault::reach(super::fault::Point::Evaluation);
     }
     eval.saturation = saturated as f64 / components.max(1) as f64;
     Ok(eval)

@@ -1,10 +1,13 @@
 //! `metrics.csv`: one row per training episode and per evaluation, rewritten atomically.
 use std::path::Path;
 
-use anyhow::Result;
+use anyhow::{bail, Context, Result};
 
 use crate::agents::Losses;
 use crate::io::write_atomic;
+
+/// The file's name, in a run directory and in each checkpoint.
+pub const FILE: &str = "metrics.csv";
 
 /// One row of `metrics.csv`: a training episode's end or an evaluation.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -109,28 +112,101 @@ pub fn write(path: &Path, rows: &[MetricsRow]) -> Result<()> {
     })
 }
 
-/// Reads the rows of a `metrics.csv`.
+/// Reads the rows of a `metrics.csv`. A row that does not parse is an error naming the file and
+/// its line.
 pub fn read(path: &Path) -> Result<Vec<MetricsRow>> {
     let mut rows = Vec::new();
     // Flexible: files from before the eval_saturation column have one field fewer.
-    let mut reader = csv::ReaderBuilder::new().flexible(true).from_path(path)?;
-    for rec in reader.records() {
-        let rec = rec?;
-        let f = |i: usize| rec.get(i).filter(|s| !s.is_empty()).map(|s| s.parse::<f64>()).transpose();
-        rows.push(MetricsRow {
-            kind: if rec.get(0) == Some("eval") { "eval" } else { "episode" },
-            step: rec.get(1).unwrap_or("0").parse()?,
-            episode_return: f(2)?,
-            episode_length: f(3)?.map(|v| v as u64),
-            eval_mean: f(4)?,
-            eval_std: f(5)?,
-            critic_loss: f(6)?,
-            actor_loss: f(7)?,
-            alpha: f(8)?,
-            steps_per_s: f(9)?.unwrap_or(0.0),
-            wall_time: f(10)?.unwrap_or(0.0),
-            eval_saturation: f(11)?,
+    let mut reader = csv::ReaderBuilder::new()
+        .flexible(true)
+        .from_path(path)
+        .with_context(|| format!("reading {}", path.display()))?;
+    let header = reader.headers().with_context(|| format!("reading {}", path.display()))?.clone();
+    if header.iter().ne(HEADER.iter().copied().take(header.len())) || header.len() < HEADER.len() - 1 {
+        bail!("{} does not start with the metrics header ({})", path.display(), HEADER.join(","));
+    }
+    for (i, rec) in reader.records().enumerate() {
+        let line = i + 2;
+        let row = rec.map_err(anyhow::Error::from).and_then(|rec| parse_row(&rec, header.len()));
+        rows.push(row.with_context(|| format!("{} line {line} is not a metrics row", path.display()))?);
+    }
+    Ok(rows)
+}
+
+fn parse_row(rec: &csv::StringRecord, width: usize) -> Result<MetricsRow> {
+    if rec.len() != width {
+        bail!("{} fields where the header has {width}", rec.len());
+    }
+    let f = |i: usize| rec.get(i).filter(|s| !s.is_empty()).map(|s| s.parse::<f64>()).transpose();
+    let kind = match rec.get(0) {
+        Some("eval") => "eval",
+        Some("episode") => "episode",
+        other => bail!("unknown kind {:?}", other.unwrap_or("")),
+    };
+    Ok(MetricsRow {
+        kind,
+        step: rec.get(1).unwrap_or("").parse().context("the step is not a whole number")?,
+        episode_return: f(2)?,
+        episode_length: f(3)?.map(|v| v as u64),
+        eval_mean: f(4)?,
+        eval_std: f(5)?,
+        critic_loss: f(6)?,
+        actor_loss: f(7)?,
+        alpha: f(8)?,
+        steps_per_s: f(9)?.unwrap_or(0.0),
+        wall_time: f(10)?.unwrap_or(0.0),
+        eval_saturation: f(11)?,
+    })
+}
+
+/// The rows a run resumed from `checkpoint` (at `step`) starts with. The checkpoint's own copy is
+/// authoritative; the run's `metrics.csv` must begin with exactly those rows (it is written before
+/// every checkpoint, so it is never behind one). A run's file that is missing, cut short or
+/// changed is an error that names it and loses nothing: it is never silently rewritten.
+/// Checkpoints from before the copy existed take the run's rows up to `step`.
+pub(crate) fn restore(run_dir: &Path, checkpoint: &Path, step: u64) -> Result<Vec<MetricsRow>> {
+    let run_file = run_dir.join(FILE);
+    let kept = checkpoint.join(FILE);
+    if !kept.exists() {
+        return Ok(if run_file.exists() {
+            read(&run_file)?.into_iter().filter(|r| r.step <= step).collect()
+        } else {
+            Vec::new()
         });
+    }
+    let rows = read(&kept)?;
+    let fix = format!(
+        "the checkpoint keeps the rows up to step {step} in {}: move the damaged file aside and copy that one in its \
+         place to resume (nothing was changed)",
+        kept.display()
+    );
+    let text = match std::fs::read_to_string(&run_file) {
+        Ok(text) => text,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound && rows.is_empty() => return Ok(rows),
+        Err(e) => return Err(e).with_context(|| format!("{} cannot be read; {fix}", run_file.display())),
+    };
+    let ours = read(&run_file).with_context(|| format!("{} is damaged; {fix}", run_file.display()))?;
+    let kept_text = std::fs::read_to_string(&kept).with_context(|| format!("reading {}", kept.display()))?;
+    let (expected, found): (Vec<&str>, Vec<&str>) = (kept_text.lines().collect(), text.lines().collect());
+    if let Some(line) = (0..expected.len()).find(|&i| found.get(i) != expected.get(i)) {
+        let what = if line >= found.len() {
+            format!(
+                "ends after line {} where the checkpoint at step {step} recorded {} lines",
+                found.len(),
+                expected.len()
+            )
+        } else {
+            format!("line {} differs from the checkpoint's copy", line + 1)
+        };
+        bail!("{} is damaged or cut short: it {what}; {fix}", run_file.display());
+    }
+    if let Some(bad) = ours[rows.len()..].iter().position(|r| r.step <= step) {
+        bail!(
+            "{} is damaged: line {} is at step {} but follows the checkpoint's rows (step {step}); {fix}",
+            run_file.display(),
+            rows.len() + bad + 2,
+            ours[rows.len() + bad].step
+        );
     }
     Ok(rows)
 }

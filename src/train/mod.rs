@@ -8,6 +8,7 @@ mod buffer_file;
 pub mod checkpoint;
 pub mod config;
 pub mod evaluate;
+pub(crate) mod fault;
 pub mod metrics;
 mod on_policy;
 pub mod provenance;
@@ -33,6 +34,7 @@ use crate::policy::to_env_action;
 use crate::record::Recording;
 use checkpoint::TrainState;
 use evaluate::{evaluate, Evaluation};
+use fault::Point;
 use metrics::MetricsRow;
 use recording::TrainingRecorder;
 use seeds::{init_rng, train_episode_seed, training_rng, RngState};
@@ -181,7 +183,7 @@ fn log_evaluation(
 ) -> Result<bool> {
     let (step, wall_time) = (row.step, row.wall_time);
     metrics.push(row.with_evaluation(evaluation));
-    metrics::write(&run_dir.join("metrics.csv"), metrics)?;
+    metrics::write(&run_dir.join(metrics::FILE), metrics)?;
     if let Some(r) = recorder {
         r.curves(metrics.last().expect("just pushed"))?;
         let evaluations = metrics.iter().filter(|m| m.kind == "eval").count() as u64;
@@ -198,7 +200,7 @@ fn log_evaluation(
 /// What both training loops do once their last checkpoint is written: rewrite the run's
 /// `metrics.csv` in full, move the recording (if any) to its name, and hand the summary back.
 fn finish_run(metrics: &[MetricsRow], recording: Option<Recording>, summary: RunSummary) -> Result<RunSummary> {
-    metrics::write(&summary.run_dir.join("metrics.csv"), metrics)?;
+    metrics::write(&summary.run_dir.join(metrics::FILE), metrics)?;
     if let Some(r) = recording {
         r.finish()?;
     }
@@ -225,7 +227,15 @@ pub fn train(
     env.options = env.resolved_options()?;
     // Before --force may remove the directory under a running trainer.
     run_lock::refuse_if_running(run_dir)?;
-    if run_dir.exists() && std::fs::read_dir(run_dir)?.next().is_some() {
+    // A lock that no process holds and a half-written temporary file (a trainer killed before
+    // it wrote its config) are no run.
+    let holds_something = |dir: &Path| -> Result<bool> {
+        Ok(std::fs::read_dir(dir)?.flatten().any(|e| {
+            let name = e.file_name();
+            name != run_lock::LOCK_FILE && !crate::io::is_temporary_name(&name.to_string_lossy())
+        }))
+    };
+    if run_dir.exists() && holds_something(run_dir)? {
         if !force {
             bail!(
                 "run directory {} already exists; use --force to overwrite it or --resume to continue it",
@@ -277,31 +287,60 @@ pub fn extend(run_dir: &Path, total_steps: u64) -> Result<bool> {
             run.train.total_steps
         );
     }
-    let state = checkpoint::load_state(&checkpoint::latest(run_dir)?)?;
+    // No checkpoint yet: the resume starts the run afresh, with the larger budget from the start.
+    let exact = if checkpoint::any(run_dir) {
+        checkpoint::load_state(&checkpoint::newest_intact(run_dir, trainer_file(&run))?)?.at_episode_boundary
+    } else {
+        true
+    };
     run.train.total_steps = total_steps;
     write_bytes_atomic(&run_dir.join("config.toml"), run.to_toml()?.as_bytes())?;
-    Ok(state.at_episode_boundary)
+    Ok(exact)
 }
 
-/// Continues a run from its newest checkpoint.
+/// The file a checkpoint of this run needs besides the networks to resume.
+fn trainer_file(run: &RunConfig) -> &'static str {
+    if run.train.algo.is_on_policy() {
+        on_policy::ROLLOUT_FILE
+    } else {
+        checkpoint::BUFFER_FILE
+    }
+}
+
+/// Continues a run from its newest intact checkpoint (`checkpoint::newest_intact`). A run with
+/// no checkpoint yet (stopped before its first) starts afresh from its `config.toml`, which is
+/// what an unbroken run computes too.
 pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
     let run = read_run_config(run_dir)?;
-    let ckpt = checkpoint::latest(run_dir)?;
+    let lock = run_lock::RunLock::acquire(run_dir)?;
+    if !checkpoint::any(run_dir) {
+        eprintln!(
+            "{} has no checkpoint yet (it stopped before its first): starting it afresh from its config.toml",
+            run_dir.display()
+        );
+        drop(lock);
+        let init_from = run.init_from.as_deref().map(Path::new);
+        return train(run.env, run.train, run.seed, run_dir, init_from, true, control);
+    }
+    checkpoint::remove_leftovers(run_dir)?;
+    checkpoint::prune_buffers(run_dir)?;
+    let ckpt = checkpoint::newest_intact(run_dir, trainer_file(&run))?;
+    checkpoint::make_latest(run_dir, &ckpt)?;
     let saved = checkpoint::load_state(&ckpt)?;
+    let metrics = metrics::restore(run_dir, &ckpt, saved.step)?;
     if saved.step >= run.train.total_steps {
         return Ok(RunSummary {
             run_dir: run_dir.to_path_buf(),
             outcome: Outcome::AlreadyFinished,
             steps: saved.step,
             last_eval: None,
-            best_eval_mean: None,
+            best_eval_mean: saved.best_eval_mean,
             checkpoint: ckpt,
         });
     }
-    let _lock = run_lock::RunLock::acquire(run_dir)?;
     if run.train.algo.is_on_policy() {
         provenance::append(run_dir, provenance::Stretch::here(saved.step, control.threads, git_commit().as_deref()))?;
-        return on_policy::resume(run_dir, &run, &ckpt, control);
+        return on_policy::resume(run_dir, &run, &ckpt, metrics, control);
     }
     let mut trainer = Trainer::new(run_dir, &run)?;
     let (state, buffer) = checkpoint::load_all(&ckpt, trainer.agent.as_mut())?;
@@ -310,10 +349,9 @@ pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
     trainer.step = state.step;
     trainer.episodes = state.episodes;
     trainer.wall_offset = state.wall_time;
-    let metrics_path = run_dir.join("metrics.csv");
-    if metrics_path.exists() {
-        trainer.metrics = metrics::read(&metrics_path)?.into_iter().filter(|r| r.step <= state.step).collect();
-    }
+    trainer.losses = state.losses;
+    trainer.best_eval = state.best_eval_mean;
+    trainer.metrics = metrics;
     provenance::append(run_dir, provenance::Stretch::here(state.step, control.threads, git_commit().as_deref()))?;
     trainer.run(control)
 }
@@ -333,6 +371,10 @@ struct Trainer {
     episodes: u64,
     wall_offset: f64,
     metrics: Vec<MetricsRow>,
+    /// The latest update's losses, carried by the rows until the next update.
+    losses: Option<Losses>,
+    /// The best in-training evaluation mean so far.
+    best_eval: Option<f64>,
     /// False when fine-tuning: the observation statistics come with the initial weights.
     fit_observations: bool,
 }
@@ -359,6 +401,8 @@ impl Trainer {
             episodes: 0,
             wall_offset: 0.0,
             metrics: Vec::new(),
+            losses: None,
+            best_eval: None,
             fit_observations: run.init_from.is_none(),
         })
     }
@@ -371,9 +415,7 @@ impl Trainer {
         let started = Instant::now();
         let start_step = self.step;
         let act_dim = self.env.spec().action_space.dim();
-        let mut losses: Option<Losses> = None;
         let mut last_eval: Option<Evaluation> = None;
-        let mut best_eval: Option<f64> = None;
         let mut next_checkpoint = (self.step / cfg.checkpoint_every + 1) * cfg.checkpoint_every;
         let mut obs: Vec<f64> = Vec::new();
         let mut need_reset = true;
@@ -414,6 +456,7 @@ impl Trainer {
             };
             let s = self.env.step(&to_env_action(self.env.as_ref(), &action))?;
             self.step += 1;
+            fault::reach(Point::Step);
 
             if s.info.unstable {
                 // Not a real transition: drop it and start over.
@@ -432,7 +475,13 @@ impl Trainer {
                     self.metrics.push(MetricsRow {
                         episode_return: Some(ep_return),
                         episode_length: Some(ep_len),
-                        ..MetricsRow::progress("episode", self.step, losses, rate(self.step), wall(self.wall_offset))
+                        ..MetricsRow::progress(
+                            "episode",
+                            self.step,
+                            self.losses,
+                            rate(self.step),
+                            wall(self.wall_offset),
+                        )
                     });
                     if let Some(r) = &recorder {
                         r.curves(self.metrics.last().unwrap())?;
@@ -452,8 +501,9 @@ impl Trainer {
                     self.buffer.sample_into(&mut self.batch, &mut self.rng);
                     let l = self.agent.update(&self.batch, &mut self.rng)?;
                     // Delayed updates leave actor/alpha unset: keep their latest values.
-                    let previous = losses.unwrap_or_default();
-                    losses = Some(Losses { actor: l.actor.or(previous.actor), alpha: l.alpha.or(previous.alpha), ..l });
+                    let previous = self.losses.unwrap_or_default();
+                    self.losses =
+                        Some(Losses { actor: l.actor.or(previous.actor), alpha: l.alpha.or(previous.alpha), ..l });
                 }
             }
 
@@ -465,9 +515,9 @@ impl Trainer {
             // Evaluate.
             if self.step.is_multiple_of(cfg.eval_every) || self.step == cfg.total_steps {
                 let e = evaluate(self.agent.as_ref(), self.eval_env.as_mut(), cfg.eval_episodes, self.seed)?;
-                best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
+                self.best_eval = Some(self.best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
-                let row = MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset));
+                let row = MetricsRow::progress("eval", self.step, self.losses, rate(self.step), wall(self.wall_offset));
                 hook_done = log_evaluation(
                     &self.run_dir,
                     &mut self.metrics,
@@ -498,7 +548,7 @@ impl Trainer {
         drop(recorder);
         let run_dir = self.run_dir.clone();
         let summary =
-            RunSummary { run_dir, outcome, steps: self.step, last_eval, best_eval_mean: best_eval, checkpoint };
+            RunSummary { run_dir, outcome, steps: self.step, last_eval, best_eval_mean: self.best_eval, checkpoint };
         finish_run(&self.metrics, recording, summary)
     }
 
@@ -511,8 +561,10 @@ impl Trainer {
             rng: RngState::of(&self.rng),
             optimizer_steps: Default::default(),
             counters: Default::default(),
+            losses: self.losses,
+            best_eval_mean: self.best_eval,
         };
-        checkpoint::save(&self.run_dir, self.agent.as_mut(), &self.buffer, &state)
+        checkpoint::save(&self.run_dir, self.agent.as_mut(), &self.buffer, &state, &self.metrics)
     }
 }
 

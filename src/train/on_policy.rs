@@ -23,7 +23,8 @@ use rand_chacha::ChaCha8Rng;
 
 use super::checkpoint::{self, TrainState};
 use super::evaluate::{evaluate, Evaluation};
-use super::metrics::{self, MetricsRow};
+use super::fault::{self, Point};
+use super::metrics::MetricsRow;
 use super::recording::TrainingRecorder;
 use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
 use super::{
@@ -36,7 +37,7 @@ use crate::envs::{make, Env, VecEnv, VecEnvSnapshot};
 use crate::policy::to_space;
 use crate::record::Recording;
 
-const ROLLOUT_FILE: &str = "rollout.safetensors";
+pub(super) const ROLLOUT_FILE: &str = "rollout.safetensors";
 /// gymnasium's `NormalizeReward` epsilon.
 const RETURN_EPSILON: f64 = 1e-8;
 
@@ -73,6 +74,8 @@ struct OnPolicyTrainer {
     episodes: u64,
     wall_offset: f64,
     metrics: Vec<MetricsRow>,
+    /// The best in-training evaluation mean so far.
+    best_eval: Option<f64>,
     returns: Vec<f64>,
     /// Running statistics of the copies' discounted returns (one feature).
     return_stat: RunningMeanStd,
@@ -96,22 +99,26 @@ pub(super) fn train(
     t.run(control)
 }
 
-/// Continues a PPO run from `ckpt`.
-pub(super) fn resume(run_dir: &Path, run: &RunConfig, ckpt: &Path, control: &RunControl) -> Result<RunSummary> {
+/// Continues a PPO run from `ckpt`, with the run's metrics rows up to it.
+pub(super) fn resume(
+    run_dir: &Path,
+    run: &RunConfig,
+    ckpt: &Path,
+    metrics: Vec<MetricsRow>,
+    control: &RunControl,
+) -> Result<RunSummary> {
     let mut t = OnPolicyTrainer::new(run_dir, run, control)?;
     let state = checkpoint::load_training(ckpt, &mut t.agent)?;
     t.rng = state.rng.restore()?;
     t.step = state.step;
     t.episodes = state.episodes;
     t.wall_offset = state.wall_time;
+    t.best_eval = state.best_eval_mean;
     let saved = checkpoint::read_trainer_file(ckpt, ROLLOUT_FILE)?;
     let snapshot =
         t.read_rollout_state(&saved).with_context(|| format!("{} is corrupt", ckpt.join(ROLLOUT_FILE).display()))?;
     t.obs = t.envs.restore(&snapshot)?;
-    let metrics_path = run_dir.join("metrics.csv");
-    if metrics_path.exists() {
-        t.metrics = metrics::read(&metrics_path)?.into_iter().filter(|r| r.step <= state.step).collect();
-    }
+    t.metrics = metrics;
     t.run(control)
 }
 
@@ -135,6 +142,7 @@ impl OnPolicyTrainer {
             episodes: 0,
             wall_offset: 0.0,
             metrics: Vec::new(),
+            best_eval: None,
             returns: vec![0.0; n],
             return_stat: RunningMeanStd::new(1),
             episode_returns: vec![0.0; n],
@@ -165,7 +173,6 @@ impl OnPolicyTrainer {
         };
         let mut losses: Option<Losses>;
         let mut last_eval: Option<Evaluation> = None;
-        let mut best_eval: Option<f64> = None;
         let checkpoint_every = self.cfg().checkpoint_every;
         let eval_every = self.cfg().eval_every;
         let eval_episodes = self.cfg().eval_episodes;
@@ -194,7 +201,7 @@ impl OnPolicyTrainer {
 
             if before / eval_every != self.step / eval_every || self.step >= total {
                 let e = evaluate(&self.agent, self.eval_env.as_mut(), eval_episodes, self.run.seed)?;
-                best_eval = Some(best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
+                self.best_eval = Some(self.best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
                 let row = MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset));
                 hook_done = log_evaluation(
@@ -223,7 +230,7 @@ impl OnPolicyTrainer {
         drop(recorder);
         let run_dir = self.run_dir.clone();
         let summary =
-            RunSummary { run_dir, outcome, steps: self.step, last_eval, best_eval_mean: best_eval, checkpoint };
+            RunSummary { run_dir, outcome, steps: self.step, last_eval, best_eval_mean: self.best_eval, checkpoint };
         finish_run(&self.metrics, recording, summary)
     }
 
@@ -259,6 +266,7 @@ impl OnPolicyTrainer {
             let s = self.envs.step(&env_actions)?;
             let before = self.step;
             self.step += n as u64;
+            fault::reach(Point::Step);
             // The actor that collected this step is the one at the budget. The run's own budget
             // counts too: it ends on a whole rollout, past a budget that is not a multiple of one.
             let budgets = POLICY_BUDGETS.iter().copied().chain([self.cfg().total_steps]);
@@ -398,9 +406,12 @@ impl OnPolicyTrainer {
             rng: RngState::of(&self.rng),
             optimizer_steps: Default::default(),
             counters: Default::default(),
+            // Every row's losses come from its own rollout's update: nothing to carry.
+            losses: None,
+            best_eval_mean: self.best_eval,
         };
         let tensors = self.rollout_state()?;
-        checkpoint::save_with(&self.run_dir.clone(), &mut self.agent, &state, |dir| {
+        checkpoint::save_with(&self.run_dir.clone(), &mut self.agent, &state, &self.metrics, |dir| {
             candle_core::safetensors::save(&tensors, dir.join(ROLLOUT_FILE))?;
             Ok(())
         })

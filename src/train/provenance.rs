@@ -90,10 +90,17 @@ pub fn read(run_dir: &Path) -> Result<Vec<Stretch>> {
 }
 
 /// Adds `stretch` to `run_dir`'s file, dropping rows that start at or after it (a resume from an
-/// earlier checkpoint recomputes those steps). Written atomically.
+/// earlier checkpoint recomputes those steps). A stretch computed as the one before it was (same
+/// commit, CPU, kernels, threads and MuJoCo) continues that row instead of adding one, so a run
+/// resumed where it ran writes the file an unbroken run writes. Written atomically.
 pub(crate) fn append(run_dir: &Path, stretch: Stretch) -> Result<()> {
     let mut rows: Vec<Stretch> = read(run_dir)?.into_iter().filter(|r| r.from_step < stretch.from_step).collect();
-    rows.push(stretch);
+    let continues = |last: &Stretch| Stretch { from_step: stretch.from_step, ..last.clone() } == stretch;
+    if rows.last().is_some_and(continues) {
+        // Rewritten all the same: rows from a stretch that a resume recomputes are gone.
+    } else {
+        rows.push(stretch);
+    }
     let mut writer = csv::Writer::from_writer(Vec::new());
     for row in &rows {
         writer.serialize(row)?;
@@ -156,6 +163,9 @@ mod tests {
         assert_eq!(rows.iter().map(|r| r.from_step).collect::<Vec<_>>(), [0, 3000]);
         assert_eq!(rows[0], first);
         assert_eq!(rows[1].git_commit, "unknown");
+        // Resumed where it ran, as it ran: the row continues, as if the run had never stopped.
+        append(dir.path(), Stretch::here(4000, 1, None)).unwrap();
+        assert_eq!(read(dir.path()).unwrap(), rows);
         std::fs::write(dir.path().join(FILE), "from_step,git_commit\nnot-a-number,x\n").unwrap();
         let err = format!("{:#}", read(dir.path()).unwrap_err());
         assert!(err.contains(FILE) && err.contains("row 1"), "{err}");
