@@ -2,9 +2,10 @@
 # The main job, a short real demo (a few minutes on 2 cores once built):
 #   1. SAC learns to balance InvertedPendulum, recorded into a rerun file as it learns;
 #   2. a sweep: TD3 and DDPG learn it too, two seeds each, two processes side by side;
-#   3. two Minitaur walking policies (trained with SAC for 300k steps and TD3 for 1M, shipped in
-#      models/policies/, retrain them with the commands in their READMEs) are evaluated and
-#      recorded, beside the Raibert/QP baseline controller at 0.35 m/s;
+#   3. three Minitaur walking policies (trained with SAC for 300k steps, TD3 for 1M and PPO for
+#      1M, shipped in models/policies/, retrain them with the commands in their READMEs) are
+#      evaluated and recorded, beside the Raibert/QP baseline controller at 0.35 m/s and at
+#      1.5 m/s, its fastest;
 #   4. a report evaluates every policy on the same held-out episodes, beside the controller
 #      across its speeds and under pushes.
 # Everything goes under demo/; the paths are printed at the end.
@@ -16,6 +17,7 @@ bin=target/release/locobench
 out=demo
 policy=models/policies/minitaur-sac
 td3_policy=models/policies/minitaur-td3
+ppo_policy=models/policies/minitaur-ppo
 rm -rf "$out"
 mkdir -p "$out"
 "$bin" envs
@@ -24,12 +26,13 @@ mkdir -p "$out"
 "$bin" eval --policy "$out/run-inverted-pendulum-sac" --episodes 10
 "$bin" sweep --env inverted-pendulum --algo td3,ddpg --seeds 2 --jobs 2 --out "$out/pendulum-sweep"
 "$bin" sweep status "$out/pendulum-sweep"
-for p in "$policy" "$td3_policy"; do "$bin" eval --policy "$p" --episodes 10; done
-"$bin" baseline --env minitaur --speed 0.35 --episodes 3 --seed 0
+for p in "$policy" "$td3_policy" "$ppo_policy"; do "$bin" eval --policy "$p" --episodes 10; done
+"$bin" baseline --env minitaur --speed 0.35,1.5 --episodes 3 --seed 0
 "$bin" record --env minitaur --policy raibert --speed 0.35 --out "$out/minitaur-raibert.rrd"
 "$bin" record --policy "$policy" --out "$out/minitaur-sac.rrd"
 "$bin" record --policy "$td3_policy" --out "$out/minitaur-td3.rrd"
-"$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/pendulum-sweep" "$policy" "$td3_policy" --out "$out/report" --episodes 3 --push-episodes 2
+"$bin" record --policy "$ppo_policy" --out "$out/minitaur-ppo.rrd"
+"$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/pendulum-sweep" "$policy" "$td3_policy" "$ppo_policy" --out "$out/report" --episodes 3 --push-episodes 2
 echo
 echo "Report (open in a browser):   $(pwd)/$out/report/index.html  (Markdown: $out/report/README.md)"
 echo "rerun recordings:             $(pwd)/$out/*.rrd  (viewer: pip install rerun-sdk==0.36.3; rerun FILE)"

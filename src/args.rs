@@ -108,9 +108,15 @@ pub struct TrainArgs {
     /// Run directory (default runs/<env>-<algo>-seed<seed>).
     #[arg(long)]
     pub out: Option<PathBuf>,
-    /// Start from a checkpoint's weights (fine-tuning); warm-up defaults to 0 steps then.
-    #[arg(long, value_name = "CHECKPOINT")]
+    /// Start from a trained policy (fine-tuning); warm-up defaults to 0 steps then. Any policy
+    /// reference: a checkpoint or a run directory (its newest checkpoint) continues every
+    /// network; a budget policy, a committed result run or an exported policy gives the actor
+    /// alone, and the critics start afresh.
+    #[arg(long, value_name = "RUN_DIR|CHECKPOINT|POLICY")]
     pub init_from: Option<PathBuf>,
+    /// With --init-from RUN_DIR: the actor the run saved at this step budget.
+    #[arg(long, requires = "init_from")]
+    pub init_budget: Option<u64>,
     /// Continue a stopped run from its newest checkpoint.
     #[arg(long, value_name = "DIR", conflicts_with_all = ["env", "algo", "set", "options", "reward", "env_config", "init_from", "out"])]
     pub resume: Option<PathBuf>,
@@ -151,6 +157,7 @@ impl Default for TrainArgs {
             env_options: EnvOptionArgs::default(),
             out: None,
             init_from: None,
+            init_budget: None,
             resume: None,
             force: false,
             resume_if_exists: false,
@@ -193,6 +200,9 @@ impl TrainArgs {
             if let Some(p) = path {
                 push(flag, p.display().to_string());
             }
+        }
+        if let Some(b) = self.init_budget {
+            push("--init-budget", b.to_string());
         }
         if let Some(r) = &self.record {
             push("--record", r.display().to_string());

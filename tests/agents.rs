@@ -440,7 +440,7 @@ fn observation_normalisation_is_fitted_on_the_warm_up_and_travels_with_the_actor
 
     // The exported policy acts exactly as the checkpoint does.
     let out = dir.path().join("exported");
-    train::export_policy(&a.checkpoint, &out).unwrap();
+    train::export_policy(&a.checkpoint, None, &out).unwrap();
     let (_, from_ckpt) = train::load_policy(&a.checkpoint).unwrap();
     let (_, from_export) = train::load_policy(&out).unwrap();
     let obs: Vec<f32> = (0..17).map(|i| (i as f32 * 0.37).sin() * 3.0).collect();

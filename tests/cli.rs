@@ -222,7 +222,7 @@ fn train_rejects_bad_arguments() {
         (&["train", "--env", "hoppr", "--algo", "td3", "--out", o], "unknown environment 'hoppr'"),
         (&["train", "--env", "ant", "--algo", "td3", "--set", "tau=7", "--out", o], "tau"),
         (&["train", "--env", "ant", "--algo", "td3", "--reward", "wobble=1", "--out", o], "wobble"),
-        (&["eval", "--policy", "/no/such/run"], "no checkpoint"),
+        (&["eval", "--policy", "/no/such/run"], "no policy at /no/such/run"),
         (&["train", "--env", "ant", "--algo", "td3", "--threads", "3", "--out", o], "3 is not in 1..=2"),
     ];
     for (args, expect) in cases {
@@ -361,5 +361,90 @@ fn every_command_help_shows_defaults_and_ends_with_an_example() {
     for cmd in ["eval", "report", "baseline"] {
         let (_, out, _) = locobench(&[cmd, "--help"]);
         assert!(out.contains("[default: 50]") && out.contains("[default: 0]"), "{cmd}:\n{out}");
+    }
+}
+
+/// A policy reference means the same thing in `eval`, `record`, `export` and `train --init-from`:
+/// a run directory (newest checkpoint, or with `--budget` the actor saved there), a result run
+/// kept without checkpoints (newest budget policy by default), a checkpoint, a budget policy file
+/// and an exported policy; a budget it does not hold is an error listing those it does.
+#[test]
+fn every_kind_of_policy_reference_loads_the_same_policy_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let r = run.to_str().unwrap();
+    let set = "warmup_steps=100,learning_starts=100,eval_every=300,eval_episodes=2,batch_size=32,hidden=[16,16]";
+    let train = ["train", "--env", "inverted-pendulum", "--algo", "td3", "--steps", "600", "--set", set, "--out", r];
+    let (ok, _, err) = locobench(&[&train[..], &["--quiet"]].concat());
+    assert!(ok, "{err}");
+    // Extended to 1200 steps: budget policies at 600 (its first budget) and 1200.
+    let (ok, _, err) = locobench(&["train", "--resume", r, "--steps", "1200", "--quiet"]);
+    assert!(ok, "{err}");
+    let eval = |args: &[&str]| {
+        let (ok, out, err) = locobench(&[&["eval", "--episodes", "3", "--seed", "7"], args].concat());
+        assert!(ok, "{args:?}: {err}");
+        out.split_once(": ").unwrap().1.to_string()
+    };
+    let newest = eval(&["--policy", r]);
+    let at_600 = eval(&["--policy", r, "--budget", "600"]);
+    assert_ne!(newest, at_600, "the actors at 600 and 1200 steps act alike");
+    assert_eq!(
+        eval(&["--policy", r, "--budget", "1200"]),
+        newest,
+        "the budget actor at the last step is the checkpoint's"
+    );
+    let checkpoint =
+        run.join("checkpoints").join(std::fs::read_to_string(run.join("checkpoints/latest")).unwrap().trim());
+    assert_eq!(eval(&["--policy", checkpoint.to_str().unwrap()]), newest);
+    assert_eq!(eval(&["--policy", checkpoint.join("model.safetensors").to_str().unwrap()]), newest);
+    let file_600 = run.join("policies/step-600.safetensors");
+    assert_eq!(eval(&["--policy", file_600.to_str().unwrap()]), at_600);
+
+    // A result run as committed under benches/results: config, metrics and policies only.
+    let result = dir.path().join("result");
+    std::fs::create_dir_all(result.join("policies")).unwrap();
+    for f in ["config.toml", "metrics.csv", "policies/step-600.safetensors", "policies/step-1200.safetensors"] {
+        std::fs::copy(run.join(f), result.join(f)).unwrap();
+    }
+    let res = result.to_str().unwrap();
+    assert_eq!(eval(&["--policy", res]), newest, "a result run's default is its newest budget policy");
+    assert_eq!(eval(&["--policy", res, "--budget", "600"]), at_600);
+    let (ok, _, err) = locobench(&["train", "--resume", res, "--quiet"]);
+    assert!(!ok && err.contains("no checkpoint to resume from"), "{err}");
+    assert!(!result.join("run.lock").exists() && result.join("policies/step-600.safetensors").exists());
+
+    // Exported from the result run at a budget: a shippable policy that acts the same.
+    let exported = dir.path().join("exported");
+    let ex = exported.to_str().unwrap();
+    let (ok, _, err) = locobench(&["export", "--policy", res, "--budget", "600", "--out", ex]);
+    assert!(ok, "{err}");
+    assert_eq!(eval(&["--policy", ex]), at_600);
+    assert!(std::fs::read_to_string(exported.join("source.toml")).unwrap().contains("step = 600"));
+    assert_eq!(eval(&["--policy", exported.join("policy.safetensors").to_str().unwrap()]), at_600);
+
+    // record and train --init-from read the same references.
+    let rrd = dir.path().join("r.rrd");
+    let (ok, _, err) = locobench(&["record", "--policy", res, "--budget", "600", "--out", rrd.to_str().unwrap()]);
+    assert!(ok && rrd.exists(), "{err}");
+    let tuned = dir.path().join("tuned");
+    let t = tuned.to_str().unwrap();
+    let init = ["--init-from", res, "--init-budget", "600", "--steps", "300", "--set", "hidden=[16,16],eval_every=300"];
+    let (ok, _, err) = locobench(
+        &[&["train", "--env", "inverted-pendulum", "--algo", "td3", "--out", t, "--quiet"][..], &init].concat(),
+    );
+    assert!(ok, "{err}");
+    let config = std::fs::read_to_string(tuned.join("config.toml")).unwrap();
+    assert!(config.contains("step-600.safetensors"), "{config}");
+
+    // Errors name the path and what it holds.
+    for (args, expect) in [
+        (vec!["--policy", r, "--budget", "5"], "has no policy at step 5 (it holds policies at 600, 1200)"),
+        (vec!["--policy", checkpoint.to_str().unwrap(), "--budget", "600"], "applies to a run directory"),
+        (vec!["--policy", ex, "--budget", "1200"], "exported policy at step 600"),
+        (vec!["--policy", file_600.to_str().unwrap(), "--budget", "1200"], "not at --budget 1200"),
+        (vec!["--policy", "no/such/run"], "the path does not exist"),
+    ] {
+        let (ok, _, err) = locobench(&[&["eval", "--episodes", "1"], &args[..]].concat());
+        assert!(!ok && err.contains(expect), "{args:?}: {err}");
     }
 }

@@ -59,8 +59,8 @@ def make_controller_env(name, **options):
 class TrainedPolicy:
     """A trained actor acting deterministically; ``predict`` follows SB3."""
 
-    def __init__(self, path):
-        self._core = _core.TrainedPolicy(os.fspath(path))
+    def __init__(self, path, budget=None):
+        self._core = _core.TrainedPolicy(os.fspath(path), budget)
         self.env_name = self._core.env
 
     def make_env(self, **options):
@@ -78,6 +78,12 @@ class TrainedPolicy:
         return np.asarray(self._core.act(obs.ravel().tolist()), dtype=np.float32), state
 
 
-def load_policy(path):
-    """A trained policy from a run directory, a checkpoint or an exported policy directory."""
-    return TrainedPolicy(path)
+def load_policy(path, budget=None):
+    """A trained policy, as ``locobench eval --policy PATH [--budget N]`` reads it.
+
+    ``path``: a run directory (its newest checkpoint, or for a committed result run such as
+    ``benches/results/minitaur/ppo-8envs-seed0-2m`` its newest budget policy), a checkpoint
+    directory, a budget policy file (``RUN/policies/step-N.safetensors``) or an exported policy.
+    ``budget``: with a run directory, the actor the run saved at that step.
+    """
+    return TrainedPolicy(path, budget)

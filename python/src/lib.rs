@@ -299,7 +299,9 @@ impl PyController {
     }
 }
 
-/// A trained actor (run directory, checkpoint or exported policy), acting deterministically.
+/// A trained actor (any policy reference: a run directory, with a step budget or its newest
+/// policy; a committed result run; a checkpoint; a budget policy file; an exported policy),
+/// acting deterministically.
 #[pyclass(name = "TrainedPolicy", module = "locobench._core", unsendable)]
 struct PyTrainedPolicy {
     agent: Box<dyn locobench::agents::Agent>,
@@ -313,11 +315,13 @@ struct PyTrainedPolicy {
 #[pymethods]
 impl PyTrainedPolicy {
     #[new]
-    fn new(path: PathBuf) -> PyResult<Self> {
+    #[pyo3(signature = (path, budget=None))]
+    fn new(path: PathBuf, budget: Option<u64>) -> PyResult<Self> {
         if !path.exists() {
             return Err(PyFileNotFoundError::new_err(format!("{}: no such file or directory", path.display())));
         }
-        let (run, agent) = locobench::train::load_policy(&path).map_err(runtime_error)?;
+        let (run, agent) =
+            locobench::train::resolve_policy(&path, budget).and_then(|p| p.load()).map_err(runtime_error)?;
         let env = make(&run.env).map_err(value_error)?;
         let spec = env.spec();
         Ok(PyTrainedPolicy {

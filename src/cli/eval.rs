@@ -8,13 +8,15 @@ use locobench::policy::AgentPolicy;
 use locobench::report::format::interval;
 use locobench::report::heldout::estimate;
 use locobench::report::BOOTSTRAP_SEED;
-use locobench::train::{evaluate::evaluate, load_budget_policy, load_policy};
+use locobench::train::{evaluate::evaluate, resolve_policy};
 
 #[derive(clap::Args, Debug)]
 pub struct EvalArgs {
-    /// A trained policy: a run directory (its newest checkpoint), a checkpoint directory, or an
-    /// exported policy. `--checkpoint` is the old spelling.
-    #[arg(long, alias = "checkpoint", value_name = "RUN_DIR|CHECKPOINT|POLICY_DIR")]
+    /// A trained policy: a run directory (its newest checkpoint, or for a committed result run
+    /// its newest budget policy), a checkpoint directory, a budget policy file
+    /// (`RUN/policies/step-N.safetensors`) or an exported policy. `--checkpoint` is the old
+    /// spelling.
+    #[arg(long, alias = "checkpoint", value_name = "RUN_DIR|CHECKPOINT|POLICY")]
     pub policy: PathBuf,
     /// Evaluate the actor the run saved at this step budget (`policies/step-N.safetensors`).
     #[arg(long)]
@@ -38,10 +40,7 @@ pub struct EvalArgs {
 pub fn run(args: EvalArgs) -> Result<()> {
     super::deprecated_flag("--checkpoint", "--policy");
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
-    let (run, agent) = match args.budget {
-        Some(b) => load_budget_policy(&args.policy, b)?,
-        None => load_policy(&args.policy)?,
-    };
+    let (run, agent) = resolve_policy(&args.policy, args.budget)?.load()?;
     let env_cfg = args.env_options.apply(run.env.clone())?;
     let mut env = make(&env_cfg)?;
     let what = format!("{} {} on {}", args.policy.display(), run.train.algo.name(), run.env.name);

@@ -6,7 +6,7 @@ use locobench::envs::make;
 use locobench::policy::{AgentPolicy, Policy};
 use locobench::record::{spawn_viewer, Recording, RolloutRecorder};
 use locobench::rollout::run_episodes;
-use locobench::train::load_policy;
+use locobench::train::resolve_policy;
 
 use super::rollout::simple_policy;
 
@@ -15,10 +15,14 @@ pub struct RecordArgs {
     /// Environment name (see `locobench envs`); optional with a checkpoint (its run's env).
     #[arg(long)]
     pub env: Option<String>,
-    /// A trained policy (run directory, checkpoint or exported policy), `raibert` (the
-    /// controller), `random`, `zero`, or `actions:FILE.csv`.
+    /// A trained policy (a run directory, a committed result run, a checkpoint, a budget
+    /// policy file or an exported policy), `raibert` (the controller), `random`, `zero`, or
+    /// `actions:FILE.csv`.
     #[arg(long)]
     pub policy: String,
+    /// With a run directory as --policy: the actor the run saved at this step budget.
+    #[arg(long)]
+    pub budget: Option<u64>,
     /// Episodes to record, one after another (reset seeds from --seed on).
     #[arg(long, default_value_t = 1)]
     pub episodes: usize,
@@ -46,6 +50,12 @@ pub struct RecordArgs {
 
 pub fn run(args: RecordArgs) -> Result<()> {
     let agent_holder;
+    let simple = ["raibert", "random", "zero"].contains(&args.policy.as_str()) || args.policy.starts_with("actions:");
+    anyhow::ensure!(
+        !(simple && args.budget.is_some()),
+        "--budget applies to a trained policy, not to --policy {}",
+        args.policy
+    );
     let (cfg, mut policy): (_, Box<dyn Policy>) = match args.policy.as_str() {
         "raibert" => {
             let env = args.env.as_deref().context("--policy raibert needs --env minitaur or --env ant")?;
@@ -58,8 +68,9 @@ pub fn run(args: RecordArgs) -> Result<()> {
             (locobench::envs::EnvConfig::new(env), simple_policy(p, args.seed.seed)?)
         }
         checkpoint => {
-            let (run, agent) = load_policy(std::path::Path::new(checkpoint)).with_context(|| {
-                format!("--policy '{checkpoint}' is not raibert, random, zero, actions:FILE.csv or a checkpoint")
+            let path = std::path::Path::new(checkpoint);
+            let (run, agent) = resolve_policy(path, args.budget).and_then(|p| p.load()).with_context(|| {
+                format!("--policy '{checkpoint}' is not raibert, random, zero, actions:FILE.csv or a trained policy")
             })?;
             if let Some(env) = &args.env {
                 anyhow::ensure!(*env == run.env.name, "the checkpoint was trained on {}, not {env}", run.env.name);

@@ -49,9 +49,11 @@ pub fn run(args: TrainArgs) -> Result<()> {
             .out
             .clone()
             .unwrap_or_else(|| PathBuf::from(format!("runs/{env}-{}-seed{}", algo.name(), args.seed.seed)));
-        if args.init_from.as_ref().is_some_and(|p| !p.exists()) {
-            bail!("checkpoint {} does not exist", args.init_from.as_ref().unwrap().display());
-        }
+        // The policy reference as one path (a budget names its file), which config.toml keeps.
+        let init_from = match &args.init_from {
+            Some(p) => Some(train::resolve_policy(p, args.init_budget)?.path()),
+            None => None,
+        };
         if args.resume_if_exists && out.join("config.toml").exists() {
             same_run_or_error(&out, &env_cfg, &cfg, args.seed.seed)?;
             println!("{} holds this run already: resuming it", out.display());
@@ -66,7 +68,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
             cfg.total_steps,
             out.display()
         );
-        train::train(env_cfg, cfg, args.seed.seed, &out, args.init_from.as_deref(), args.force, &control)?
+        train::train(env_cfg, cfg, args.seed.seed, &out, init_from.as_deref(), args.force, &control)?
     };
     report(&args, &summary)
 }

@@ -11,6 +11,7 @@ pub mod evaluate;
 pub(crate) mod fault;
 pub mod metrics;
 mod on_policy;
+pub mod policy_ref;
 pub mod provenance;
 mod recording;
 pub mod run_config;
@@ -39,6 +40,7 @@ use metrics::MetricsRow;
 use recording::TrainingRecorder;
 use seeds::{init_rng, train_episode_seed, training_rng, RngState};
 
+pub use policy_ref::{resolve_policy, PolicyRef};
 pub use run_config::{read_run_config, RunConfig};
 pub use run_dir::{
     budget_policy_steps, export_policy, has_policy, load_budget_policy, load_policy, resolve_checkpoint, run_progress,
@@ -244,13 +246,15 @@ pub fn train(
         }
         std::fs::remove_dir_all(run_dir).with_context(|| format!("removing {}", run_dir.display()))?;
     }
-    let init_checkpoint = init_from.map(resolve_checkpoint).transpose()?;
+    // Any policy reference: a checkpoint fine-tunes every network, an actor alone (a budget or
+    // exported policy) starts the critics afresh.
+    let init = init_from.map(|p| resolve_policy(p, None)).transpose()?;
     let run = RunConfig {
         format: run_config::FORMAT,
         seed,
         crate_version: env!("CARGO_PKG_VERSION").to_string(),
         git_commit: git_commit(),
-        init_from: init_checkpoint.as_ref().map(|p| p.display().to_string()),
+        init_from: init.as_ref().map(|p| p.path().display().to_string()),
         env,
         train,
     };
@@ -259,11 +263,11 @@ pub fn train(
         let _lock = run_lock::RunLock::acquire(run_dir)?;
         write_bytes_atomic(&run_dir.join("config.toml"), run.to_toml()?.as_bytes())?;
         provenance::append(run_dir, provenance::Stretch::here(0, control.threads, run.git_commit.as_deref()))?;
-        return on_policy::train(run_dir, &run, init_checkpoint.as_deref(), control);
+        return on_policy::train(run_dir, &run, init.as_ref(), control);
     }
     let mut trainer = Trainer::new(run_dir, &run)?;
-    if let Some(ckpt) = &init_checkpoint {
-        checkpoint::load_weights(ckpt, trainer.agent.as_ref())?;
+    if let Some(policy) = &init {
+        policy.load_into(trainer.agent.as_ref())?;
     }
     std::fs::create_dir_all(run_dir)?;
     let _lock = run_lock::RunLock::acquire(run_dir)?;
@@ -312,6 +316,15 @@ fn trainer_file(run: &RunConfig) -> &'static str {
 /// what an unbroken run computes too.
 pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
     let run = read_run_config(run_dir)?;
+    if !checkpoint::any(run_dir)
+        && (run_dir.join(checkpoint::POLICY_FILE).is_file() || !budget_policy_steps(run_dir).is_empty())
+    {
+        bail!(
+            "{} has no checkpoint to resume from: it holds a policy without its training state (an exported policy, \
+             or a result kept without checkpoints); train anew into another --out (it can --init-from this one)",
+            run_dir.display()
+        );
+    }
     let lock = run_lock::RunLock::acquire(run_dir)?;
     if !checkpoint::any(run_dir) {
         eprintln!(

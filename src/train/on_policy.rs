@@ -87,12 +87,12 @@ struct OnPolicyTrainer {
 pub(super) fn train(
     run_dir: &Path,
     run: &RunConfig,
-    init_from: Option<&Path>,
+    init_from: Option<&super::PolicyRef>,
     control: &RunControl,
 ) -> Result<RunSummary> {
     let mut t = OnPolicyTrainer::new(run_dir, run, control)?;
-    if let Some(ckpt) = init_from {
-        checkpoint::load_weights(ckpt, &t.agent)?;
+    if let Some(policy) = init_from {
+        policy.load_into(&t.agent)?;
     }
     t.obs = t.envs.reset(run.seed)?;
     t.agent.observe(&t.obs)?;

@@ -9,6 +9,7 @@ use crate::agents::{make_agent, Agent};
 use crate::envs::make;
 use crate::io::write_bytes_atomic;
 
+use super::policy_ref::{resolve_policy, PolicyRef};
 use super::seeds::init_rng;
 use super::{checkpoint, metrics, read_run_config, RunConfig};
 
@@ -72,47 +73,54 @@ pub fn resolve_checkpoint(path: &Path) -> Result<PathBuf> {
     }
 }
 
-/// Writes a run's policy for sharing: `policy.safetensors` (the actor's weights only, a few
-/// hundred KB where a checkpoint with critics, targets and optimiser state is several MB, or GB
-/// with its buffer), the run's `config.toml` and `metrics.csv`. `eval`, `record` and `report`
-/// take the directory like a run directory.
-pub fn export_policy(checkpoint: &Path, out: &Path) -> Result<PathBuf> {
-    let ckpt = resolve_checkpoint(checkpoint)?;
-    let run_dir = ckpt.parent().and_then(Path::parent).context("checkpoint is not inside a run directory")?;
-    let (_, agent) = load_policy(&ckpt)?;
+/// Writes a policy for sharing: `policy.safetensors` (the actor's weights only, a few hundred KB
+/// where a checkpoint with critics, targets and optimiser state is several MB, or GB with its
+/// buffer), the run's `config.toml` and `metrics.csv`, and `source.toml` (what it was exported
+/// from, and its step). `policy` and `budget` are a policy reference
+/// ([`super::policy_ref::resolve_policy`]): a run directory (with a budget, or its newest
+/// policy), a committed result run, a checkpoint, a budget policy file or an exported policy.
+/// `eval`, `record` and `report` take the directory like a run directory.
+pub fn export_policy(policy: &Path, budget: Option<u64>, out: &Path) -> Result<PathBuf> {
+    let source = resolve_policy(policy, budget)?;
+    let run_dir = source.run_dir()?;
+    if out.exists() && same_dir(out, &run_dir) {
+        bail!("--out {} is the policy's own directory; export into another", out.display());
+    }
+    let (_, agent) = source.load()?;
     std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
     checkpoint::save_actor(&out.join(checkpoint::POLICY_FILE), agent.as_ref())?;
-    for file in ["config.toml", "metrics.csv"] {
-        let bytes =
-            std::fs::read(run_dir.join(file)).with_context(|| format!("reading {}", run_dir.join(file).display()))?;
-        write_bytes_atomic(&out.join(file), &bytes)?;
+    let config = run_dir.join("config.toml");
+    let bytes = std::fs::read(&config).with_context(|| format!("reading {}", config.display()))?;
+    write_bytes_atomic(&out.join("config.toml"), &bytes)?;
+    let metrics = run_dir.join("metrics.csv");
+    if metrics.is_file() {
+        let bytes = std::fs::read(&metrics).with_context(|| format!("reading {}", metrics.display()))?;
+        write_bytes_atomic(&out.join("metrics.csv"), &bytes)?;
     }
-    let state = checkpoint::load_state(&ckpt)?;
-    write_bytes_atomic(
-        &out.join("source.toml"),
-        format!("checkpoint = {:?}\nstep = {}\n", ckpt.display().to_string(), state.step).as_bytes(),
-    )?;
+    let mut text = format!("source = {:?}\n", source.path().display().to_string());
+    if let Some(step) = source.step() {
+        text.push_str(&format!("step = {step}\n"));
+    }
+    write_bytes_atomic(&out.join("source.toml"), text.as_bytes())?;
     Ok(out.join(checkpoint::POLICY_FILE))
+}
+
+fn same_dir(a: &Path, b: &Path) -> bool {
+    matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
 }
 
 /// Whether a run directory (or exported policy) holds weights to act with.
 pub fn has_policy(dir: &Path) -> bool {
-    dir.join(checkpoint::POLICY_FILE).is_file() || dir.join("checkpoints").join("latest").is_file()
+    dir.join(checkpoint::POLICY_FILE).is_file()
+        || dir.join("checkpoints").join("latest").is_file()
+        || !budget_policy_steps(dir).is_empty()
 }
 
-/// Builds the agent of a run and loads a checkpoint's weights into it. Also takes an exported
-/// policy directory (`export_policy`): only the actor is loaded then, which is all acting needs.
-pub fn load_policy(checkpoint: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
-    if checkpoint.join(checkpoint::POLICY_FILE).is_file() {
-        let (run, agent) = run_agent(checkpoint)?;
-        checkpoint::load_actor(&checkpoint.join(checkpoint::POLICY_FILE), agent.as_ref())?;
-        return Ok((run, agent));
-    }
-    let ckpt = resolve_checkpoint(checkpoint)?;
-    let run_dir = ckpt.parent().and_then(Path::parent).context("checkpoint is not inside a run directory")?;
-    let (run, agent) = run_agent(run_dir)?;
-    checkpoint::load_weights(&ckpt, agent.as_ref())?;
-    Ok((run, agent))
+/// Builds the agent of a run and loads the policy `path` names into it (a policy reference
+/// without a budget, [`super::policy_ref::resolve_policy`]): every network from a checkpoint, the
+/// actor alone from an exported or budget policy, which is all acting needs.
+pub fn load_policy(path: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
+    resolve_policy(path, None)?.load()
 }
 
 /// The actor a run wrote when it passed `step` (`train::POLICY_BUDGETS`, or its last step).
@@ -121,9 +129,7 @@ pub fn load_budget_policy(run_dir: &Path, step: u64) -> Result<(RunConfig, Box<d
     if !file.is_file() {
         bail!("{} has no policy at step {step} (expected {})", run_dir.display(), file.display());
     }
-    let (run, agent) = run_agent(run_dir)?;
-    checkpoint::load_actor(&file, agent.as_ref())?;
-    Ok((run, agent))
+    PolicyRef::Budget { run_dir: run_dir.to_path_buf(), step }.load()
 }
 
 /// The steps at which a run directory holds a policy file (`policies/step-<N>.safetensors`).
@@ -142,7 +148,7 @@ pub fn budget_policy_steps(run_dir: &Path) -> Vec<u64> {
 }
 
 /// The config of the run in `dir` and a freshly initialised agent of its shape.
-fn run_agent(dir: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
+pub(super) fn run_agent(dir: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
     let run = read_run_config(dir)?;
     let env = make(&run.env)?;
     let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
