@@ -59,6 +59,8 @@ fn main() {
         .clang_arg(format!("-I{}", include_dir.display()))
         .allowlist_function("mj_.*")
         .allowlist_function("mju_.*")
+        // Rendering: the abstract scene (mjv_) and its OpenGL renderer (mjr_), src/render/.
+        .allowlist_function("mj[rv]_.*")
         .allowlist_type("mj.*")
         .allowlist_var("mj.*")
         .allowlist_var("mju_user_.*")

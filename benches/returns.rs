@@ -123,6 +123,7 @@ fn main() -> Result<()> {
             steps: Some(block.steps),
             set: block.set.iter().map(|s| s.to_string()).collect(),
             options: vec![],
+            tensorboard: false,
         };
         let dir = out.join(block.env);
         let js = jobs(&spec, &dir)?;

@@ -4,5 +4,5 @@
 # tests compare with) and pytest, then runs python/tests.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-LOCOBENCH_PY_PROFILE=dev LOCOBENCH_PY_EXTRA="gymnasium[mujoco]==1.4.0 pytest" bash python/install.sh target/py-venv
+LOCOBENCH_PY_PROFILE=dev LOCOBENCH_PY_EXTRA="gymnasium[mujoco]==1.4.0 pytest moviepy tensorboard" bash python/install.sh target/py-venv
 target/py-venv/bin/python -m pytest -q -p no:cacheprovider python/tests

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # Installs the Debian packages locobench needs to build and run. Safe to run again.
 set -euo pipefail
-packages=(libmujoco-dev libclang-dev pkg-config)
+# Rendering (src/render/): Mesa's OSMesa and EGL for an OpenGL context without a display, and
+# ffmpeg to encode MP4 and WebM videos.
+packages=(libmujoco-dev libclang-dev pkg-config libosmesa6 libegl1 libegl-mesa0 ffmpeg)
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")

@@ -135,6 +135,15 @@ pub struct TrainArgs {
     /// evaluation), e.g. `--record training.rrd`.
     #[arg(long, value_name = "FILE.rrd")]
     pub record: Option<PathBuf>,
+    /// Film the deterministic evaluation episode at every N-th evaluation into the run's
+    /// videos/eval-step-<STEP>.mp4 (320x240, rendered offscreen on an env of its own: the run's
+    /// numbers are the same with or without).
+    #[arg(long, value_name = "N")]
+    pub video_every: Option<u64>,
+    /// Write TensorBoard event files into DIR: every metrics.csv value as a scalar
+    /// (`tensorboard --logdir DIR`; `wandb sync --sync-tensorboard DIR` for Weights & Biases).
+    #[arg(long, value_name = "DIR")]
+    pub tensorboard: Option<PathBuf>,
     /// With --record: a rollout at every N-th evaluation only (the curves are always complete).
     #[arg(long, default_value_t = 1, value_name = "N")]
     pub record_every: u64,
@@ -163,6 +172,8 @@ impl Default for TrainArgs {
             resume_if_exists: false,
             quiet: false,
             record: None,
+            video_every: None,
+            tensorboard: None,
             record_every: 1,
             threads: None,
         }
@@ -206,6 +217,12 @@ impl TrainArgs {
         }
         if let Some(r) = &self.record {
             push("--record", r.display().to_string());
+        }
+        if let Some(d) = &self.tensorboard {
+            push("--tensorboard", d.display().to_string());
+        }
+        if let Some(n) = self.video_every {
+            push("--video-every", n.to_string());
         }
         if self.record_every != 1 {
             push("--record-every", self.record_every.to_string());

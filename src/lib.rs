@@ -12,6 +12,7 @@ pub mod mujoco;
 pub mod numeric;
 pub mod policy;
 pub mod record;
+pub mod render;
 pub mod report;
 pub mod rollout;
 pub mod runtime;

@@ -19,11 +19,7 @@ ENV_IDS = {
     "hopper": "locobench/Hopper-v5",
 }
 
-_NO_RENDERING = (
-    "render_mode={!r}: this build has no rendering (Debian's MuJoCo 2.2.2 needs an OpenGL context "
-    "for offscreen images, which a headless machine lacks); record rollouts with `locobench record` "
-    "and view them in the rerun viewer"
-)
+_RENDER_MODES = ["rgb_array", "rgb_array_list"]
 
 
 def _toml_value(key, value):
@@ -73,12 +69,14 @@ class LocobenchEnv(gym.Env):
     (truncation), so no TimeLimit wrapper is needed.
     """
 
-    metadata = {"render_modes": []}
+    metadata = {"render_modes": _RENDER_MODES}
 
-    def __init__(self, name, render_mode=None, reward=None, _option_pairs=None, **options):
-        if render_mode is not None:
-            raise ValueError(_NO_RENDERING.format(render_mode))
-        self.render_mode = None
+    def __init__(
+        self, name, render_mode=None, reward=None, width=640, height=480, camera="follow", _option_pairs=None, **options
+    ):
+        if render_mode is not None and render_mode not in _RENDER_MODES:
+            raise ValueError(f"render_mode={render_mode!r}: one of {_RENDER_MODES} (or None)")
+        self.render_mode = render_mode
         pairs, weights = _core_arguments(options, reward)
         self._core = _core.Env(name, list(_option_pairs or []) + pairs, weights)
         self.name = self._core.name
@@ -88,8 +86,11 @@ class LocobenchEnv(gym.Env):
         self.action_space = spaces.Box(
             np.array(low, dtype=np.float32), np.array(high, dtype=np.float32), dtype=np.float32
         )
-        self.metadata = {"render_modes": [], "render_fps": int(round(1.0 / self._core.dt))}
+        self.metadata = {"render_modes": _RENDER_MODES, "render_fps": 1.0 / self._core.dt}
         self.episode = -1
+        # Made here, so that a missing OpenGL library or a bad camera is an error at once.
+        self._renderer = None if render_mode is None else _core.Renderer(self._core, width, height, camera)
+        self._frames = []
 
     def reset(self, *, seed=None, options=None):
         """Starts an episode. ``seed`` reseeds the env's own stream; without one it continues."""
@@ -100,12 +101,20 @@ class LocobenchEnv(gym.Env):
             raise ValueError(f"seed must be a non-negative integer, not {seed!r}")
         obs, info = self._core.reset(None if seed is None else int(seed))
         self.episode += 1
+        if self.render_mode == "rgb_array_list":
+            self._frames = [self._frame()]
         return np.asarray(obs, dtype=np.float64), info
 
     def step(self, action):
         a = _float64_actions(action, self.action_space.shape, "action")
         obs, reward, terminated, truncated, info = self._core.step(a.ravel().tolist())
+        if self.render_mode == "rgb_array_list":
+            self._frames.append(self._frame())
         return np.asarray(obs, dtype=np.float64), float(reward), bool(terminated), bool(truncated), info
+
+    def _frame(self):
+        width, height, rgb = self._renderer.render(self._core)
+        return np.frombuffer(rgb, dtype=np.uint8).reshape(height, width, 3)
 
     def set_state(self, qpos, qvel):
         """Overwrites the simulation's positions and velocities (Gymnasium MujocoEnv's set_state)."""
@@ -118,6 +127,16 @@ class LocobenchEnv(gym.Env):
         return np.asarray(qpos), np.asarray(qvel)
 
     def render(self):
+        """The frame of the current state, (height, width, 3) uint8, with ``render_mode="rgb_array"``;
+        the frames since the last call (or reset), with ``"rgb_array_list"``; None without a
+        render mode. Offscreen, with no display: OSMesa, or EGL with ``MUJOCO_GL=egl``."""
+        if self.render_mode == "rgb_array":
+            return self._frame()
+        if self.render_mode == "rgb_array_list":
+            frames, self._frames = self._frames, []
+            return frames
+        if self.render_mode is None:
+            gym.logger.warn("render() without a render_mode: make the env with render_mode='rgb_array'")
         return None
 
 

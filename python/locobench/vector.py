@@ -7,7 +7,13 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from locobench import _core
-from locobench.envs import _NO_RENDERING, LocobenchEnv, _core_arguments, _float64_actions
+from locobench.envs import LocobenchEnv, _core_arguments, _float64_actions
+
+_NO_RENDERING = (
+    "render_mode={!r}: the vector env does not render its copies; film single envs made with "
+    "gymnasium.make(..., render_mode='rgb_array') (what SB3's make_vec_env and VecVideoRecorder use), "
+    "or a policy with `locobench record --video`"
+)
 
 
 class LocobenchVectorEnv(VectorEnv):

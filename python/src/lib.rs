@@ -375,6 +375,37 @@ fn env_names_() -> Vec<&'static str> {
     env_names()
 }
 
+/// An offscreen renderer of one env's states (MuJoCo's renderer on OSMesa, or EGL with
+/// `MUJOCO_GL=egl`). It holds an OpenGL context current on the thread that made it, so Python
+/// may only use it from that thread (unsendable).
+#[pyclass(name = "Renderer", module = "locobench._core", unsendable)]
+struct PyRenderer {
+    renderer: locobench::render::Renderer,
+}
+
+#[pymethods]
+impl PyRenderer {
+    #[new]
+    #[pyo3(signature = (env, width = 640, height = 480, camera = "follow"))]
+    fn new(env: &PyEnv, width: usize, height: usize, camera: &str) -> PyResult<Self> {
+        let camera = locobench::render::Camera::parse(camera).map_err(value_error)?;
+        let settings = locobench::render::RenderSettings { width, height, camera };
+        let model = env.env().data().model().clone();
+        let renderer = locobench::render::Renderer::new(&model, settings).map_err(runtime_error)?;
+        Ok(PyRenderer { renderer })
+    }
+
+    /// The env's current state as RGB bytes, rows from the top: (width, height, bytes).
+    fn render<'py>(
+        &mut self,
+        py: Python<'py>,
+        env: &PyEnv,
+    ) -> PyResult<(usize, usize, Bound<'py, pyo3::types::PyBytes>)> {
+        let frame = self.renderer.render(env.env().data()).map_err(runtime_error)?;
+        Ok((frame.width, frame.height, pyo3::types::PyBytes::new(py, &frame.rgb)))
+    }
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     locobench::runtime::configure_process();
@@ -383,6 +414,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(episode_seed, m)?)?;
     m.add_class::<PyController>()?;
     m.add_class::<PyTrainedPolicy>()?;
+    m.add_class::<PyRenderer>()?;
     m.add_function(wrap_pyfunction!(env_names_, m)?)?;
     Ok(())
 }

@@ -125,6 +125,56 @@ def test_a_trained_policy_predicts_like_sb3_and_is_deterministic():
         policy.predict(np.zeros(5))
 
 
+@pytest.mark.parametrize("env_id", sorted(locobench.ENV_IDS.values()))
+def test_every_env_renders_rgb_arrays_offscreen(env_id):
+    env = gym.make(env_id, render_mode="rgb_array", width=96, height=64)
+    env.reset(seed=0)
+    frame = env.render()
+    assert frame.shape == (64, 96, 3) and frame.dtype == np.uint8
+    assert frame.std() > 5, "a blank frame"
+    assert np.array_equal(frame, env.render()), "the same state rendered twice differs"
+    env.step(env.action_space.sample())
+    check_env(env.unwrapped)  # with the render check this time
+
+
+def test_rgb_array_list_collects_a_frame_per_step_since_the_last_render():
+    env = gym.make("locobench/Minitaur-v0", render_mode="rgb_array_list", width=64, height=48)
+    env.reset(seed=0)
+    for _ in range(3):
+        env.step(env.action_space.sample())
+    frames = env.render()
+    assert len(frames) == 4 and all(f.shape == (48, 64, 3) for f in frames)
+    env.step(env.action_space.sample())
+    assert len(env.render()) == 1
+    with pytest.raises(ValueError, match="render_mode='human'"):
+        gym.make("locobench/Minitaur-v0", render_mode="human")
+    with pytest.raises(ValueError, match="unknown camera"):
+        gym.make("locobench/Minitaur-v0", render_mode="rgb_array", camera="top")
+
+
+def test_gymnasiums_record_video_writes_a_playable_file(tmp_path):
+    pytest.importorskip("moviepy")
+    env = gym.make("locobench/HalfCheetah-v5", render_mode="rgb_array", width=160, height=120, max_episode_steps=30)
+    env = gym.wrappers.RecordVideo(env, str(tmp_path), episode_trigger=lambda e: True, disable_logger=True)
+    env.reset(seed=0)
+    done = False
+    while not done:
+        _, _, terminated, truncated, _ = env.step(env.action_space.sample())
+        done = terminated or truncated
+    env.close()
+    videos = list(tmp_path.glob("*.mp4"))
+    assert len(videos) == 1
+    import subprocess
+
+    probe = subprocess.run(
+        ["ffprobe", "-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries",
+         "stream=nb_read_frames,width,height", "-of", "csv=p=0", str(videos[0])],
+        capture_output=True, text=True, check=True,
+    )
+    # The reset's frame and one per step.
+    assert probe.stdout.strip() == "160,120,31"
+
+
 def test_missing_or_corrupt_policy_files_raise(tmp_path):
     with pytest.raises(FileNotFoundError, match="no_such_dir"):
         locobench.load_policy(tmp_path / "no_such_dir")

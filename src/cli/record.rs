@@ -5,7 +5,8 @@ use locobench::controller::baseline::{baseline_controller_for, baseline_env, par
 use locobench::envs::make;
 use locobench::policy::{AgentPolicy, Policy};
 use locobench::record::{spawn_viewer, Recording, RolloutRecorder};
-use locobench::rollout::run_episodes;
+use locobench::render::{Camera, RenderSettings, VideoRecorder};
+use locobench::rollout::{run_episodes, Observer};
 use locobench::train::resolve_policy;
 
 use super::rollout::simple_policy;
@@ -40,9 +41,25 @@ pub struct RecordArgs {
     /// Options over the policy's environment, e.g. `--option max_episode_steps=200`.
     #[command(flatten)]
     pub env_options: super::EnvOptionArgs,
-    /// The recording to write.
-    #[arg(long, default_value = "rollout.rrd")]
-    pub out: PathBuf,
+    /// The rerun recording to write (default rollout.rrd, unless --video is given alone).
+    #[arg(long)]
+    pub out: Option<PathBuf>,
+    /// Also render the episodes into a video: .mp4 (H.264, plays in browsers), .webm (VP9) or
+    /// .gif (for Markdown). Offscreen, no display needed (MUJOCO_GL=osmesa, the default, or egl).
+    #[arg(long, value_name = "FILE")]
+    pub video: Option<PathBuf>,
+    /// The video's camera: follow (the robot's base, the default), fixed:NAME (one of the
+    /// model's cameras) or free:DISTANCE,AZIMUTH,ELEVATION.
+    #[arg(long, default_value = "follow")]
+    pub camera: String,
+    /// The video's width and height in pixels.
+    #[arg(long, default_value_t = 640)]
+    pub width: usize,
+    #[arg(long, default_value_t = 480)]
+    pub height: usize,
+    /// At most this many frames per simulated second (the video plays in real time).
+    #[arg(long, default_value_t = 25.0)]
+    pub fps: f64,
     /// Open the recording in the rerun viewer (needs `rerun` on the PATH).
     #[arg(long)]
     pub spawn: bool,
@@ -82,12 +99,35 @@ pub fn run(args: RecordArgs) -> Result<()> {
     };
     let cfg = args.env_options.apply(cfg)?;
     let mut env = make(&cfg)?;
-    let recording = Recording::create(&args.out)?;
-    let mut recorder = RolloutRecorder::new(recording.stream(), env.data().model())?;
-    let summaries = run_episodes(env.as_mut(), policy.as_mut(), args.episodes, args.seed.seed, &mut recorder)?;
-    let frames = recorder.frames();
+    let rrd = match (&args.out, &args.video) {
+        (Some(out), _) => Some(out.clone()),
+        (None, None) => Some(PathBuf::from("rollout.rrd")),
+        (None, Some(_)) => None,
+    };
+    let recording = rrd.as_deref().map(Recording::create).transpose()?;
+    let mut recorder = match &recording {
+        Some(r) => Some(RolloutRecorder::new(r.stream(), env.data().model())?),
+        None => None,
+    };
+    let mut video = match &args.video {
+        Some(path) => {
+            let settings =
+                RenderSettings { width: args.width, height: args.height, camera: Camera::parse(&args.camera)? };
+            Some(VideoRecorder::create(env.data().model(), env.spec().dt, settings, path, args.fps)?)
+        }
+        None => None,
+    };
+    let mut observers: Vec<&mut dyn Observer> = Vec::new();
+    if let Some(r) = recorder.as_mut() {
+        observers.push(r);
+    }
+    if let Some(v) = video.as_mut() {
+        observers.push(v);
+    }
+    let summaries =
+        run_episodes(env.as_mut(), policy.as_mut(), args.episodes, args.seed.seed, &mut Observers(observers))?;
+    let frames = recorder.as_ref().map(|r| r.frames());
     drop(recorder);
-    let path = recording.finish()?;
     for s in &summaries {
         println!(
             "{} with {}: episode {} return {:.3} over {} steps",
@@ -98,9 +138,32 @@ pub fn run(args: RecordArgs) -> Result<()> {
             s.length
         );
     }
-    println!("wrote {} ({frames} frames); view it with `rerun {}`", path.display(), path.display());
-    if args.spawn {
-        spawn_viewer(&path)?;
+    if let Some(v) = video {
+        let (frames, every) = (v.frames(), v.stride());
+        let path = v.finish()?;
+        println!("wrote {} ({frames} frames, one every {every} steps, real time)", path.display());
+    }
+    if let Some(recording) = recording {
+        let path = recording.finish()?;
+        println!("wrote {} ({} frames); view it with `rerun {}`", path.display(), frames.unwrap_or(0), path.display());
+        if args.spawn {
+            spawn_viewer(&path)?;
+        }
     }
     Ok(())
+}
+
+/// Several observers watching one rollout, in order.
+struct Observers<'a>(Vec<&'a mut dyn Observer>);
+
+impl Observer for Observers<'_> {
+    fn reset(&mut self, episode: usize, env: &dyn locobench::envs::Env) -> Result<()> {
+        self.0.iter_mut().try_for_each(|o| o.reset(episode, env))
+    }
+    fn step(&mut self, view: &locobench::rollout::StepView) -> Result<()> {
+        self.0.iter_mut().try_for_each(|o| o.step(view))
+    }
+    fn end(&mut self, summary: &locobench::rollout::EpisodeSummary) -> Result<()> {
+        self.0.iter_mut().try_for_each(|o| o.end(summary))
+    }
 }

@@ -44,6 +44,10 @@ pub struct SweepArgs {
     /// Only write the plan (sweep.toml, jobs.txt; with --slurm also slurm.sh), run nothing.
     #[arg(long)]
     pub dry_run: bool,
+    /// Every job writes TensorBoard event files into SWEEP/tensorboard/<job>/
+    /// (`tensorboard --logdir SWEEP/tensorboard`).
+    #[arg(long)]
+    pub tensorboard: bool,
     #[command(flatten)]
     pub slurm: SlurmArgs,
 }
@@ -121,6 +125,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
         steps: args.steps,
         set: args.set.clone(),
         options: args.env_options.pairs(&env_name)?.into_iter().map(|(k, v)| format!("{k}={v}")).collect(),
+        tensorboard: args.tensorboard,
     };
     let jobs = jobs(&spec, &out)?;
     write_plan(&spec, &out, &jobs)?;

@@ -16,6 +16,8 @@ pub fn run(args: TrainArgs) -> Result<()> {
         show_progress: !args.quiet,
         record: args.record.clone(),
         record_every: args.record_every,
+        video_every: args.video_every,
+        tensorboard: args.tensorboard.clone(),
         threads: args.threads.map(usize::from).unwrap_or_else(default_threads),
         ..Default::default()
     };

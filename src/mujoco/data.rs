@@ -97,6 +97,12 @@ impl Data {
         self.ptr.as_ptr()
     }
 
+    /// The state's pointer for MuJoCo calls that take `mjData*` but only read it
+    /// (`mjv_updateScene`, which builds a scene from the positions).
+    pub(crate) fn as_ptr_for_reading(&self) -> *mut sys::mjData {
+        self.ptr.as_ptr()
+    }
+
     fn raw(&self) -> &sys::mjData {
         // SAFETY: `ptr` came from mj_makeData, is non-null and stays valid until `drop`; a shared borrow only
         // reads.

@@ -6,5 +6,6 @@ mod model;
 pub mod sys;
 
 pub use data::{Contact, Data, InstabilityCounts};
+pub(crate) use error::last_engine_error;
 pub use error::{take_warnings, MjError, MjResult};
 pub use model::{version, Model, ObjKind};

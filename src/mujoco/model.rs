@@ -22,6 +22,8 @@ pub enum ObjKind {
     Actuator,
     /// A sensor.
     Sensor,
+    /// A camera.
+    Camera,
 }
 
 impl ObjKind {
@@ -33,6 +35,7 @@ impl ObjKind {
             ObjKind::Site => sys::mjtObj__mjOBJ_SITE,
             ObjKind::Actuator => sys::mjtObj__mjOBJ_ACTUATOR,
             ObjKind::Sensor => sys::mjtObj__mjOBJ_SENSOR,
+            ObjKind::Camera => sys::mjtObj__mjOBJ_CAMERA,
         }) as i32
     }
 
@@ -45,6 +48,7 @@ impl ObjKind {
             ObjKind::Site => "site",
             ObjKind::Actuator => "actuator",
             ObjKind::Sensor => "sensor",
+            ObjKind::Camera => "camera",
         }
     }
 }
@@ -131,6 +135,36 @@ impl Model {
         NonNull::new(out).map(|ptr| Model { ptr }).ok_or_else(|| MjError::Engine("mj_copyModel returned NULL".into()))
     }
 
+    /// Sets the offscreen framebuffer's size (`<visual><global offwidth offheight>`), which
+    /// MuJoCo's renderer reads when its context is made. For a renderer's own copy of a model.
+    pub(crate) fn set_offscreen_size(&mut self, width: usize, height: usize) {
+        // SAFETY: `&mut self` is the only access to this model; two plain ints are written.
+        unsafe {
+            let global = &mut self.ptr.as_mut().vis.global;
+            global.offwidth = width as i32;
+            global.offheight = height as i32;
+        }
+    }
+
+    /// Body `body`'s position in its parent's frame at the initial configuration (`body_pos`).
+    pub fn body_pos(&self, body: usize) -> [f64; 3] {
+        assert!(body < self.nbody(), "body {body} out of range");
+        // SAFETY: MuJoCo allocates body_pos with 3 entries per body; `body` is in range.
+        let p = unsafe { std::slice::from_raw_parts(self.raw().body_pos.add(3 * body), 3) };
+        [p[0], p[1], p[2]]
+    }
+
+    /// Each geom's bounding-sphere radius (`geom_rbound`).
+    pub fn geom_rbound(&self) -> &[f64] {
+        // SAFETY: MuJoCo allocates geom_rbound with one entry per geom.
+        unsafe { std::slice::from_raw_parts(self.raw().geom_rbound, self.ngeom()) }
+    }
+
+    /// The model's extent (`stat.extent`): the size of its bounding box, for camera distances.
+    pub fn extent(&self) -> f64 {
+        self.raw().stat.extent
+    }
+
     pub(crate) fn raw(&self) -> &sys::mjModel {
         // SAFETY: `ptr` came from MuJoCo's compiler, is non-null and stays valid until `drop`; a shared
         // borrow only reads.
@@ -145,6 +179,11 @@ impl Model {
     /// to time bare `mj_step`). The model stays owned by `self`.
     pub fn as_raw(&self) -> *const sys::mjModel {
         self.ptr.as_ptr()
+    }
+
+    /// Number of cameras the model defines (`ncam`).
+    pub fn ncam(&self) -> usize {
+        self.raw().ncam as usize
     }
 
     /// Number of position coordinates (`nq`).
@@ -200,6 +239,7 @@ impl Model {
             ObjKind::Site => self.nsite(),
             ObjKind::Actuator => self.nu(),
             ObjKind::Sensor => self.raw().nsensor as usize,
+            ObjKind::Camera => self.ncam(),
         }
     }
 

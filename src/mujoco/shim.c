@@ -87,3 +87,26 @@ int lb_load_xml_string(const char* name, const char* xml, int len, char* err, in
   free(vfs);
   return rc;
 }
+
+// Rendering (src/render/): the caller has made an OpenGL context current on this thread.
+// mjr_makeContext reports a GL it cannot load through mju_error, which comes back here as -1.
+int lb_make_render_context(const mjModel* m, mjrContext* con) {
+  GUARDED(mjr_makeContext(m, con, mjFONTSCALE_100));
+}
+
+// One frame: the scene from the state, drawn into the offscreen buffer and read back (RGB, rows
+// bottom-up as OpenGL stores them).
+static void render_frame(const mjModel* m, mjData* d, const mjvOption* opt, mjvCamera* cam,
+                         mjvScene* scn, mjrContext* con, int width, int height,
+                         unsigned char* rgb) {
+  mjrRect viewport = {0, 0, width, height};
+  mjv_updateScene(m, d, opt, NULL, cam, mjCAT_ALL, scn);
+  mjr_setBuffer(mjFB_OFFSCREEN, con);
+  mjr_render(viewport, scn, con);
+  mjr_readPixels(rgb, NULL, viewport, con);
+}
+
+int lb_render_frame(const mjModel* m, mjData* d, const mjvOption* opt, mjvCamera* cam, mjvScene* scn,
+                    mjrContext* con, int width, int height, unsigned char* rgb) {
+  GUARDED(render_frame(m, d, opt, cam, scn, con, width, height, rgb));
+}

@@ -19,6 +19,18 @@ extern "C" {
     pub fn lb_copy_model(m: *const mjModel, out: *mut *mut mjModel) -> c_int;
     pub fn lb_jac_site(m: *const mjModel, d: *mut mjData, jacp: *mut f64, jacr: *mut f64, site: c_int) -> c_int;
     pub fn lb_jac_body(m: *const mjModel, d: *mut mjData, jacp: *mut f64, jacr: *mut f64, body: c_int) -> c_int;
+    pub fn lb_make_render_context(m: *const mjModel, con: *mut mjrContext) -> c_int;
+    pub fn lb_render_frame(
+        m: *const mjModel,
+        d: *mut mjData,
+        opt: *const mjvOption,
+        cam: *mut mjvCamera,
+        scn: *mut mjvScene,
+        con: *mut mjrContext,
+        width: c_int,
+        height: c_int,
+        rgb: *mut u8,
+    ) -> c_int;
     pub fn lb_load_xml_file(path: *const c_char, err: *mut c_char, err_len: c_int, out: *mut *mut mjModel) -> c_int;
     pub fn lb_load_xml_string(
         name: *const c_char,

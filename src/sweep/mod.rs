@@ -76,6 +76,10 @@ pub struct SweepSpec {
     pub set: Vec<String>,
     /// Extra `--option` arguments given to every job.
     pub options: Vec<String>,
+    /// Every job writes TensorBoard event files into `tensorboard/<job>/` of the sweep
+    /// directory, so `tensorboard --logdir SWEEP/tensorboard` shows the runs side by side.
+    #[serde(default)]
+    pub tensorboard: bool,
 }
 
 /// One training run of a sweep.
@@ -153,6 +157,7 @@ pub fn jobs(spec: &SweepSpec, sweep_dir: &Path) -> Result<Vec<Job>> {
                         reward: (!rewards.is_empty()).then(|| rewards.join(",")),
                     },
                     out: Some(run_dir.clone()),
+                    tensorboard: spec.tensorboard.then(|| sweep_dir.join("tensorboard").join(&name)),
                     resume_if_exists: true,
                     quiet: true,
                     ..TrainArgs::default()
@@ -286,6 +291,7 @@ mod tests {
             steps: Some(1000),
             set: vec!["hidden=[64,64]".into()],
             options: vec![],
+            tensorboard: false,
         };
         let jobs = jobs(&spec, Path::new("sw")).unwrap();
         assert_eq!(jobs.len(), 3 * 2 * 2);

@@ -434,6 +434,7 @@ mod tests {
             steps: Some(100),
             set: vec![],
             options: vec![],
+            tensorboard: false,
         };
         let jobs = super::super::jobs(&spec, Path::new("/s/sw")).unwrap();
         let opts = SlurmOptions {

@@ -357,7 +357,12 @@ pub(crate) fn newest_intact(run_dir: &Path, trainer_file: &str) -> Result<PathBu
 /// and temporary files of the run directory, its `policies/` and its checkpoints. Call with the
 /// run lock held.
 pub(crate) fn remove_leftovers(run_dir: &Path) -> Result<()> {
-    let mut dirs = vec![run_dir.to_path_buf(), checkpoints_dir(run_dir), run_dir.join(super::BUDGET_POLICY_DIR)];
+    let mut dirs = vec![
+        run_dir.to_path_buf(),
+        checkpoints_dir(run_dir),
+        run_dir.join(super::BUDGET_POLICY_DIR),
+        run_dir.join("videos"),
+    ];
     // A checkpoint's checksums are rewritten in place when its buffer is pruned.
     dirs.extend(step_dirs(&checkpoints_dir(run_dir)).into_iter().map(|(_, dir)| dir));
     for dir in dirs {
@@ -366,7 +371,7 @@ pub(crate) fn remove_leftovers(run_dir: &Path) -> Result<()> {
             let path = entry.path();
             if name.starts_with(".incomplete-") && path.is_dir() {
                 std::fs::remove_dir_all(&path).with_context(|| format!("removing {}", path.display()))?;
-            } else if name.starts_with(".policy-") && path.is_file() {
+            } else if (name.starts_with(".policy-") || name.starts_with(".video-")) && path.is_file() {
                 std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
             }
         }

@@ -19,6 +19,7 @@ pub mod run_dir;
 pub(crate) mod run_lock;
 pub mod seeds;
 pub mod stop;
+mod tensorboard;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -37,7 +38,7 @@ use checkpoint::TrainState;
 use evaluate::{evaluate, Evaluation};
 use fault::Point;
 use metrics::MetricsRow;
-use recording::TrainingRecorder;
+use recording::{TrainingClips, TrainingRecorder};
 use seeds::{init_rng, train_episode_seed, training_rng, RngState};
 
 pub use policy_ref::{resolve_policy, PolicyRef};
@@ -101,6 +102,13 @@ pub struct RunControl {
     /// Record a rollout at every this many evaluations (0 or 1: every one). A 1000-step Ant
     /// rollout takes about 3 MB.
     pub record_every: u64,
+    /// Film the deterministic evaluation episode at every this many evaluations into
+    /// `videos/eval-step-<N>.mp4` (320x240, on an environment of its own: the run's numbers are
+    /// the same with or without). None: no clips.
+    pub video_every: Option<u64>,
+    /// Write TensorBoard event files here: every metrics row's values as scalars
+    /// (`train::tensorboard`).
+    pub tensorboard: Option<PathBuf>,
     /// 2: the training thread gets a helper thread, and the large dense layers of every update
     /// run in two halves on both cores (`numeric::second_core`); results are the same bit for
     /// bit. 0 or 1: the training thread alone (parallel runs, e.g. a sweep's jobs).
@@ -179,6 +187,8 @@ fn log_evaluation(
     row: MetricsRow,
     evaluation: &Evaluation,
     recorder: Option<&mut TrainingRecorder>,
+    clips: Option<&mut TrainingClips>,
+    events: Option<&mut tensorboard::EventWriter>,
     control: &RunControl,
     agent: &dyn Agent,
     run_seed: u64,
@@ -186,6 +196,13 @@ fn log_evaluation(
     let (step, wall_time) = (row.step, row.wall_time);
     metrics.push(row.with_evaluation(evaluation));
     metrics::write(&run_dir.join(metrics::FILE), metrics)?;
+    if let Some(e) = events {
+        e.row(metrics.last().expect("just pushed"))?;
+    }
+    if let Some(c) = clips {
+        let evaluations = metrics.iter().filter(|m| m.kind == "eval").count() as u64;
+        c.evaluation(agent, step, run_seed, evaluations)?;
+    }
     if let Some(r) = recorder {
         r.curves(metrics.last().expect("just pushed"))?;
         let evaluations = metrics.iter().filter(|m| m.kind == "eval").count() as u64;
@@ -335,12 +352,14 @@ pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
         let init_from = run.init_from.as_deref().map(Path::new);
         return train(run.env, run.train, run.seed, run_dir, init_from, true, control);
     }
-    checkpoint::remove_leftovers(run_dir)?;
-    checkpoint::prune_buffers(run_dir)?;
+    // Everything is checked before anything is changed: a resume that stops on bad input leaves
+    // the run directory as it found it.
     let ckpt = checkpoint::newest_intact(run_dir, trainer_file(&run))?;
-    checkpoint::make_latest(run_dir, &ckpt)?;
     let saved = checkpoint::load_state(&ckpt)?;
     let metrics = metrics::restore(run_dir, &ckpt, saved.step)?;
+    checkpoint::remove_leftovers(run_dir)?;
+    checkpoint::prune_buffers(run_dir)?;
+    checkpoint::make_latest(run_dir, &ckpt)?;
     if saved.step >= run.train.total_steps {
         return Ok(RunSummary {
             run_dir: run_dir.to_path_buf(),
@@ -441,6 +460,10 @@ impl Trainer {
             Some(r) => Some(TrainingRecorder::new(r.stream(), &self.env_config)?),
             None => None,
         };
+        let mut clips =
+            control.video_every.map(|n| TrainingClips::new(&self.run_dir, &self.env_config, n)).transpose()?;
+        let mut events =
+            control.tensorboard.as_deref().map(|d| tensorboard::EventWriter::create(d, self.step)).transpose()?;
 
         let mut hook_done = false;
         let outcome = loop {
@@ -499,6 +522,9 @@ impl Trainer {
                     if let Some(r) = &recorder {
                         r.curves(self.metrics.last().unwrap())?;
                     }
+                    if let Some(e) = events.as_mut() {
+                        e.row(self.metrics.last().unwrap())?;
+                    }
                     need_reset = true;
                 } else {
                     obs = s.observation;
@@ -537,6 +563,8 @@ impl Trainer {
                     row,
                     &e,
                     recorder.as_mut(),
+                    clips.as_mut(),
+                    events.as_mut(),
                     control,
                     self.agent.as_ref(),
                     self.seed,
@@ -552,6 +580,9 @@ impl Trainer {
             }
         };
         bar.finish_and_clear();
+        if let Some(e) = events.as_mut() {
+            e.flush()?;
+        }
         // A run finished early (target_return, an evaluation hook) keeps its actor at the step
         // it reached, as the on-policy loop does; budgets and the full budget are saved above.
         if outcome == Outcome::Finished && !POLICY_BUDGETS.contains(&self.step) && self.step != cfg.total_steps {

@@ -25,8 +25,9 @@ use super::checkpoint::{self, TrainState};
 use super::evaluate::{evaluate, Evaluation};
 use super::fault::{self, Point};
 use super::metrics::MetricsRow;
-use super::recording::TrainingRecorder;
+use super::recording::{TrainingClips, TrainingRecorder};
 use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
+use super::tensorboard::EventWriter;
 use super::{
     finish_run, log_evaluation, progress_bar, save_budget_policy, Outcome, RunConfig, RunControl, RunSummary,
     POLICY_BUDGETS,
@@ -171,6 +172,8 @@ impl OnPolicyTrainer {
             Some(r) => Some(TrainingRecorder::new(r.stream(), &self.run.env)?),
             None => None,
         };
+        let mut clips = control.video_every.map(|n| TrainingClips::new(&self.run_dir, &self.run.env, n)).transpose()?;
+        let mut events = control.tensorboard.as_deref().map(|d| EventWriter::create(d, self.step)).transpose()?;
         let mut losses: Option<Losses>;
         let mut last_eval: Option<Evaluation> = None;
         let checkpoint_every = self.cfg().checkpoint_every;
@@ -195,7 +198,7 @@ impl OnPolicyTrainer {
                 self.agent.anneal(1.0 - iteration as f64 / iterations as f64);
             }
             let before = self.step;
-            let data = self.collect(&bar, &rate, &wall, recorder.as_ref())?;
+            let data = self.collect(&bar, &rate, &wall, recorder.as_ref(), events.as_mut())?;
             let l = self.update(&data)?;
             losses = Some(Losses { critic: l.value, actor: Some(l.policy), ..Losses::default() });
 
@@ -210,6 +213,8 @@ impl OnPolicyTrainer {
                     row,
                     &e,
                     recorder.as_mut(),
+                    clips.as_mut(),
+                    events.as_mut(),
                     control,
                     &self.agent,
                     self.run.seed,
@@ -223,6 +228,9 @@ impl OnPolicyTrainer {
             }
         };
         bar.finish_and_clear();
+        if let Some(e) = events.as_mut() {
+            e.flush()?;
+        }
         if outcome == Outcome::Finished {
             save_budget_policy(&self.run_dir, self.step, &self.agent)?;
         }
@@ -241,6 +249,7 @@ impl OnPolicyTrainer {
         rate: &dyn Fn(u64) -> f64,
         wall: &dyn Fn(f64) -> f64,
         recorder: Option<&TrainingRecorder>,
+        mut events: Option<&mut EventWriter>,
     ) -> Result<Rollout> {
         let (n, steps) = (self.settings.num_envs, self.settings.num_steps);
         let gamma = self.cfg().gamma;
@@ -333,6 +342,9 @@ impl OnPolicyTrainer {
                     });
                     if let Some(rec) = recorder {
                         rec.curves(self.metrics.last().expect("just pushed"))?;
+                    }
+                    if let Some(e) = events.as_deref_mut() {
+                        e.row(self.metrics.last().expect("just pushed"))?;
                     }
                     self.episode_returns[i] = 0.0;
                     self.episode_lengths[i] = 0;

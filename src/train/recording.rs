@@ -61,3 +61,46 @@ impl<'a> TrainingRecorder<'a> {
         Ok(())
     }
 }
+
+/// Clips of the deterministic evaluation episode (the first evaluation seed) at chosen
+/// evaluations, `videos/eval-step-<N>.mp4` in the run directory, rendered on an environment of
+/// its own so that the run's numbers do not depend on filming.
+pub(super) struct TrainingClips {
+    env: Box<dyn Env>,
+    dir: std::path::PathBuf,
+    every: u64,
+}
+
+/// The clips' size: small enough to keep one per evaluation beside a run.
+const CLIP_SETTINGS: (usize, usize) = (320, 240);
+
+impl TrainingClips {
+    /// Checks up front that rendering and encoding work here (a missing GL library or ffmpeg is
+    /// an error before training starts, not at the first evaluation).
+    pub(super) fn new(run_dir: &std::path::Path, env: &EnvConfig, every: u64) -> Result<TrainingClips> {
+        let env = make(env)?;
+        crate::render::check_available(env.data().model())?;
+        crate::render::video::check_encoder(crate::render::video::Format::Mp4)?;
+        let dir = run_dir.join("videos");
+        Ok(TrainingClips { env, dir, every: every.max(1) })
+    }
+
+    /// Called at every evaluation, after `evaluations` evaluations so far (this one included):
+    /// films the evaluation episode at every `every`-th one.
+    pub(super) fn evaluation(&mut self, agent: &dyn Agent, step: u64, run_seed: u64, evaluations: u64) -> Result<()> {
+        if !(evaluations - 1).is_multiple_of(self.every) {
+            return Ok(());
+        }
+        std::fs::create_dir_all(&self.dir)?;
+        let path = self.dir.join(format!("eval-step-{step}.mp4"));
+        let (width, height) = CLIP_SETTINGS;
+        let settings = crate::render::RenderSettings { width, height, camera: crate::render::Camera::Follow };
+        let dt = self.env.spec().dt;
+        let mut video = crate::render::VideoRecorder::create(self.env.data().model(), dt, settings, &path, 25.0)?;
+        let seed = seeds::eval_episode_seed(run_seed, 0);
+        let mut policy = AgentPolicy { agent, label: agent.algo().name().to_string() };
+        crate::rollout::run_episode(self.env.as_mut(), &mut policy, 0, Some(seed), &mut video)?;
+        video.finish()?;
+        Ok(())
+    }
+}
