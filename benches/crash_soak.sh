@@ -18,6 +18,8 @@ kills=${1:-50}
 results=${2:-benches/results/$(date +%F)-$(hostname -s)}
 work=target/crash-soak
 bin=target/release/locobench
+# What the binary is built from, read before the build.
+built_from="$(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src Cargo.toml Cargo.lock || echo ' with uncommitted changes')"
 cargo build --release --locked -q
 rm -rf "$work"
 mkdir -p "$work" "$results"
@@ -184,7 +186,7 @@ total_same=$((total_same + same))
 {
   echo "# Crash soak"
   echo
-  echo "\`bash benches/crash_soak.sh $kills\` at commit $(git rev-parse --short HEAD)$(git diff --quiet HEAD -- src || echo ' (with uncommitted changes to src/)'),"
+  echo "\`bash benches/crash_soak.sh $kills\`, the binary built from commit $built_from,"
   echo "on $(grep -m1 'model name' /proc/cpuinfo | cut -d: -f2 | sed 's/^ //'), $(nproc) cores."
   echo "Each kill is SIGKILL at a moment drawn uniformly over an unbroken run's wall time; the run is"
   echo "then continued with the same command and \`--resume-if-exists\` and compared, file by file, with"

@@ -6,21 +6,24 @@
 //! 640 x 480.
 //!
 //! Run: `cargo bench --bench render [-- OUT.csv]`; prints a table and, given a path, writes it
-//! as CSV (with the machine, the commit and the backend).
+//! as CSV (with the machine, the commit and the backend). Under `cargo test` (no `--bench`) it
+//! makes a smoke run: 25 frames at 160 x 120.
 use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Result;
-use locobench::envs::{make, Env};
+use locobench::envs::make;
 use locobench::policy::AgentPolicy;
 use locobench::render::video::VideoWriter;
 use locobench::render::{frame_stride, Backend, Camera, Frame, RenderSettings, Renderer};
 use locobench::train::load_policy;
 
 const SIZES: [(usize, usize); 3] = [(320, 240), (640, 480), (1280, 720)];
+const SMOKE_SIZES: [(usize, usize); 1] = [(160, 120)];
 
 fn main() -> Result<()> {
     let out = std::env::args().skip(1).find(|a| a.ends_with(".csv")).map(PathBuf::from);
+    let smoke = !std::env::args().any(|a| a == "--bench");
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     let (run, agent) = load_policy(&root.join("models/policies/minitaur-ppo"))?;
     let mut env = make(&run.env)?;
@@ -29,7 +32,7 @@ fn main() -> Result<()> {
     let mut states: Vec<(Vec<f64>, Vec<f64>)> = Vec::new();
     let mut policy = AgentPolicy { agent: agent.as_ref(), label: "ppo".into() };
     let mut keep = |v: &locobench::rollout::StepView| {
-        if (v.t + 1) % every == 0 {
+        if (v.t + 1).is_multiple_of(every) {
             states.push((v.env.data().qpos().to_vec(), v.env.data().qvel().to_vec()));
         }
         Ok(())
@@ -38,6 +41,9 @@ fn main() -> Result<()> {
     let first = (env.data().qpos().to_vec(), env.data().qvel().to_vec());
     locobench::rollout::run_episode(env.as_mut(), &mut policy, 0, Some(0), &mut keep)?;
     states.insert(0, first);
+    if smoke {
+        states.truncate(25);
+    }
     let seconds = env.spec().max_episode_steps as f64 * env.spec().dt;
     let backend = Backend::from_env()?;
     let dir = tempfile::tempdir()?;
@@ -51,7 +57,7 @@ fn main() -> Result<()> {
         "{:<10} {:>14} {:>14} {:>14} {:>14} {:>12}",
         "size", "render", "encode mp4", "encode webm", "encode gif", "mp4 total"
     );
-    for (w, h) in SIZES {
+    for &(w, h) in if smoke { &SMOKE_SIZES[..] } else { &SIZES[..] } {
         let settings = RenderSettings { width: w, height: h, camera: Camera::Follow };
         let mut renderer = Renderer::with_backend(env.data().model(), settings, backend)?;
         let started = Instant::now();
@@ -61,7 +67,7 @@ fn main() -> Result<()> {
             frames.push(renderer.render(env.data())?);
         }
         let render = started.elapsed().as_secs_f64();
-        let mut encode = |ext: &str| -> Result<f64> {
+        let encode = |ext: &str| -> Result<f64> {
             let started = Instant::now();
             let mut writer = VideoWriter::create(&dir.path().join(format!("v.{ext}")), w, h, 25.0)?;
             for f in &frames {
@@ -84,7 +90,7 @@ fn main() -> Result<()> {
         );
         rows.push(format!("{w},{h},{},{render:.3},{mp4:.3},{webm:.3},{gif:.3}", frames.len()));
     }
-    if let Some(path) = out {
+    if let Some(path) = out.filter(|_| !smoke) {
         let cpu = locobench::train::provenance::Stretch::here(0, 1, None).cpu_model;
         let commit = option_env!("LOCOBENCH_GIT_COMMIT").unwrap_or("unknown");
         let mut text = format!(

@@ -315,8 +315,12 @@ fn bad_checkpoints_are_clear_errors() {
     std::fs::write(s.checkpoint.join("model.safetensors"), &bytes[..bytes.len() / 2]).unwrap();
     let err = train::load_policy(&s.checkpoint).err().unwrap();
     assert!(format!("{err:#}").contains("corrupt"), "{err:#}");
-    let err = train::resume(&run, &RunControl::default()).unwrap_err();
-    assert!(format!("{err:#}").contains("corrupt"), "{err:#}");
+    // The run's only checkpoint is damaged: a resume names the file and what is wrong with it.
+    let err = format!("{:#}", train::resume(&run, &RunControl::default()).unwrap_err());
+    assert!(
+        err.contains("can be resumed from") && err.contains("model.safetensors") && err.contains("bytes where"),
+        "{err}"
+    );
 }
 
 #[test]

@@ -260,3 +260,47 @@ fn training_clips_leave_the_run_s_numbers_unchanged() {
     clips.sort();
     assert_eq!(clips, ["eval-step-300.mp4", "eval-step-900.mp4"]);
 }
+
+/// `--side-by-side controller`: the policy's panel and the controller's in one frame, the same
+/// episode for both; without a video or with several episodes it is refused.
+#[test]
+fn side_by_side_puts_the_controller_beside_the_policy() {
+    let dir = tempfile::tempdir().unwrap();
+    let mp4 = dir.path().join("sbs.mp4");
+    let record = |extra: &[&str]| {
+        std::process::Command::new(env!("CARGO_BIN_EXE_locobench"))
+            .args(["record", "--env", "minitaur", "--policy", "zero", "--option", "max_episode_steps=20"])
+            .args(["--width", "160", "--height", "120", "--side-by-side", "controller"])
+            .args(extra)
+            .output()
+            .unwrap()
+    };
+    let out = record(&["--video", mp4.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("the controller commanded to") && stdout.contains("2 panels"), "{stdout}");
+    let probe = std::process::Command::new("ffprobe")
+        .args(["-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries"])
+        .args(["stream=nb_read_frames,width,height", "-of", "csv=p=0"])
+        .arg(&mp4)
+        .output()
+        .unwrap();
+    // Two 160-pixel panels; 20 steps at a frame every 4, and the reset's.
+    assert_eq!(String::from_utf8_lossy(&probe.stdout).trim(), "320,120,6");
+    let refused = record(&[]);
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("give --video FILE"));
+    let refused = record(&["--video", mp4.to_str().unwrap(), "--episodes", "2"]);
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("--episodes 1"));
+}
+
+#[test]
+fn tiled_panels_hold_their_last_frame() {
+    use locobench::render::tile;
+    let f = |w: usize, v: u8| Frame { width: w, height: 2, rgb: vec![v; w * 2 * 3] };
+    let tiled = tile(&[vec![f(1, 1), f(1, 2)], vec![f(2, 9)]]).unwrap();
+    assert_eq!(tiled.len(), 2);
+    assert_eq!((tiled[1].width, tiled[1].height), (3, 2));
+    assert_eq!(tiled[1].pixel(0, 1), [2, 2, 2]);
+    assert_eq!(tiled[1].pixel(2, 0), [9, 9, 9], "the shorter panel holds its last frame");
+    assert!(tile(&[vec![f(1, 1)], vec![Frame { width: 1, height: 3, rgb: vec![0; 9] }]]).is_err());
+}

@@ -59,7 +59,8 @@ def test_same_seed_same_trajectory():
         (lambda: gym.make("locobench/Minitaur-v0", reward={"speed": 1.0}), "speed"),
         (lambda: gym.make("locobench/Minitaur-v0", max_episode_steps=-3), "max_episode_steps"),
         (lambda: locobench.LocobenchEnv("no-such-env"), "no-such-env"),
-        (lambda: gym.make("locobench/Ant-v5", render_mode="rgb_array"), "rendering"),
+        (lambda: locobench.LocobenchEnv("ant", render_mode="depth_array"), "render_mode='depth_array'"),
+        (lambda: gym.make("locobench/Ant-v5", render_mode="rgb_array", camera="side"), "unknown camera 'side'"),
     ],
 )
 def test_bad_settings_raise_python_errors_naming_the_value(make, message):
@@ -146,10 +147,7 @@ def test_rgb_array_list_collects_a_frame_per_step_since_the_last_render():
     assert len(frames) == 4 and all(f.shape == (48, 64, 3) for f in frames)
     env.step(env.action_space.sample())
     assert len(env.render()) == 1
-    with pytest.raises(ValueError, match="render_mode='human'"):
-        gym.make("locobench/Minitaur-v0", render_mode="human")
-    with pytest.raises(ValueError, match="unknown camera"):
-        gym.make("locobench/Minitaur-v0", render_mode="rgb_array", camera="top")
+    # "human" is Gymnasium's: its HumanRendering wrapper shows our rgb_array frames in a window.
 
 
 def test_gymnasiums_record_video_writes_a_playable_file(tmp_path):

@@ -60,6 +60,12 @@ pub struct RecordArgs {
     /// At most this many frames per simulated second (the video plays in real time).
     #[arg(long, default_value_t = 25.0)]
     pub fps: f64,
+    /// With --video: more panels beside the policy's, left to right, each playing the same
+    /// episode (reset seed --seed) with the same camera: `controller` (the Raibert controller,
+    /// Minitaur and Ant, commanded to the policy's mean speed over the episode, capped at 1.5
+    /// m/s) or another trained policy. Repeatable; one episode.
+    #[arg(long = "side-by-side", value_name = "controller|POLICY")]
+    pub side_by_side: Vec<String>,
     /// Open the recording in the rerun viewer (needs `rerun` on the PATH).
     #[arg(long)]
     pub spawn: bool,
@@ -98,6 +104,9 @@ pub fn run(args: RecordArgs) -> Result<()> {
         }
     };
     let cfg = args.env_options.apply(cfg)?;
+    if !args.side_by_side.is_empty() {
+        return side_by_side(&args, &cfg, policy.as_mut());
+    }
     let mut env = make(&cfg)?;
     let rrd = match (&args.out, &args.video) {
         (Some(out), _) => Some(out.clone()),
@@ -166,4 +175,82 @@ impl Observer for Observers<'_> {
     fn end(&mut self, summary: &locobench::rollout::EpisodeSummary) -> Result<()> {
         self.0.iter_mut().try_for_each(|o| o.end(summary))
     }
+}
+
+/// The controller's top command here (the grid the report sweeps ends there).
+const CONTROLLER_TOP_SPEED: f64 = 1.5;
+
+/// One panel's episode: its frames, return and mean forward speed (base displacement along x
+/// over the episode's simulated time).
+fn film(
+    cfg: &locobench::envs::EnvConfig,
+    policy: &mut dyn Policy,
+    settings: &RenderSettings,
+    fps: f64,
+    seed: u64,
+) -> Result<(Vec<locobench::render::Frame>, f64, f64, f64)> {
+    let mut env = make(cfg)?;
+    let dt = env.spec().dt;
+    let every = locobench::render::frame_stride(dt, fps);
+    let renderer = locobench::render::Renderer::new(env.data().model(), settings.clone())?;
+    let mut frames = locobench::render::FrameCollector::new(renderer, every);
+    env.reset(Some(seed))?;
+    let x0 = env.data().xpos()[3];
+    let summary = locobench::rollout::run_episode(env.as_mut(), policy, 0, Some(seed), &mut frames)?;
+    let speed = (env.data().xpos()[3] - x0) / (summary.length.max(1) as f64 * dt);
+    Ok((frames.frames, summary.episode_return, speed, 1.0 / (every as f64 * dt)))
+}
+
+/// `record --video FILE --side-by-side ...`: the policy's episode and each other panel's, tiled.
+fn side_by_side(args: &RecordArgs, cfg: &locobench::envs::EnvConfig, policy: &mut dyn Policy) -> Result<()> {
+    let path = args.video.as_ref().context("--side-by-side makes a video: give --video FILE")?;
+    anyhow::ensure!(args.episodes == 1, "--side-by-side films one episode (the same one in every panel): --episodes 1");
+    anyhow::ensure!(args.out.is_none(), "--side-by-side writes a video only: leave out --out");
+    locobench::render::video::check_encoder(locobench::render::video::Format::of(path)?)?;
+    let settings = RenderSettings { width: args.width, height: args.height, camera: Camera::parse(&args.camera)? };
+    let seed = args.seed.seed;
+    let (frames, ret, speed, fps) = film(cfg, policy, &settings, args.fps, seed)?;
+    println!("left: {} on {}: return {ret:.3}, {speed:.2} m/s", policy.name(), cfg.name);
+    let mut panels = vec![frames];
+    for spec in &args.side_by_side {
+        let (frames, ret, speed, panel_fps, label) = if spec == "controller" {
+            let command = speed.clamp(0.0, CONTROLLER_TOP_SPEED);
+            let base = baseline_env(&cfg.name).with_context(|| {
+                format!("--side-by-side controller: {} has no controller (minitaur, ant)", cfg.name)
+            })?;
+            // The same --option and --reward settings as the policy's panel.
+            let base = args.env_options.apply(base)?;
+            let commands = args.command.commands(&[command])?;
+            let mut controller = baseline_controller_for(&cfg.name, commands.into_iter().next().unwrap(), None)?;
+            let (frames, ret, speed, fps) = film(&base, controller.as_mut(), &settings, args.fps, seed)?;
+            (frames, ret, speed, fps, format!("the controller commanded to {command:.2} m/s"))
+        } else {
+            let (run, agent) = resolve_policy(std::path::Path::new(spec), None)?.load()?;
+            anyhow::ensure!(
+                run.env.name == cfg.name,
+                "--side-by-side {spec} was trained on {}, not {}",
+                run.env.name,
+                cfg.name
+            );
+            let mut other = AgentPolicy { agent: agent.as_ref(), label: spec.clone() };
+            let env = args.env_options.apply(run.env)?;
+            let (frames, ret, speed, fps) = film(&env, &mut other, &settings, args.fps, seed)?;
+            (frames, ret, speed, fps, spec.clone())
+        };
+        anyhow::ensure!(
+            (panel_fps - fps).abs() < 1e-9,
+            "{spec} acts at another rate than the policy: its frames would not line up"
+        );
+        println!("next: {label}: return {ret:.3}, {speed:.2} m/s");
+        panels.push(frames);
+    }
+    let tiled = locobench::render::tile(&panels)?;
+    let mut writer = locobench::render::video::VideoWriter::create(path, tiled[0].width, tiled[0].height, fps)?;
+    for f in &tiled {
+        writer.push(f)?;
+    }
+    let n = writer.frames();
+    let path = writer.finish()?;
+    println!("wrote {} ({n} frames of {} panels, episode seed {seed})", path.display(), panels.len());
+    Ok(())
 }

@@ -136,6 +136,32 @@ pub(crate) fn python_speed(results: &Path) -> Result<String> {
     Ok(out)
 }
 
+/// The newest `render-speed.csv` (`cargo bench --bench render -- FILE`): seconds and frames per
+/// second to render a 10-second episode's 251 frames and to encode them, per size.
+pub(crate) fn render_speed(results: &Path) -> Result<String> {
+    let path = newest(results, "render-speed.csv")?;
+    let rows = read(&path)?;
+    let mut out = quoting(&path)?
+        + "\n\n| size | frames | render | encode MP4 | encode WebM | encode GIF | MP4, render + encode |\n|---|---|---|---|---|---|---|\n";
+    for r in &rows {
+        let frames = r.num("frames");
+        let cell = |s: f64| format!("{s:.2} s ({:.0} fps)", frames / s);
+        let (render, mp4) = (r.num("render_s"), r.num("encode_mp4_s"));
+        let _ = writeln!(
+            out,
+            "| {}x{} | {frames:.0} | {} | {} | {} | {} | {:.2} s |",
+            r.num("width"),
+            r.num("height"),
+            cell(render),
+            cell(mp4),
+            cell(r.num("encode_webm_s")),
+            cell(r.num("encode_gif_s")),
+            render + mp4
+        );
+    }
+    Ok(out)
+}
+
 /// The newest `time-to-walk.csv` (`cargo bench --bench time_to_walk`): per algorithm and
 /// threshold, how many runs reached it and how long they took.
 pub(crate) fn time_to_walk(results: &Path) -> Result<String> {

@@ -57,6 +57,11 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
             name: "vector-env",
             text: benchmarks::vector_env(&root.join(BENCH_RESULTS_DIR))?,
         },
+        Section {
+            file: "docs/benchmarks.md",
+            name: "render-speed",
+            text: benchmarks::render_speed(&root.join(BENCH_RESULTS_DIR))?,
+        },
         Section { file: "docs/environments.md", name: "envs", text: envs::table()? },
         Section {
             file: "docs/python.md",

@@ -160,6 +160,17 @@ impl Model {
         unsafe { std::slice::from_raw_parts(self.raw().geom_rbound, self.ngeom()) }
     }
 
+    /// Sets the renderer's quality settings (`<visual><quality shadowsize offsamples>`): the
+    /// shadow map's side in texels and the offscreen buffer's multisamples.
+    pub(crate) fn set_render_quality(&mut self, shadowsize: usize, offsamples: usize) {
+        // SAFETY: `&mut self` is the only access to this model; two plain ints are written.
+        unsafe {
+            let quality = &mut self.ptr.as_mut().vis.quality;
+            quality.shadowsize = shadowsize as i32;
+            quality.offsamples = offsamples as i32;
+        }
+    }
+
     /// The model's extent (`stat.extent`): the size of its bounding box, for camera distances.
     pub fn extent(&self) -> f64 {
         self.raw().stat.extent

@@ -61,6 +61,23 @@ impl MetricsRow {
         }
     }
 
+    /// Every value the row carries besides its kind and step, by its `metrics.csv` column
+    /// (None where the column is empty), for the logs that mirror the file.
+    pub(crate) fn values(&self) -> [(&'static str, Option<f64>); 10] {
+        [
+            ("episode_return", self.episode_return),
+            ("episode_length", self.episode_length.map(|l| l as f64)),
+            ("eval_mean", self.eval_mean),
+            ("eval_std", self.eval_std),
+            ("critic_loss", self.critic_loss),
+            ("actor_loss", self.actor_loss),
+            ("alpha", self.alpha),
+            ("steps_per_s", Some(self.steps_per_s)),
+            ("wall_time", Some(self.wall_time)),
+            ("eval_saturation", self.eval_saturation),
+        ]
+    }
+
     /// This row with an evaluation's mean, std and saturation.
     pub(crate) fn with_evaluation(self, e: &super::evaluate::Evaluation) -> MetricsRow {
         MetricsRow { eval_mean: Some(e.mean()), eval_std: Some(e.std()), eval_saturation: Some(e.saturation), ..self }

@@ -15,20 +15,10 @@ use super::seeds;
 pub(crate) fn log_training_row(rec: &RecordingStream, row: &MetricsRow) -> Result<()> {
     rec.reset_time();
     rec.set_time_sequence("train_step", row.step as i64);
-    let values = [
-        ("training/episode_return", row.episode_return),
-        ("training/episode_length", row.episode_length.map(|l| l as f64)),
-        ("training/eval_mean", row.eval_mean),
-        ("training/eval_std", row.eval_std),
-        ("training/eval_saturation", row.eval_saturation),
-        ("training/critic_loss", row.critic_loss),
-        ("training/actor_loss", row.actor_loss),
-        ("training/alpha", row.alpha),
-        ("training/steps_per_s", Some(row.steps_per_s)),
-    ];
-    for (path, value) in values {
+    // The wall time is the recording's own timeline, not a curve.
+    for (column, value) in row.values().into_iter().filter(|(c, _)| *c != "wall_time") {
         if let Some(v) = value {
-            rec.log(path, &rerun::Scalars::single(v))?;
+            rec.log(format!("training/{column}"), &rerun::Scalars::single(v))?;
         }
     }
     Ok(())
