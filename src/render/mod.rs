@@ -403,4 +403,3 @@ pub fn tile(panels: &[Vec<Frame>]) -> Result<Vec<Frame>> {
         })
         .collect())
 }
-

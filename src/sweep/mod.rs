@@ -310,6 +310,17 @@ mod tests {
             assert_eq!(train.to_args(), job.args);
             assert_eq!(train.out.as_deref(), Some(job.run_dir.as_path()));
             assert!(train.resume_if_exists && train.quiet);
+            assert_eq!(train.tensorboard, None);
         }
+        // With --tensorboard, each job logs into its own directory under the sweep's.
+        let logged = jobs_of(&SweepSpec { tensorboard: true, ..spec.clone() });
+        for job in &logged {
+            let train = TrainArgs::parse_from(&job.args).unwrap();
+            assert_eq!(train.tensorboard, Some(Path::new("sw/tensorboard").join(&job.name)));
+        }
+    }
+
+    fn jobs_of(spec: &SweepSpec) -> Vec<Job> {
+        jobs(spec, Path::new("sw")).unwrap()
     }
 }
