@@ -33,8 +33,7 @@ pub(crate) fn shipped_step(run_dir: &Path) -> Option<u64> {
     if !run_dir.join(crate::train::checkpoint::POLICY_FILE).is_file() {
         return None;
     }
-    let text = std::fs::read_to_string(run_dir.join("source.toml")).ok()?;
-    text.parse::<toml::Table>().ok()?.get("step")?.as_integer().map(|s| s as u64)
+    crate::train::policy_ref::exported_step(run_dir)
 }
 
 /// The furthest step a run reached (its metrics, or its exported policy's step).

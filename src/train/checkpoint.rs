@@ -320,7 +320,12 @@ fn damage(checkpoint: &Path, trainer_file: &str) -> Option<String> {
 
 /// Whether a run directory holds any checkpoint directory, intact or not.
 pub fn any(run_dir: &Path) -> bool {
-    !step_dirs(&checkpoints_dir(run_dir)).is_empty()
+    newest(run_dir).is_some()
+}
+
+/// A run's checkpoint directory of the highest step, intact or not.
+pub(crate) fn newest(run_dir: &Path) -> Option<PathBuf> {
+    step_dirs(&checkpoints_dir(run_dir)).into_iter().next().map(|(_, dir)| dir)
 }
 
 /// The newest checkpoint of a run that a resume can start from: its files match their checksums

@@ -132,12 +132,15 @@ pub fn write(path: &Path, rows: &[MetricsRow]) -> Result<()> {
 /// Reads the rows of a `metrics.csv`. A row that does not parse is an error naming the file and
 /// its line.
 pub fn read(path: &Path) -> Result<Vec<MetricsRow>> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+    parse(&text, path)
+}
+
+/// The rows of `text`, the contents of the `metrics.csv` at `path` (named in errors).
+fn parse(text: &str, path: &Path) -> Result<Vec<MetricsRow>> {
     let mut rows = Vec::new();
     // Flexible: files from before the eval_saturation column have one field fewer.
-    let mut reader = csv::ReaderBuilder::new()
-        .flexible(true)
-        .from_path(path)
-        .with_context(|| format!("reading {}", path.display()))?;
+    let mut reader = csv::ReaderBuilder::new().flexible(true).from_reader(text.as_bytes());
     let header = reader.headers().with_context(|| format!("reading {}", path.display()))?.clone();
     if header.iter().ne(HEADER.iter().copied().take(header.len())) || header.len() < HEADER.len() - 1 {
         bail!("{} does not start with the metrics header ({})", path.display(), HEADER.join(","));
@@ -191,7 +194,8 @@ pub(crate) fn restore(run_dir: &Path, checkpoint: &Path, step: u64) -> Result<Ve
             Vec::new()
         });
     }
-    let rows = read(&kept)?;
+    let kept_text = std::fs::read_to_string(&kept).with_context(|| format!("reading {}", kept.display()))?;
+    let rows = parse(&kept_text, &kept)?;
     let fix = format!(
         "the checkpoint keeps the rows up to step {step} in {}: move the damaged file aside and copy that one in its \
          place to resume (nothing was changed)",
@@ -202,8 +206,7 @@ pub(crate) fn restore(run_dir: &Path, checkpoint: &Path, step: u64) -> Result<Ve
         Err(e) if e.kind() == std::io::ErrorKind::NotFound && rows.is_empty() => return Ok(rows),
         Err(e) => return Err(e).with_context(|| format!("{} cannot be read; {fix}", run_file.display())),
     };
-    let ours = read(&run_file).with_context(|| format!("{} is damaged; {fix}", run_file.display()))?;
-    let kept_text = std::fs::read_to_string(&kept).with_context(|| format!("reading {}", kept.display()))?;
+    let ours = parse(&text, &run_file).with_context(|| format!("{} is damaged; {fix}", run_file.display()))?;
     let (expected, found): (Vec<&str>, Vec<&str>) = (kept_text.lines().collect(), text.lines().collect());
     if let Some(line) = (0..expected.len()).find(|&i| found.get(i) != expected.get(i)) {
         let what = if line >= found.len() {

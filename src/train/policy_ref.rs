@@ -14,7 +14,7 @@ use anyhow::{bail, Context, Result};
 
 use crate::agents::Agent;
 
-use super::{budget_policy_path, budget_policy_steps, checkpoint, read_run_config, RunConfig, BUDGET_POLICY_DIR};
+use super::{budget_policy_path, budget_policy_steps, checkpoint, RunConfig, BUDGET_POLICY_DIR};
 
 /// A resolved policy reference.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -112,9 +112,8 @@ pub fn resolve_policy(path: &Path, budget: Option<u64>) -> Result<PolicyRef> {
         }
         return Ok(PolicyRef::Budget { run_dir: path.to_path_buf(), step: b });
     }
-    if checkpoint::any(path) {
-        let newest = checkpoint::latest(path).or_else(|_| newest_checkpoint_dir(path))?;
-        return Ok(PolicyRef::Checkpoint(newest));
+    if let Some(newest) = checkpoint::newest(path) {
+        return Ok(PolicyRef::Checkpoint(checkpoint::latest(path).unwrap_or(newest)));
     }
     match steps.last() {
         Some(&step) => Ok(PolicyRef::Budget { run_dir: path.to_path_buf(), step }),
@@ -122,18 +121,8 @@ pub fn resolve_policy(path: &Path, budget: Option<u64>) -> Result<PolicyRef> {
     }
 }
 
-fn newest_checkpoint_dir(run_dir: &Path) -> Result<PathBuf> {
-    let mut dirs: Vec<PathBuf> = std::fs::read_dir(run_dir.join("checkpoints"))?
-        .flatten()
-        .map(|e| e.path())
-        .filter(|p| p.is_dir() && p.file_name().is_some_and(|n| n.to_string_lossy().starts_with("step_")))
-        .collect();
-    dirs.sort();
-    dirs.pop().with_context(|| format!("{} has no checkpoint", run_dir.display()))
-}
-
 /// The step an exported policy was taken at (its `source.toml`).
-fn exported_step(dir: &Path) -> Option<u64> {
+pub(crate) fn exported_step(dir: &Path) -> Option<u64> {
     let text = std::fs::read_to_string(dir.join("source.toml")).ok()?;
     toml::from_str::<toml::Table>(&text).ok()?.get("step")?.as_integer().map(|s| s as u64)
 }
@@ -200,9 +189,4 @@ impl PolicyRef {
             _ => checkpoint::load_actor(&self.weights_file(), agent),
         }
     }
-}
-
-/// Reads the config of a policy's run (for `train --init-from`'s check that sizes fit).
-pub fn policy_run_config(policy: &PolicyRef) -> Result<RunConfig> {
-    read_run_config(&policy.run_dir()?)
 }

@@ -57,22 +57,6 @@ pub fn run_progress(run_dir: &Path) -> Result<RunProgress> {
     })
 }
 
-/// Accepts a checkpoint directory or a run directory (meaning its newest checkpoint).
-pub fn resolve_checkpoint(path: &Path) -> Result<PathBuf> {
-    if path.join("model.safetensors").exists() {
-        Ok(path.to_path_buf())
-    } else if path.join("checkpoints").exists() {
-        checkpoint::latest(path)
-    } else if path.file_name().is_some_and(|n| n == "model.safetensors") && path.exists() {
-        Ok(path.parent().unwrap().to_path_buf())
-    } else {
-        bail!(
-            "no checkpoint at {} (expected a checkpoint directory with model.safetensors, or a run directory)",
-            path.display()
-        )
-    }
-}
-
 /// Writes a policy for sharing: `policy.safetensors` (the actor's weights only, a few hundred KB
 /// where a checkpoint with critics, targets and optimiser state is several MB, or GB with its
 /// buffer), the run's `config.toml` and `metrics.csv`, and `source.toml` (what it was exported
