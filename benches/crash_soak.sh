@@ -111,77 +111,53 @@ for algo in td3 sac ppo crossq dqn; do
   total_same=$((total_same + same))
 done
 
+# A command killed at random moments (with its children, as a job scheduler would) and run again,
+# KILLS times, each time compared with an unbroken run's output.
+soak_command() { # name label kills cmd_fn manifest_fn message
+  local name=$1 label=$2 count=$3 cmd=$4 list=$5 message=$6
+  $($cmd "$work/$name-whole") >/dev/null
+  $list "$work/$name-whole" >"$work/$name-whole.manifest"
+  local t0 span n=0 same=0 i=0 out delay k ident
+  t0=$(ms_now)
+  $($cmd "$work/$name-timing") >/dev/null
+  span=$(($(ms_now) - t0))
+  while [ "$n" -lt "$count" ]; do
+    i=$((i + 1))
+    out="$work/$name-$i"
+    delay=$(((RANDOM * 32768 + RANDOM) % span))
+    # shellcheck disable=SC2046
+    k=$(kill_after "$delay" $($cmd "$out"))
+    if [ "$k" = 1 ]; then
+      $($cmd "$out") >/dev/null 2>&1 || true
+      ident=0
+      if diff -q <($list "$out") "$work/$name-whole.manifest" >/dev/null; then
+        ident=1
+        same=$((same + 1))
+      fi
+      n=$((n + 1))
+      echo "$name,$n,$delay,1,$ident" >>"$csv"
+    fi
+    rm -rf "$out"
+  done
+  echo "crash soak: $name: $same of $n kills $message (span ${span} ms)"
+  summary+="| $label | $n | $same | $span |"$'\n'
+  total_kills=$((total_kills + n))
+  total_same=$((total_same + same))
+}
+
 # A sweep killed with its jobs, then run again.
 sweep_cmd() { # out
   echo "$bin sweep --env inverted-pendulum --algo td3,sac --grid set.tau=0.005,0.01 --seeds 1 --jobs 2 --steps 2000 --set $(settings td3) --out $1"
 }
 sweep_manifest() { manifest "$1/runs"; }
-$(sweep_cmd "$work/sweep-whole") >/dev/null
-sweep_manifest "$work/sweep-whole" >"$work/sweep-whole.manifest"
-t0=$(ms_now)
-$(sweep_cmd "$work/sweep-timing") >/dev/null
-sweep_span=$(($(ms_now) - t0))
-sweep_kills=$((kills / 5))
-n=0
-same=0
-i=0
-while [ "$n" -lt "$sweep_kills" ]; do
-  i=$((i + 1))
-  out="$work/sweep-$i"
-  delay=$(((RANDOM * 32768 + RANDOM) % sweep_span))
-  # shellcheck disable=SC2046
-  k=$(kill_after "$delay" $(sweep_cmd "$out"))
-  if [ "$k" = 1 ]; then
-    $(sweep_cmd "$out") >/dev/null 2>&1 || true
-    ident=0
-    if diff -q <(sweep_manifest "$out") "$work/sweep-whole.manifest" >/dev/null; then
-      ident=1
-      same=$((same + 1))
-    fi
-    n=$((n + 1))
-    echo "sweep,$n,$delay,1,$ident" >>"$csv"
-  fi
-  rm -rf "$out"
-done
-echo "crash soak: sweep: $same of $n kills resumed to the unbroken sweep (span ${sweep_span} ms)"
-summary+="| sweep (2 algorithms x 2 taus, 2 jobs at a time) | $n | $same | $sweep_span |"$'\n'
-total_kills=$((total_kills + n))
-total_same=$((total_same + same))
+soak_command sweep "sweep (2 algorithms x 2 taus, 2 jobs at a time)" $((kills / 5)) sweep_cmd sweep_manifest \
+  "resumed to the unbroken sweep"
 
 # `report` killed, then run again over the same runs.
 report_cmd() { # out
   echo "$bin report --runs $work/sweep-whole/runs --episodes 5 --out $1"
 }
-$(report_cmd "$work/report-whole") >/dev/null
-manifest "$work/report-whole" >"$work/report-whole.manifest"
-t0=$(ms_now)
-$(report_cmd "$work/report-timing") >/dev/null
-report_span=$(($(ms_now) - t0))
-n=0
-same=0
-i=0
-while [ "$n" -lt "$sweep_kills" ]; do
-  i=$((i + 1))
-  out="$work/report-$i"
-  delay=$(((RANDOM * 32768 + RANDOM) % report_span))
-  # shellcheck disable=SC2046
-  k=$(kill_after "$delay" $(report_cmd "$out"))
-  if [ "$k" = 1 ]; then
-    $(report_cmd "$out") >/dev/null 2>&1 || true
-    ident=0
-    if diff -q <(manifest "$out") "$work/report-whole.manifest" >/dev/null; then
-      ident=1
-      same=$((same + 1))
-    fi
-    n=$((n + 1))
-    echo "report,$n,$delay,1,$ident" >>"$csv"
-  fi
-  rm -rf "$out"
-done
-echo "crash soak: report: $same of $n kills gave the unbroken report (span ${report_span} ms)"
-summary+="| report | $n | $same | $report_span |"$'\n'
-total_kills=$((total_kills + n))
-total_same=$((total_same + same))
+soak_command report report $((kills / 5)) report_cmd manifest "gave the unbroken report"
 
 {
   echo "# Crash soak"
