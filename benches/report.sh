@@ -2,13 +2,21 @@
 # Regenerates the committed report, benches/results/report/, from the committed runs: every run
 # with saved policies is evaluated under the report's protocol (50 held-out episodes per seed,
 # 20 per push level); runs kept as config.toml + metrics.csv only give learning curves and are
-# listed as having no policy. About 10 minutes on 2 cores.
+# listed as having no policy. Each algorithm's best row is filmed (report --videos) unless
+# LOCOBENCH_REPORT_VIDEOS=0. LOCOBENCH=BINARY runs that binary instead of building one.
+# About 10 minutes on 2 cores without videos (benches/report_timing.sh measures both).
 #
-#   bash benches/report.sh [OUT]      (default benches/results/report)
+#   bash benches/report.sh [OUT] [REPORT OPTIONS...]      (default benches/results/report)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 out=${1:-benches/results/report}
-cargo build --locked --release --quiet
+bin=${LOCOBENCH:-}
+if [ -z "$bin" ]; then
+  cargo build --locked --release --quiet
+  bin=./target/release/locobench
+fi
+videos=(--videos)
+[ "${LOCOBENCH_REPORT_VIDEOS:-1}" = 0 ] && videos=()
 r=benches/results
 runs=(
   # Minitaur: TD3 (the preset: normalised observations, rewards x 100), SAC and DDPG with the
@@ -36,4 +44,4 @@ for d in "${runs[@]}"; do
   if [ -d "$d" ]; then existing+=("$d"); else echo "not committed (yet): $d" >&2; fi
 done
 rm -rf "$out"  # no chart of an earlier layout left behind
-./target/release/locobench report --runs "${existing[@]}" --out "$out" "${@:2}"
+"$bin" report --runs "${existing[@]}" --out "$out" "${videos[@]}" "${@:2}"

@@ -1,6 +1,10 @@
-"""The optional Stable-Baselines3 check: SB3's own env checker on every locobench env, then a short
-SAC and PPO training on Minitaur and a look at the trained policy. Run by python/check_sb3.sh."""
+"""The optional Stable-Baselines3 check: SB3's own env checker on every locobench env, a short
+SAC and PPO training on Minitaur and a look at the trained policy, then SB3's VecVideoRecorder on
+a vector env from SB3's make_vec_env (which asks every env for render_mode="rgb_array"). Run by
+python/check_sb3.sh."""
+import pathlib
 import sys
+import tempfile
 import time
 
 import gymnasium as gym
@@ -31,3 +35,19 @@ for algo in (SAC, PPO):
         if terminated or truncated:
             break
     print(f"{algo.__name__} on locobench/Minitaur-v0: {steps} steps in {elapsed:.0f} s; one episode after: return {total:.3f}, {length} steps")
+
+from stable_baselines3.common.env_util import make_vec_env
+from stable_baselines3.common.vec_env import VecVideoRecorder
+
+with tempfile.TemporaryDirectory() as out:
+    venv = make_vec_env("locobench/Minitaur-v0", n_envs=4, seed=0)
+    recorder = VecVideoRecorder(venv, out, record_video_trigger=lambda step: step == 0, video_length=100,
+                                name_prefix="minitaur")
+    recorder.reset()
+    for _ in range(120):
+        recorder.step(np.stack([venv.action_space.sample() for _ in range(venv.num_envs)]))
+    recorder.close()
+    videos = sorted(pathlib.Path(out).glob("*.mp4"))
+    assert videos and videos[0].stat().st_size > 10_000, videos
+    print(f"VecVideoRecorder on make_vec_env('locobench/Minitaur-v0', n_envs=4): wrote {videos[0].name}, "
+          f"{videos[0].stat().st_size} bytes")

@@ -7,7 +7,7 @@ use std::sync::Arc;
 use locobench::envs::{make, Env, EnvConfig};
 use locobench::mujoco::Model;
 use locobench::render::video::VideoWriter;
-use locobench::render::{Backend, Camera, Frame, RenderSettings, Renderer};
+use locobench::render::{Backend, Camera, Frame, Marks, RenderSettings, Renderer};
 
 const W: usize = 160;
 const H: usize = 120;
@@ -115,13 +115,31 @@ fn the_follow_camera_keeps_the_robot_centred() {
     let mut renderer = Renderer::with_backend(&model(env.as_ref()), settings, Backend::OsMesa).unwrap();
     let here = renderer.render(env.data()).unwrap();
     let there = render_moved(env.as_mut(), &mut renderer, 3.0, 0.0);
-    // The floor is one colour, so the robot looks the same wherever it is.
-    let differing = here.rgb.chunks(3).zip(there.rgb.chunks(3)).filter(|(a, b)| a != b).count();
-    assert!(differing < W * H / 50, "{differing} pixels changed when the followed robot moved 3 m");
-    let brightness =
-        |f: &Frame, x: usize| (0..H).map(|y| f.pixel(x, y).iter().map(|&c| c as u32).sum::<u32>()).sum::<u32>();
-    // Darker (robot) columns in the middle than at the edges.
-    assert!(brightness(&here, W / 2) < brightness(&here, 2), "no robot in the middle of the frame");
+    // The robot's body is blue and the floor grey: its blue pixels sit in the middle of both
+    // frames, in the same number (the floor's checker moves under it).
+    let blue = |f: &Frame| {
+        let (mut sx, mut sy, mut n) = (0.0, 0.0, 0usize);
+        for y in 0..H {
+            for x in 0..W {
+                let [r, _, b] = f.pixel(x, y);
+                if b as i32 > r as i32 + 60 {
+                    sx += x as f64;
+                    sy += y as f64;
+                    n += 1;
+                }
+            }
+        }
+        assert!(n > 50, "the robot's body in the frame ({n} blue pixels)");
+        (sx / n as f64, sy / n as f64, n as f64)
+    };
+    let ((x0, y0, n0), (x1, y1, n1)) = (blue(&here), blue(&there));
+    for (x, y) in [(x0, y0), (x1, y1)] {
+        assert!(
+            (x - W as f64 / 2.0).abs() < 0.1 * W as f64 && (y - H as f64 / 2.0).abs() < 0.2 * H as f64,
+            "({x:.0}, {y:.0})"
+        );
+    }
+    assert!((x1 - x0).abs() < 2.0 && (y1 - y0).abs() < 2.0 && (n1 / n0 - 1.0).abs() < 0.1, "{n0} and {n1} blue pixels");
 }
 
 #[test]
@@ -258,7 +276,95 @@ fn training_clips_leave_the_run_s_numbers_unchanged() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     clips.sort();
-    assert_eq!(clips, ["eval-step-300.mp4", "eval-step-900.mp4"]);
+    assert_eq!(clips, ["eval-step-300.gif", "eval-step-300.mp4", "eval-step-900.gif", "eval-step-900.mp4"]);
+    let gif = std::fs::read(filmed.join("videos/eval-step-300.gif")).unwrap();
+    assert!(gif.starts_with(b"GIF89a"), "a GIF copy for Markdown and TensorBoard");
+
+    // `report --progress` shows the clips in training order, each with its evaluation.
+    let page = dir.path().join("progress");
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_locobench"))
+        .args(["report", "--progress"])
+        .arg(&filmed)
+        .arg("--out")
+        .arg(&page)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", String::from_utf8_lossy(&o.stderr));
+    let html = std::fs::read_to_string(page.join("index.html")).unwrap();
+    let md = std::fs::read_to_string(page.join("README.md")).unwrap();
+    let (first, last) =
+        (html.find("videos/eval-step-300.mp4").unwrap(), html.find("videos/eval-step-900.mp4").unwrap());
+    assert!(first < last, "training order");
+    assert!(md.contains("![step 300 (300): evaluation return") && md.contains("](videos/eval-step-900.gif)"), "{md}");
+    for f in ["eval-step-300.mp4", "eval-step-300.gif", "eval-step-900.mp4", "eval-step-900.gif"] {
+        assert_eq!(
+            std::fs::read(page.join("videos").join(f)).unwrap(),
+            std::fs::read(filmed.join("videos").join(f)).unwrap(),
+            "{f} copied beside the page"
+        );
+    }
+    let o = std::process::Command::new(env!("CARGO_BIN_EXE_locobench"))
+        .args(["report", "--progress"])
+        .arg(&plain)
+        .arg("--out")
+        .arg(dir.path().join("none"))
+        .output()
+        .unwrap();
+    assert!(!o.status.success() && String::from_utf8_lossy(&o.stderr).contains("--video-every"));
+}
+
+/// A caption is drawn at the top left and leaves the rest of the frame as it was.
+#[test]
+fn a_caption_is_drawn_at_the_top_left_only() {
+    let env = minitaur();
+    let settings = RenderSettings { width: 320, height: 240, camera: Camera::Follow };
+    let mut renderer = Renderer::with_backend(&model(env.as_ref()), settings, Backend::OsMesa).unwrap();
+    let plain = renderer.render(env.data()).unwrap();
+    let marks = Marks { caption: Some(("ppo 1M\nstep 0".into(), String::new())), arrow: None };
+    let captioned = renderer.render_marked(env.data(), &marks).unwrap();
+    let changed = |x0: usize, x1: usize, y0: usize, y1: usize| {
+        (y0..y1)
+            .flat_map(|y| (x0..x1).map(move |x| (x, y)))
+            .filter(|&(x, y)| plain.pixel(x, y) != captioned.pixel(x, y))
+            .count()
+    };
+    assert!(changed(0, 160, 0, 60) > 500, "the caption's box and text at the top left");
+    assert_eq!(changed(0, 320, 120, 240), 0, "the lower half untouched");
+    assert_eq!(changed(200, 320, 0, 240), 0, "the right side untouched");
+}
+
+/// A pushed episode is marked while the push acts and for a second after: red arrow pixels
+/// appear then and not before, and the panel says when the push began.
+#[test]
+fn a_push_is_marked_in_the_frame_while_it_acts() {
+    use locobench::evaluation::Push;
+    use locobench::policy::ZeroPolicy;
+    use locobench::render::clip::film_episode;
+    let cfg = EnvConfig::new("minitaur").with_overrides(&[("max_episode_steps".into(), "700".into())]).unwrap();
+    let settings = RenderSettings { width: W, height: H, camera: Camera::Follow };
+    let panel = film_episode(&cfg, &mut ZeroPolicy, &settings, 10.0, 7, None, Some(Push { delta_v: 0.5 })).unwrap();
+    let start = panel.push_time.expect("the push is seen");
+    assert!((2.0..6.0).contains(&start), "the evaluation pushes 2-6 s in, not at {start}");
+    let red = |f: &Frame| {
+        (0..f.height)
+            .flat_map(|y| (0..f.width).map(move |x| (x, y)))
+            .filter(|&(x, y)| {
+                let [r, g, b] = f.pixel(x, y);
+                r > 150 && g < 60 && b < 60
+            })
+            .count()
+    };
+    let time = |i: usize| i as f64 / panel.fps;
+    for (i, f) in panel.frames.iter().enumerate() {
+        let t = time(i);
+        if t < start - 0.05 || t > start + 1.2 {
+            assert_eq!(red(f), 0, "no arrow at {t:.1} s (push at {start:.2} s)");
+        } else if t > start + 0.15 && t < start + 0.9 {
+            assert!(red(f) > 20, "the arrow at {t:.1} s (push at {start:.2} s)");
+        }
+    }
+    let unpushed = film_episode(&cfg, &mut ZeroPolicy, &settings, 10.0, 7, None, None).unwrap();
+    assert!(unpushed.push_time.is_none());
 }
 
 /// `--side-by-side controller`: the policy's panel and the controller's in one frame, the same
@@ -278,7 +384,7 @@ fn side_by_side_puts_the_controller_beside_the_policy() {
     let out = record(&["--video", mp4.to_str().unwrap()]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("the controller commanded to") && stdout.contains("2 panels"), "{stdout}");
+    assert!(stdout.contains("next: controller at") && stdout.contains("2 panels"), "{stdout}");
     let probe = std::process::Command::new("ffprobe")
         .args(["-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries"])
         .args(["stream=nb_read_frames,width,height", "-of", "csv=p=0"])

@@ -59,6 +59,7 @@ fn sweep_then_report_evaluates_every_run_at_its_budget_beside_the_controller() {
         "2",
         "--push-episodes",
         "1",
+        "--videos",
     ]);
     assert!(ok, "{out}\n{err}");
     let html = std::fs::read_to_string(report.join("index.html")).unwrap();
@@ -114,6 +115,33 @@ fn sweep_then_report_evaluates_every_run_at_its_budget_beside_the_controller() {
         assert!(html.contains(&format!("<a href=\"{n}\">")), "{n} linked, not embedded");
     }
 
+    // The first screen: the summary, then the protocol; the run list in the appendix.
+    let at = |needle: &str| md.find(needle).unwrap_or_else(|| panic!("{needle} missing:\n{md}"));
+    assert!(at("## Summary") < at("## Protocol") && at("## Protocol") < at("## minitaur"));
+    assert!(at("## minitaur") < at("## Appendix: the runs"));
+    let summary = &md[at("## Summary")..at("## Protocol")];
+    assert!(summary.contains("minitaur: Best learned: ") && summary.contains("The controller"), "{summary}");
+    // --videos: per algorithm its best row's clip beside the controller, and the pair pushed;
+    // the page plays MP4s with posters, the Markdown shows GIFs.
+    for algo in ["sac", "td3"] {
+        for stem in [format!("minitaur_{algo}"), format!("minitaur_{algo}_push")] {
+            let file = |ext: &str| std::fs::read(report.join("videos").join(format!("{stem}.{ext}"))).unwrap();
+            assert_eq!(&file("mp4")[4..8], b"ftyp", "{stem}.mp4");
+            assert!(file("gif").starts_with(b"GIF89a"), "{stem}.gif");
+            assert!(file("jpg").starts_with(&[0xff, 0xd8]), "{stem}.jpg");
+            assert!(
+                html.contains(&format!("poster=\"videos/{stem}.jpg\" src=\"videos/{stem}.mp4\"")),
+                "{stem} on the page"
+            );
+            assert!(md.contains(&format!("](videos/{stem}.gif)")), "{stem} in the Markdown");
+        }
+    }
+    // Each clip lasts its longest panel's episode: at most the 40 steps of 10 ms these runs have.
+    for d in html.split("data-duration=\"").skip(1) {
+        let seconds: f64 = d.split('"').next().unwrap().parse().unwrap();
+        assert!(seconds > 0.0 && seconds <= 0.4 + 1e-9, "{seconds}");
+    }
+
     // The same report, number for number, on one thread.
     let again = dir.path().join("report-1");
     let (ok, out, err) = locobench(&[
@@ -128,6 +156,7 @@ fn sweep_then_report_evaluates_every_run_at_its_budget_beside_the_controller() {
         "1",
         "--threads",
         "1",
+        "--videos",
     ]);
     assert!(ok, "{out}\n{err}");
     for file in ["README.md", "held_out.csv", "controller.csv"] {
@@ -213,6 +242,18 @@ fn committed_reports_are_light_and_self_contained() {
         assert!(html.len() < 500_000, "{}: {} bytes", index.display(), html.len());
         assert!(!html.contains("<script") && !html.contains("src=\"http"), "{}", index.display());
         assert!(html.contains("Protocol") && html.contains("held-out episodes"), "{}", index.display());
+        // Every video, poster and GIF the pages show is committed beside them.
+        let md = std::fs::read_to_string(root.join(report).join("README.md")).unwrap();
+        let referenced = html
+            .split(" src=\"")
+            .chain(html.split(" poster=\""))
+            .skip(1)
+            .map(|s| s.split('"').next().unwrap().to_string())
+            .filter(|s| s.starts_with("videos/"))
+            .chain(md.split("](videos/").skip(1).map(|s| format!("videos/{}", s.split(')').next().unwrap())));
+        for file in referenced {
+            assert!(root.join(report).join(&file).is_file(), "{report}/{file}");
+        }
         for file in ["held_out.csv", "controller.csv", "README.md"] {
             assert!(root.join(report).join(file).is_file(), "{report}/{file}");
         }

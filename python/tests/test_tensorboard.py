@@ -79,3 +79,25 @@ def test_every_metric_reaches_tensorboard_and_a_resume_replaces_what_a_kill_left
     # The same numbers as the unbroken run (its wall-clock columns aside).
     for tag in ("eval/eval_mean", "episode/episode_return", "episode/critic_loss"):
         assert got[tag] == scalars(whole_tb)[tag], tag
+
+
+def test_training_clips_reach_tensorboard_as_animated_gifs(tmp_path):
+    """With --video-every, each filmed evaluation is an image summary `eval/video` at its step: the
+    GIF beside the run, which TensorBoard's image dashboard plays."""
+    from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
+
+    binary = locobench_binary()
+    run, tb = tmp_path / "run", tmp_path / "tb"
+    subprocess.run([str(binary), "train", "--env", "inverted-pendulum", "--algo", "td3", "--seed", "3", "--steps",
+                    "1000", "--set", SETTINGS, "--quiet", "--threads", "1", "--out", str(run), "--tensorboard",
+                    str(tb), "--video-every", "1"], check=True)
+    acc = EventAccumulator(str(tb), size_guidance={"images": 0})
+    acc.Reload()
+    assert "eval/video" in acc.Tags()["images"]
+    images = acc.Images("eval/video")
+    eval_steps = [int(r["step"]) for r in csv.DictReader(open(run / "metrics.csv")) if r["kind"] == "eval"]
+    assert [i.step for i in images] == eval_steps
+    for image in images:
+        assert image.encoded_image_string == (run / "videos" / f"eval-step-{image.step}.gif").read_bytes()
+        assert image.encoded_image_string.startswith(b"GIF89a")
+        assert (image.width, image.height) == (320, 240)

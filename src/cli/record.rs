@@ -5,7 +5,8 @@ use locobench::controller::baseline::{baseline_controller_for, baseline_env, par
 use locobench::envs::make;
 use locobench::policy::{AgentPolicy, Policy};
 use locobench::record::{spawn_viewer, Recording, RolloutRecorder};
-use locobench::render::{Camera, RenderSettings, VideoRecorder};
+use locobench::render::clip::{film_episode, tile_panels, write_video};
+use locobench::render::{Camera, Film, RenderSettings};
 use locobench::rollout::{run_episodes, Observer};
 use locobench::train::resolve_policy;
 
@@ -66,6 +67,10 @@ pub struct RecordArgs {
     /// m/s) or another trained policy. Repeatable; one episode.
     #[arg(long = "side-by-side", value_name = "controller|POLICY")]
     pub side_by_side: Vec<String>,
+    /// With --video: a caption on every frame: the policy, the step, the return so far and the
+    /// mean forward speed so far (and a push's size while one is marked).
+    #[arg(long)]
+    pub caption: bool,
     /// Open the recording in the rerun viewer (needs `rerun` on the PATH).
     #[arg(long)]
     pub spawn: bool,
@@ -99,7 +104,8 @@ pub fn run(args: RecordArgs) -> Result<()> {
                 anyhow::ensure!(*env == run.env.name, "the checkpoint was trained on {}, not {env}", run.env.name);
             }
             agent_holder = agent;
-            let label = format!("{} ({checkpoint})", run.train.algo.name());
+            let label =
+                format!("{} {}", run.train.algo.name(), path.file_name().unwrap_or(path.as_os_str()).to_string_lossy());
             (run.env, Box::new(AgentPolicy { agent: agent_holder.as_ref(), label }) as Box<dyn Policy>)
         }
     };
@@ -122,7 +128,8 @@ pub fn run(args: RecordArgs) -> Result<()> {
         Some(path) => {
             let settings =
                 RenderSettings { width: args.width, height: args.height, camera: Camera::parse(&args.camera)? };
-            Some(VideoRecorder::create(env.data().model(), env.spec().dt, settings, path, args.fps)?)
+            let film = Film::video(env.data().model(), env.spec().dt, settings, path, args.fps)?;
+            Some(if args.caption { film.with_caption(policy.name()) } else { film })
         }
         None => None,
     };
@@ -148,7 +155,7 @@ pub fn run(args: RecordArgs) -> Result<()> {
         );
     }
     if let Some(v) = video {
-        let (frames, every) = (v.frames(), v.stride());
+        let (frames, every) = (v.frame_count(), v.stride());
         let path = v.finish()?;
         println!("wrote {} ({frames} frames, one every {every} steps, real time)", path.display());
     }
@@ -180,27 +187,6 @@ impl Observer for Observers<'_> {
 /// The controller's top command here (the grid the report sweeps ends there).
 const CONTROLLER_TOP_SPEED: f64 = 1.5;
 
-/// One panel's episode: its frames, return and mean forward speed (base displacement along x
-/// over the episode's simulated time).
-fn film(
-    cfg: &locobench::envs::EnvConfig,
-    policy: &mut dyn Policy,
-    settings: &RenderSettings,
-    fps: f64,
-    seed: u64,
-) -> Result<(Vec<locobench::render::Frame>, f64, f64, f64)> {
-    let mut env = make(cfg)?;
-    let dt = env.spec().dt;
-    let every = locobench::render::frame_stride(dt, fps);
-    let renderer = locobench::render::Renderer::new(env.data().model(), settings.clone())?;
-    let mut frames = locobench::render::FrameCollector::new(renderer, every);
-    env.reset(Some(seed))?;
-    let x0 = env.data().xpos()[3];
-    let summary = locobench::rollout::run_episode(env.as_mut(), policy, 0, Some(seed), &mut frames)?;
-    let speed = (env.data().xpos()[3] - x0) / (summary.length.max(1) as f64 * dt);
-    Ok((frames.frames, summary.episode_return, speed, 1.0 / (every as f64 * dt)))
-}
-
 /// `record --video FILE --side-by-side ...`: the policy's episode and each other panel's, tiled.
 fn side_by_side(args: &RecordArgs, cfg: &locobench::envs::EnvConfig, policy: &mut dyn Policy) -> Result<()> {
     let path = args.video.as_ref().context("--side-by-side makes a video: give --video FILE")?;
@@ -209,11 +195,14 @@ fn side_by_side(args: &RecordArgs, cfg: &locobench::envs::EnvConfig, policy: &mu
     locobench::render::video::check_encoder(locobench::render::video::Format::of(path)?)?;
     let settings = RenderSettings { width: args.width, height: args.height, camera: Camera::parse(&args.camera)? };
     let seed = args.seed.seed;
-    let (frames, ret, speed, fps) = film(cfg, policy, &settings, args.fps, seed)?;
-    println!("left: {} on {}: return {ret:.3}, {speed:.2} m/s", policy.name(), cfg.name);
-    let mut panels = vec![frames];
+    let caption = |label: String| args.caption.then_some(label);
+    let name = policy.name();
+    let first = film_episode(cfg, policy, &settings, args.fps, seed, caption(name.clone()).as_deref(), None)?;
+    println!("left: {name} on {}: return {:.3}, {:.2} m/s", cfg.name, first.episode_return, first.speed);
+    let speed = first.speed;
+    let mut panels = vec![first];
     for spec in &args.side_by_side {
-        let (frames, ret, speed, panel_fps, label) = if spec == "controller" {
+        let (panel, label) = if spec == "controller" {
             let command = speed.clamp(0.0, CONTROLLER_TOP_SPEED);
             let base = baseline_env(&cfg.name).with_context(|| {
                 format!("--side-by-side controller: {} has no controller (minitaur, ant)", cfg.name)
@@ -222,8 +211,17 @@ fn side_by_side(args: &RecordArgs, cfg: &locobench::envs::EnvConfig, policy: &mu
             let base = args.env_options.apply(base)?;
             let commands = args.command.commands(&[command])?;
             let mut controller = baseline_controller_for(&cfg.name, commands.into_iter().next().unwrap(), None)?;
-            let (frames, ret, speed, fps) = film(&base, controller.as_mut(), &settings, args.fps, seed)?;
-            (frames, ret, speed, fps, format!("the controller commanded to {command:.2} m/s"))
+            let label = format!("controller at {command:.2} m/s");
+            let panel = film_episode(
+                &base,
+                controller.as_mut(),
+                &settings,
+                args.fps,
+                seed,
+                caption(label.clone()).as_deref(),
+                None,
+            )?;
+            (panel, label)
         } else {
             let (run, agent) = resolve_policy(std::path::Path::new(spec), None)?.load()?;
             anyhow::ensure!(
@@ -234,23 +232,22 @@ fn side_by_side(args: &RecordArgs, cfg: &locobench::envs::EnvConfig, policy: &mu
             );
             let mut other = AgentPolicy { agent: agent.as_ref(), label: spec.clone() };
             let env = args.env_options.apply(run.env)?;
-            let (frames, ret, speed, fps) = film(&env, &mut other, &settings, args.fps, seed)?;
-            (frames, ret, speed, fps, spec.clone())
+            let label = format!(
+                "{} {}",
+                run.train.algo.name(),
+                std::path::Path::new(spec).file_name().map_or(spec.clone(), |f| f.to_string_lossy().into_owned())
+            );
+            (film_episode(&env, &mut other, &settings, args.fps, seed, caption(label.clone()).as_deref(), None)?, label)
         };
         anyhow::ensure!(
-            (panel_fps - fps).abs() < 1e-9,
+            (panel.fps - panels[0].fps).abs() < 1e-9,
             "{spec} acts at another rate than the policy: its frames would not line up"
         );
-        println!("next: {label}: return {ret:.3}, {speed:.2} m/s");
-        panels.push(frames);
+        println!("next: {label}: return {:.3}, {:.2} m/s", panel.episode_return, panel.speed);
+        panels.push(panel);
     }
-    let tiled = locobench::render::tile(&panels)?;
-    let mut writer = locobench::render::video::VideoWriter::create(path, tiled[0].width, tiled[0].height, fps)?;
-    for f in &tiled {
-        writer.push(f)?;
-    }
-    let n = writer.frames();
-    let path = writer.finish()?;
-    println!("wrote {} ({n} frames of {} panels, episode seed {seed})", path.display(), panels.len());
+    let (tiled, fps) = tile_panels(&panels)?;
+    let path = write_video(path, &tiled, fps)?;
+    println!("wrote {} ({} frames of {} panels, episode seed {seed})", path.display(), tiled.len(), panels.len());
     Ok(())
 }

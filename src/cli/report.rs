@@ -9,8 +9,12 @@ use locobench::report::{fmt_return, write_report, ReportOptions};
 #[derive(clap::Args, Debug)]
 pub struct ReportArgs {
     /// Run directories, or directories holding them (e.g. a sweep).
-    #[arg(long, num_args = 1.., required = true)]
+    #[arg(long, num_args = 1.., required_unless_present = "progress")]
     pub runs: Vec<PathBuf>,
+    /// Instead of a report: RUN's training clips (`train --video-every N`) in training order,
+    /// each beside its evaluation, written to --out.
+    #[arg(long, value_name = "RUN", conflicts_with = "runs")]
+    pub progress: Option<PathBuf>,
     #[arg(long, default_value = "report")]
     pub out: PathBuf,
     /// Held-out episodes per policy and seed.
@@ -22,6 +26,11 @@ pub struct ReportArgs {
     /// Evaluations at once (default: every core); the report is the same for any number.
     #[arg(long)]
     pub threads: Option<usize>,
+    /// Film each algorithm's best row on the first held-out episode (beside the controller at its
+    /// speed, and under a push, on Minitaur and Ant) into OUT/videos/: MP4s with poster frames for
+    /// index.html, GIFs for README.md. Needs OpenGL (OSMesa) and ffmpeg, as `record --video`.
+    #[arg(long)]
+    pub videos: bool,
     /// Protocol seed: picks the held-out reset seeds.
     #[command(flatten)]
     pub seed: super::SeedArg,
@@ -30,10 +39,16 @@ pub struct ReportArgs {
 pub fn run(args: ReportArgs) -> Result<()> {
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
     let started = Instant::now();
+    if let Some(run) = &args.progress {
+        let (index, clips) = locobench::report::progress::write_progress(run, &args.out)?;
+        println!("wrote {} ({clips} clips in training order)", index.display());
+        return Ok(());
+    }
     let opts = ReportOptions {
         protocol: Protocol { episodes: args.episodes, seed: args.seed.seed },
         push_episodes: args.push_episodes,
         threads: args.threads.unwrap_or_else(locobench::evaluation::parallel::default_threads),
+        videos: args.videos,
     };
     let report = write_report(&args.runs, &args.out, &opts)?;
     for (env, rows) in &report.rows {

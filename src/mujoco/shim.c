@@ -95,18 +95,33 @@ int lb_make_render_context(const mjModel* m, mjrContext* con) {
 }
 
 // One frame: the scene from the state, drawn into the offscreen buffer and read back (RGB, rows
-// bottom-up as OpenGL stores them).
+// bottom-up as OpenGL stores them). Optional marks: a red arrow in the scene from arrow[0..3] to
+// arrow[3..6] (a push), and a caption in MuJoCo's own font at the top left (labels in `caption`,
+// their values in `caption2`, lines separated by '\n', as mjr_overlay draws them).
 static void render_frame(const mjModel* m, mjData* d, const mjvOption* opt, mjvCamera* cam,
                          mjvScene* scn, mjrContext* con, int width, int height,
-                         unsigned char* rgb) {
+                         unsigned char* rgb, const char* caption, const char* caption2,
+                         const double* arrow) {
   mjrRect viewport = {0, 0, width, height};
   mjv_updateScene(m, d, opt, NULL, cam, mjCAT_ALL, scn);
+  if (arrow && scn->ngeom < scn->maxgeom) {
+    const float red[4] = {0.9f, 0.1f, 0.1f, 1.0f};
+    mjvGeom* g = scn->geoms + scn->ngeom;
+    mjv_initGeom(g, mjGEOM_ARROW, NULL, NULL, NULL, red);
+    mjv_makeConnector(g, mjGEOM_ARROW, 0.04, arrow[0], arrow[1], arrow[2], arrow[3], arrow[4], arrow[5]);
+    g->category = mjCAT_DECOR;
+    scn->ngeom++;
+  }
   mjr_setBuffer(mjFB_OFFSCREEN, con);
   mjr_render(viewport, scn, con);
+  if (caption && caption[0]) {
+    mjr_overlay(mjFONT_NORMAL, mjGRID_TOPLEFT, viewport, caption, caption2, con);
+  }
   mjr_readPixels(rgb, NULL, viewport, con);
 }
 
 int lb_render_frame(const mjModel* m, mjData* d, const mjvOption* opt, mjvCamera* cam, mjvScene* scn,
-                    mjrContext* con, int width, int height, unsigned char* rgb) {
-  GUARDED(render_frame(m, d, opt, cam, scn, con, width, height, rgb));
+                    mjrContext* con, int width, int height, unsigned char* rgb, const char* caption,
+                    const char* caption2, const double* arrow) {
+  GUARDED(render_frame(m, d, opt, cam, scn, con, width, height, rgb, caption, caption2, arrow));
 }

@@ -30,6 +30,9 @@ extern "C" {
         width: c_int,
         height: c_int,
         rgb: *mut u8,
+        caption: *const c_char,
+        caption2: *const c_char,
+        arrow: *const f64,
     ) -> c_int;
     pub fn lb_load_xml_file(path: *const c_char, err: *mut c_char, err_len: c_int, out: *mut *mut mjModel) -> c_int;
     pub fn lb_load_xml_string(

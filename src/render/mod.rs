@@ -89,11 +89,37 @@ pub struct Frame {
 }
 
 impl Frame {
+    /// The frame at half its width and height, each pixel the mean of a 2x2 block (an odd last
+    /// row or column is dropped).
+    pub fn half(&self) -> Frame {
+        let (w, h) = (self.width / 2, self.height / 2);
+        let mut rgb = Vec::with_capacity(w * h * 3);
+        for y in 0..h {
+            for x in 0..w {
+                for c in 0..3 {
+                    let at = |dx: usize, dy: usize| self.rgb[((2 * y + dy) * self.width + 2 * x + dx) * 3 + c] as u16;
+                    rgb.push(((at(0, 0) + at(1, 0) + at(0, 1) + at(1, 1) + 2) / 4) as u8);
+                }
+            }
+        }
+        Frame { width: w, height: h, rgb }
+    }
+
     /// The pixel at column `x`, row `y` (from the top).
     pub fn pixel(&self, x: usize, y: usize) -> [u8; 3] {
         let i = (y * self.width + x) * 3;
         [self.rgb[i], self.rgb[i + 1], self.rgb[i + 2]]
     }
+}
+
+/// What is drawn over a frame besides the scene.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Marks {
+    /// Top-left text in MuJoCo's font: a column of names and a column of values, lines
+    /// separated by `\n`.
+    pub caption: Option<(String, String)>,
+    /// A red arrow in the scene, from the first point to the second (world frame, metres).
+    pub arrow: Option<([f64; 3], [f64; 3])>,
 }
 
 /// Renders states of one model. Holds an OpenGL context current on the thread that made it, so
@@ -224,8 +250,18 @@ impl Renderer {
         self.gl.backend()
     }
 
+    /// The model it draws (its own copy, with the offscreen size set).
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
     /// Draws `data` (a state of the model this renderer was made for).
     pub fn render(&mut self, data: &Data) -> Result<Frame> {
+        self.render_marked(data, &Marks::default())
+    }
+
+    /// Draws `data` with `marks` over it.
+    pub fn render_marked(&mut self, data: &Data, marks: &Marks) -> Result<Frame> {
         let m = data.model();
         if m.nq() != self.model.nq() || m.nbody() != self.model.nbody() || m.ngeom() != self.model.ngeom() {
             bail!("the state belongs to another model than this renderer's");
@@ -239,6 +275,9 @@ impl Renderer {
         }
         let (w, h) = (self.settings.width, self.settings.height);
         let mut flipped = vec![0u8; w * h * 3];
+        let text = |s: &str| std::ffi::CString::new(s.replace('\0', " ")).expect("NULs replaced");
+        let caption = marks.caption.as_ref().map(|(a, b)| (text(a), text(b)));
+        let arrow = marks.arrow.map(|(a, b)| [a[0], a[1], a[2], b[0], b[1], b[2]]);
         // SAFETY: the GL context is current on this thread (a Renderer never leaves it); every
         // pointer is live; `flipped` holds w*h*3 bytes for the read-back; mjv_updateScene only
         // reads the state.
@@ -253,6 +292,9 @@ impl Renderer {
                 w as i32,
                 h as i32,
                 flipped.as_mut_ptr(),
+                caption.as_ref().map_or(std::ptr::null(), |c| c.0.as_ptr()),
+                caption.as_ref().map_or(std::ptr::null(), |c| c.1.as_ptr()),
+                arrow.as_ref().map_or(std::ptr::null(), |a| a.as_ptr()),
             )
         };
         if rc != 0 {
@@ -286,120 +328,9 @@ pub fn check_available(model: &Arc<Model>) -> Result<()> {
         .context("rendering is not available on this machine")
 }
 
+pub mod clip;
+pub mod film;
 pub mod video;
 
-/// Renders every k-th step of the episodes it watches into a video, k chosen so that the video
-/// plays at the simulation's own speed at about `fps` frames per second. An [`Observer`] of
-/// `rollout::run_episodes`, so any policy (agent, controller, replay) is filmed the same way.
-///
-/// [`Observer`]: crate::rollout::Observer
-pub struct VideoRecorder {
-    renderer: Renderer,
-    writer: video::VideoWriter,
-    every: usize,
-}
-
-impl VideoRecorder {
-    /// Films `model`'s states (control period `dt` seconds) into `path` at about `fps`.
-    pub fn create(
-        model: &Arc<Model>,
-        dt: f64,
-        settings: RenderSettings,
-        path: &std::path::Path,
-        fps: f64,
-    ) -> Result<VideoRecorder> {
-        let every = frame_stride(dt, fps);
-        let writer = video::VideoWriter::create(path, settings.width, settings.height, 1.0 / (every as f64 * dt))?;
-        let renderer = Renderer::new(model, settings)?;
-        Ok(VideoRecorder { renderer, writer, every })
-    }
-
-    /// Frames written.
-    pub fn frames(&self) -> usize {
-        self.writer.frames()
-    }
-
-    /// Environment steps per frame.
-    pub fn stride(&self) -> usize {
-        self.every
-    }
-
-    /// Finishes the file; returns its path.
-    pub fn finish(self) -> Result<std::path::PathBuf> {
-        self.writer.finish()
-    }
-}
-
-/// Steps per frame so that frames come at most `fps` times per simulated second.
-pub fn frame_stride(dt: f64, fps: f64) -> usize {
-    ((1.0 / (dt * fps)).round() as usize).max(1)
-}
-
-impl crate::rollout::Observer for VideoRecorder {
-    fn reset(&mut self, _episode: usize, env: &dyn crate::envs::Env) -> Result<()> {
-        let frame = self.renderer.render(env.data())?;
-        self.writer.push(&frame)
-    }
-
-    fn step(&mut self, view: &crate::rollout::StepView) -> Result<()> {
-        if (view.t + 1).is_multiple_of(self.every) {
-            let frame = self.renderer.render(view.env.data())?;
-            self.writer.push(&frame)?;
-        }
-        Ok(())
-    }
-}
-
-/// Keeps every k-th step's frame of the episodes it watches (and each reset's), for videos made
-/// of several panels ([`tile`]).
-pub struct FrameCollector {
-    renderer: Renderer,
-    every: usize,
-    /// The frames so far.
-    pub frames: Vec<Frame>,
-}
-
-impl FrameCollector {
-    /// Renders with `renderer` at one frame every `every` steps.
-    pub fn new(renderer: Renderer, every: usize) -> FrameCollector {
-        FrameCollector { renderer, every: every.max(1), frames: Vec::new() }
-    }
-}
-
-impl crate::rollout::Observer for FrameCollector {
-    fn reset(&mut self, _episode: usize, env: &dyn crate::envs::Env) -> Result<()> {
-        self.frames.push(self.renderer.render(env.data())?);
-        Ok(())
-    }
-
-    fn step(&mut self, view: &crate::rollout::StepView) -> Result<()> {
-        if (view.t + 1).is_multiple_of(self.every) {
-            self.frames.push(self.renderer.render(view.env.data())?);
-        }
-        Ok(())
-    }
-}
-
-/// Panels side by side, left to right, frame by frame; a panel whose episode ended earlier holds
-/// its last frame. Every panel must have the same height.
-pub fn tile(panels: &[Vec<Frame>]) -> Result<Vec<Frame>> {
-    let Some(first) = panels.first().and_then(|p| p.first()) else { bail!("no frames to tile") };
-    let height = first.height;
-    if let Some(p) = panels.iter().find(|p| p.is_empty() || p[0].height != height) {
-        bail!("panels must have frames of one height ({} and {})", height, p.first().map_or(0, |f| f.height));
-    }
-    let width: usize = panels.iter().map(|p| p[0].width).sum();
-    let length = panels.iter().map(Vec::len).max().unwrap_or(0);
-    Ok((0..length)
-        .map(|i| {
-            let mut rgb = Vec::with_capacity(width * height * 3);
-            for y in 0..height {
-                for panel in panels {
-                    let f = &panel[i.min(panel.len() - 1)];
-                    rgb.extend_from_slice(&f.rgb[y * f.width * 3..(y + 1) * f.width * 3]);
-                }
-            }
-            Frame { width, height, rgb }
-        })
-        .collect())
-}
+pub use clip::tile;
+pub use film::{frame_stride, Film};

@@ -153,6 +153,42 @@ impl Drop for VideoWriter {
     }
 }
 
+/// Writes `frame` as the JPEG `path` (a video's poster), through ffmpeg, atomically.
+pub fn write_poster(path: &Path, frame: &Frame) -> Result<PathBuf> {
+    let dir = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let tmp = tempfile::Builder::new()
+        .prefix(".poster-")
+        .suffix(".jpg")
+        .tempfile_in(dir)
+        .with_context(|| format!("cannot write {}: creating a file in {} failed", path.display(), dir.display()))?
+        .into_temp_path();
+    let size = format!("{}x{}", frame.width, frame.height);
+    let mut child = Command::new("ffmpeg")
+        .args(["-hide_banner", "-loglevel", "error", "-y", "-f", "rawvideo", "-pix_fmt", "rgb24", "-s", &size])
+        .args(["-i", "-", "-frames:v", "1", "-q:v", "4", "-f", "image2", "-c:v", "mjpeg"])
+        .arg(&tmp)
+        .stdin(Stdio::piped())
+        .stdout(Stdio::null())
+        .stderr(Stdio::piped())
+        .spawn()
+        .with_context(|| format!("writing {} needs the ffmpeg program (Debian's ffmpeg)", path.display()))?;
+    child.stdin.take().context("ffmpeg's input")?.write_all(&frame.rgb)?;
+    let out = child.wait_with_output()?;
+    if !out.status.success() {
+        bail!("ffmpeg failed writing {}: {}", path.display(), String::from_utf8_lossy(&out.stderr).trim());
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        std::fs::set_permissions(&tmp, std::fs::Permissions::from_mode(0o644))?;
+    }
+    tmp.persist(path).with_context(|| format!("moving the poster to {}", path.display()))?;
+    Ok(path.to_path_buf())
+}
+
 /// Checks that `format` can be written here (`ffmpeg` for MP4 and WebM), for an error before
 /// long work starts rather than at its first video.
 pub fn check_encoder(format: Format) -> Result<()> {

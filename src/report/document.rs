@@ -21,8 +21,18 @@ pub enum Block {
         header: Vec<String>,
         rows: Vec<Vec<String>>,
     },
-    /// Lines shown as they are: a list in Markdown, preformatted in HTML.
+    /// Lines shown as a list.
     Lines(Vec<String>),
+    /// A video: the HTML page plays `video` (with `poster`, if any, shown before it plays); the
+    /// Markdown page shows the GIF `gif` and links the video. `timing`: the episode's length (s)
+    /// and the video's frames per second, kept on the page for checks.
+    Video {
+        video: String,
+        gif: String,
+        poster: Option<String>,
+        caption: String,
+        timing: Option<(f64, f64)>,
+    },
 }
 
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -66,6 +76,21 @@ impl Document {
         self.blocks.push(Block::Lines(lines));
     }
 
+    pub(crate) fn video(&mut self, clip: &super::videos::Clip) {
+        self.blocks.push(Block::Video {
+            video: clip.video.clone(),
+            gif: clip.gif.clone(),
+            poster: Some(clip.poster.clone()),
+            caption: clip.caption.clone(),
+            timing: Some((clip.duration, clip.fps)),
+        });
+    }
+
+    /// Puts `blocks` before the block at `index` (what was written later but is read first).
+    pub(crate) fn insert(&mut self, index: usize, blocks: Vec<Block>) {
+        self.blocks.splice(index..index, blocks);
+    }
+
     pub(crate) fn to_markdown(&self) -> String {
         let mut md = format!("# {}\n\n", self.title);
         for block in &self.blocks {
@@ -92,6 +117,9 @@ impl Document {
                     }
                     md.push('\n');
                 }
+                Block::Video { video, gif, caption, .. } => {
+                    let _ = writeln!(md, "![{caption}]({gif})\n\n{caption}. [The whole episode (MP4)]({video})\n");
+                }
             }
         }
         md
@@ -114,7 +142,7 @@ impl Document {
                     let _ = writeln!(body, "<p><a href=\"{}\">{}</a></p>", escape(file), escape(caption));
                 }
                 Block::Table { header, rows } => {
-                    body.push_str("<table><tr>");
+                    body.push_str("<div class=\"wide\"><table><tr>");
                     for h in header {
                         let _ = write!(body, "<th>{}</th>", escape(h));
                     }
@@ -126,10 +154,26 @@ impl Document {
                         }
                         body.push_str("</tr>");
                     }
-                    body.push_str("</table>\n");
+                    body.push_str("</table></div>\n");
                 }
                 Block::Lines(lines) => {
-                    let _ = writeln!(body, "<pre>{}</pre>", escape(&lines.join("\n")));
+                    body.push_str("<ul>");
+                    for line in lines {
+                        let _ = write!(body, "<li>{}</li>", escape(line));
+                    }
+                    body.push_str("</ul>\n");
+                }
+                Block::Video { video, poster, caption, timing, .. } => {
+                    let poster = poster.as_ref().map_or(String::new(), |p| format!(" poster=\"{}\"", escape(p)));
+                    let timing = timing
+                        .map_or(String::new(), |(d, fps)| format!(" data-duration=\"{d:.3}\" data-fps=\"{fps:.3}\""));
+                    let _ = writeln!(
+                        body,
+                        "<figure><video controls muted playsinline preload=\"metadata\"{poster} src=\"{}\"{timing}>\
+                         </video><figcaption>{}</figcaption></figure>",
+                        escape(video),
+                        escape(caption)
+                    );
                 }
             }
         }
@@ -137,7 +181,8 @@ impl Document {
             "<!DOCTYPE html>\n<html><head><meta charset=\"utf-8\"><title>{}</title><style>\
              body{{font-family:sans-serif;max-width:1000px;margin:2em auto;color:#222}}\
              table{{border-collapse:collapse;margin:1em 0}}td,th{{border:1px solid #bbb;padding:3px 8px;text-align:right}}\
-             th{{background:#eee}}figure{{margin:1em 0}}figcaption{{color:#555;font-size:90%}}</style></head><body>\n\
+             th{{background:#eee}}figure{{margin:1em 0}}figcaption{{color:#555;font-size:90%}}\
+             .wide{{overflow-x:auto}}svg,video,img{{max-width:100%;height:auto}}li{{overflow-wrap:anywhere}}</style></head><body>\n\
              {body}</body></html>\n",
             escape(&self.title)
         )
@@ -145,7 +190,7 @@ impl Document {
 }
 
 fn escape(s: &str) -> String {
-    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+    s.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;").replace('"', "&quot;")
 }
 
 #[cfg(test)]

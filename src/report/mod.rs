@@ -11,8 +11,10 @@ pub(crate) mod document;
 pub mod format;
 pub mod heldout;
 pub mod plots;
+pub mod progress;
 pub mod runs;
 mod sections;
+pub mod videos;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -49,6 +51,8 @@ pub struct ReportOptions {
     pub push_episodes: usize,
     /// Evaluations run at once; the report is the same for any number.
     pub threads: usize,
+    /// Film each algorithm's best row (and the controller beside it) into `videos/`.
+    pub videos: bool,
 }
 
 impl Default for ReportOptions {
@@ -57,6 +61,7 @@ impl Default for ReportOptions {
             protocol: Protocol::default(),
             push_episodes: 20,
             threads: crate::evaluation::parallel::default_threads(),
+            videos: false,
         }
     }
 }
@@ -132,7 +137,9 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
     }
 
     let mut doc = Document::new("locobench report");
-    doc.paragraph(format!("{} runs from {}.", runs.len(), paths_list(paths)));
+    // The summary goes here, once the sections below have computed what it says.
+    let summary_at = doc.blocks.len();
+    let mut summaries: Vec<((bool, usize, String), Vec<document::Block>)> = Vec::new();
     sections::protocol(&mut doc, opts);
 
     let mut report = Report {
@@ -152,9 +159,31 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
                 report.controllers.insert(env.clone(), c);
             }
         }
+        let section = report.controllers.get(env);
+        let clips = if opts.videos {
+            sections::gaits(&mut doc, out, env, env_groups, &rows, section, opts)?
+        } else {
+            Vec::new()
+        };
+        let runs_here: usize = env_groups.iter().map(|(_, rs)| rs.len()).sum();
+        summaries.push((
+            (section.is_none(), usize::MAX - runs_here, env.clone()),
+            sections::summary(env, &rows, section, &clips),
+        ));
         sections::training_returns(&mut doc, out, env, env_groups)?;
         report.rows.insert(env.clone(), rows);
     }
+    // Envs with a controller first, then by runs.
+    summaries.sort_by(|a, b| a.0.cmp(&b.0));
+    let mut first = vec![document::Block::Heading { level: 1, text: "Summary".into() }];
+    first.push(document::Block::Paragraph(format!(
+        "{} runs ({}; listed in the appendix), each policy on the held-out episodes of the protocol below. \
+         Per env: the best learned row (highest mean return) and, where the env has one, the controller.",
+        runs.len(),
+        paths_summary(paths)
+    )));
+    first.extend(summaries.into_iter().flat_map(|(_, b)| b));
+    doc.insert(summary_at, first);
     sections::runs(&mut doc, &runs);
     write_bytes_atomic(&out.join(HELD_OUT_CSV), data::held_out_csv(&report.rows).as_bytes())?;
     write_bytes_atomic(&out.join(CONTROLLER_CSV), data::controller_csv(&report.controllers).as_bytes())?;
@@ -168,6 +197,11 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
     Ok(report)
 }
 
-fn paths_list(paths: &[PathBuf]) -> String {
-    paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+/// The paths given, or how many when they are many.
+fn paths_summary(paths: &[PathBuf]) -> String {
+    if paths.len() <= 3 {
+        format!("from {}", paths.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", "))
+    } else {
+        format!("from {} paths", paths.len())
+    }
 }

@@ -507,7 +507,8 @@ pub fn controller(
 }
 
 /// Push survival of the controller (at its best speed and at each pushed row's speed) and of
-/// each group's largest-budget row among those compared with the controller.
+/// each algorithm's best row (highest mean held-out return) among those compared with the
+/// controller.
 fn pushes(
     groups: &[(&Group, &Vec<&Run>)],
     rows: &[BudgetRow],
@@ -518,10 +519,11 @@ fn pushes(
     let protocol = Protocol { episodes: opts.push_episodes, ..opts.protocol };
     let mut family = crate::evaluation::ControllerFamily::new(env_config, protocol)?;
     family.threads = opts.threads;
-    // Each group's largest-budget row, and the controller at its speed.
-    let pushed_rows: Vec<(usize, &Group, &Vec<&Run>)> = groups
-        .iter()
-        .filter_map(|(g, rs)| section.matched.iter().rev().find(|m| &rows[m.row].group == *g).map(|m| (m.row, *g, *rs)))
+    // Each algorithm's best row, and the controller at its speed.
+    let compared: std::collections::BTreeSet<usize> = section.matched.iter().map(|m| m.row).collect();
+    let pushed_rows: Vec<(usize, &Group, &Vec<&Run>)> = super::videos::best_rows(rows, |i| compared.contains(&i))
+        .into_iter()
+        .filter_map(|i| groups.iter().find(|(g, _)| **g == rows[i].group).map(|(g, rs)| (i, *g, *rs)))
         .collect();
     let matched_speed = |i: usize| {
         section.matched.iter().find(|m| m.row == i).and_then(|m| m.controller.as_ref().ok()).map(|c| c.commanded)
@@ -668,7 +670,7 @@ fn file_stem(g: &Group) -> String {
 }
 
 pub fn runs(doc: &mut Document, runs: &[Run]) {
-    doc.heading(1, "Runs");
+    doc.heading(1, "Appendix: the runs");
     doc.lines(
         runs.iter()
             .map(|r| {
@@ -691,4 +693,138 @@ pub fn runs(doc: &mut Document, runs: &[Run]) {
             })
             .collect(),
     );
+}
+
+/// The clips of one env's best rows (`report --videos`), under a heading.
+pub(crate) fn gaits(
+    doc: &mut Document,
+    out: &Path,
+    env: &str,
+    groups: &[(&Group, &Vec<&Run>)],
+    rows: &[BudgetRow],
+    section: Option<&ControllerSection>,
+    opts: &ReportOptions,
+) -> Result<Vec<super::videos::Clip>> {
+    let speed = |i: usize| {
+        section
+            .and_then(|s| s.matched.iter().find(|m| m.row == i))
+            .and_then(|m| m.controller.as_ref().ok())
+            .map(|c| c.commanded)
+    };
+    let best = super::videos::best_rows(rows, |_| true);
+    let plans = super::videos::plan(env, rows, &best, &speed, section.is_some() && opts.push_episodes > 0);
+    if plans.is_empty() {
+        return Ok(Vec::new());
+    }
+    let clips = super::videos::film(&plans, groups, out, &opts.protocol, opts.threads)?;
+    doc.heading(2, "Gaits");
+    doc.paragraph(format!(
+        "Per algorithm, its best row's policy (the seed with the row's median return) on the first held-out \
+         episode{}. Captions in the frame: step, return and mean forward speed so far. The GIFs show at most the \
+         first {} s at {} frames/s (a push clip's start a second before the push); the videos show the whole episode.",
+        if section.is_some() {
+            ", beside the controller commanded to the row's speed, and the pair under a push"
+        } else {
+            ""
+        },
+        super::videos::GIF_SECONDS,
+        super::videos::GIF_FPS
+    ));
+    for clip in &clips {
+        doc.video(clip);
+    }
+    Ok(clips)
+}
+
+/// What the first screen says about one env: who wins, at which speed and by how much, from the
+/// numbers of the tables below, and the best learned policy's clip.
+pub(crate) fn summary(
+    env: &str,
+    rows: &[BudgetRow],
+    section: Option<&ControllerSection>,
+    clips: &[super::videos::Clip],
+) -> Vec<super::document::Block> {
+    use super::document::Block;
+    let est = |r: &BudgetRow| r.mean_return(BOOTSTRAP_SEED);
+    let describe = |r: &BudgetRow| {
+        let (falls, n) = r.falls();
+        format!(
+            "{} at {} ({} seed{}): return {} at {} m/s, falls {}",
+            r.group.label(),
+            budget(r.budget),
+            r.seeds(),
+            if r.seeds() == 1 { "" } else { "s" },
+            interval(est(r).interval, fmt_return),
+            fixed(r.speed(), 2),
+            rate(falls, n)
+        )
+    };
+    let best = super::videos::best_rows(rows, |_| true);
+    let mut ranked: Vec<usize> = best.clone();
+    ranked.sort_by(|&a, &b| {
+        super::videos::mean_over_seeds(&rows[b]).total_cmp(&super::videos::mean_over_seeds(&rows[a]))
+    });
+    let mut text = format!("{env}: ");
+    let Some(&top) = ranked.first() else {
+        text.push_str("No run kept a policy, so nothing was evaluated on the held-out episodes; learning curves only.");
+        return vec![Block::Paragraph(text)];
+    };
+    let row = &rows[top];
+    let winner_clip = clips.iter().find(|c| c.stem == format!("{env}_{}", row.group.algo));
+    match section.and_then(|s| s.best.as_ref().map(|b| (s, b))) {
+        Some((s, controller_best)) => {
+            let c = return_interval(controller_best);
+            let (cf, cn) = (controller_best.falls(), controller_best.episodes.len());
+            let learned = est(row).interval;
+            let (winner, by) = if learned.estimate >= c.estimate {
+                (format!("{} at {}", row.group.label(), budget(row.budget)), learned.estimate - c.estimate)
+            } else {
+                ("the controller".to_string(), c.estimate - learned.estimate)
+            };
+            let separated = learned.low > c.high || c.low > learned.high;
+            text.push_str(&format!(
+                "Best learned: {}. The controller's best: {} at {} m/s commanded ({} achieved), falls {}. \
+                 Higher mean return: {winner}, by {}{}.",
+                describe(row),
+                interval(c, fmt_return),
+                fixed(controller_best.commanded, 2),
+                fixed(controller_best.achieved(), 2),
+                rate(cf, cn),
+                fmt_return(by),
+                if separated { " (the 95% intervals do not overlap)" } else { " (the 95% intervals overlap)" }
+            ));
+            if let Some(m) = s.matched.iter().find(|m| m.row == top) {
+                if let (Ok(cp), Some(p)) = (&m.controller, &m.beats_matched) {
+                    text.push_str(&format!(
+                        " At the learned policy's speed the controller (commanded {} m/s, achieved {}) returns {}, \
+                         falls {}; the learned policy scores higher on {} of the paired episodes.",
+                        fixed(cp.commanded, 2),
+                        fixed(cp.achieved(), 2),
+                        interval(return_interval(cp), fmt_return),
+                        rate(cp.falls(), cp.episodes.len()),
+                        interval(p.interval, |v| format!("{:.0}%", 100.0 * v))
+                    ));
+                }
+            }
+        }
+        None if section.is_some() => {
+            text.push_str(&format!(
+                "Best learned: {}. The controller works at none of its commanded speeds here (its table below).",
+                describe(row)
+            ));
+        }
+        None => {
+            text.push_str(&format!("Best learned: {}.", describe(row)));
+            if let Some(&second) = ranked.get(1) {
+                text.push_str(&format!(" Next: {}.", describe(&rows[second])));
+            }
+        }
+    }
+    let mut blocks = vec![Block::Paragraph(text)];
+    let mut doc = super::document::Document::new("");
+    if let Some(c) = winner_clip {
+        doc.video(c);
+    }
+    blocks.extend(doc.blocks);
+    blocks
 }

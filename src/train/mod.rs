@@ -187,7 +187,7 @@ fn log_evaluation(
     evaluation: &Evaluation,
     recorder: Option<&mut TrainingRecorder>,
     clips: Option<&mut TrainingClips>,
-    events: Option<&mut tensorboard::EventWriter>,
+    mut events: Option<&mut tensorboard::EventWriter>,
     control: &RunControl,
     agent: &dyn Agent,
     run_seed: u64,
@@ -195,12 +195,14 @@ fn log_evaluation(
     let (step, wall_time) = (row.step, row.wall_time);
     metrics.push(row.with_evaluation(evaluation));
     metrics::write(&run_dir.join(metrics::FILE), metrics)?;
-    if let Some(e) = events {
+    if let Some(e) = events.as_deref_mut() {
         e.row(metrics.last().expect("just pushed"))?;
     }
     if let Some(c) = clips {
         let evaluations = metrics.iter().filter(|m| m.kind == "eval").count() as u64;
-        c.evaluation(agent, step, run_seed, evaluations)?;
+        if let (Some(clip), Some(e)) = (c.evaluation(agent, step, run_seed, evaluations)?, events) {
+            e.gif("eval/video", step, &clip.gif, clip.width, clip.height)?;
+        }
     }
     if let Some(r) = recorder {
         r.curves(metrics.last().expect("just pushed"))?;

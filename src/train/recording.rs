@@ -53,8 +53,10 @@ impl<'a> TrainingRecorder<'a> {
 }
 
 /// Clips of the deterministic evaluation episode (the first evaluation seed) at chosen
-/// evaluations, `videos/eval-step-<N>.mp4` in the run directory, rendered on an environment of
-/// its own so that the run's numbers do not depend on filming.
+/// evaluations, rendered on an environment of its own so that the run's numbers do not depend on
+/// filming: `videos/eval-step-<N>.mp4` in the run directory (25 frames/s) and
+/// `videos/eval-step-<N>.gif` (every other frame: for Markdown pages and TensorBoard), each
+/// captioned with the algorithm, the step, the return and the speed.
 pub(super) struct TrainingClips {
     env: Box<dyn Env>,
     dir: std::path::PathBuf,
@@ -63,6 +65,15 @@ pub(super) struct TrainingClips {
 
 /// The clips' size: small enough to keep one per evaluation beside a run.
 const CLIP_SETTINGS: (usize, usize) = (320, 240);
+
+/// A clip just written.
+pub(super) struct Clip {
+    /// The GIF copy.
+    pub gif: std::path::PathBuf,
+    /// Its frame size.
+    pub width: usize,
+    pub height: usize,
+}
 
 impl TrainingClips {
     /// Checks up front that rendering and encoding work here (a missing GL library or ffmpeg is
@@ -77,20 +88,31 @@ impl TrainingClips {
 
     /// Called at every evaluation, after `evaluations` evaluations so far (this one included):
     /// films the evaluation episode at every `every`-th one.
-    pub(super) fn evaluation(&mut self, agent: &dyn Agent, step: u64, run_seed: u64, evaluations: u64) -> Result<()> {
+    pub(super) fn evaluation(
+        &mut self,
+        agent: &dyn Agent,
+        step: u64,
+        run_seed: u64,
+        evaluations: u64,
+    ) -> Result<Option<Clip>> {
         if !(evaluations - 1).is_multiple_of(self.every) {
-            return Ok(());
+            return Ok(None);
         }
         std::fs::create_dir_all(&self.dir)?;
-        let path = self.dir.join(format!("eval-step-{step}.mp4"));
         let (width, height) = CLIP_SETTINGS;
         let settings = crate::render::RenderSettings { width, height, camera: crate::render::Camera::Follow };
         let dt = self.env.spec().dt;
-        let mut video = crate::render::VideoRecorder::create(self.env.data().model(), dt, settings, &path, 25.0)?;
+        let renderer = crate::render::Renderer::new(self.env.data().model(), settings)?;
+        let mut film = crate::render::Film::frames(renderer, dt, crate::render::frame_stride(dt, 25.0))
+            .with_caption(format!("{} at step {step}", agent.algo().name()));
         let seed = seeds::eval_episode_seed(run_seed, 0);
         let mut policy = AgentPolicy { agent, label: agent.algo().name().to_string() };
-        crate::rollout::run_episode(self.env.as_mut(), &mut policy, 0, Some(seed), &mut video)?;
-        video.finish()?;
-        Ok(())
+        crate::rollout::run_episode(self.env.as_mut(), &mut policy, 0, Some(seed), &mut film)?;
+        let fps = film.fps();
+        let frames = film.into_frames();
+        crate::render::clip::write_video(&self.dir.join(format!("eval-step-{step}.mp4")), &frames, fps)?;
+        let half: Vec<_> = frames.into_iter().step_by(2).collect();
+        let gif = crate::render::clip::write_video(&self.dir.join(format!("eval-step-{step}.gif")), &half, fps / 2.0)?;
+        Ok(Some(Clip { gif, width, height }))
     }
 }

@@ -2,7 +2,8 @@
 //! a scalar, tagged `<kind>/<column>` (`episode/episode_return`, `eval/eval_mean`,
 //! `eval/eval_std`, `episode/critic_loss`, ...) at the row's step, so TensorBoard (and Weights &
 //! Biases, which imports these files with `wandb sync --sync-tensorboard`) shows the curves
-//! `metrics.csv` holds.
+//! `metrics.csv` holds, and with `--video-every` the evaluation clips as animated GIF images
+//! (`eval/video`).
 //!
 //! The format is TensorFlow's: a file `events.out.tfevents.<seconds>.<host>` of records, each a
 //! little-endian u64 length, its masked CRC-32C, the bytes of one `Event` protocol buffer and
@@ -52,7 +53,7 @@ struct SummaryValue {
     tag: String,
     // A member of summary.proto's `oneof value`, so written even when 0 (a plain proto3 float
     // field would leave a zero out, and TensorBoard would drop the point).
-    #[prost(oneof = "Scalar", tags = "2")]
+    #[prost(oneof = "Scalar", tags = "2, 4")]
     value: Option<Scalar>,
 }
 
@@ -60,6 +61,23 @@ struct SummaryValue {
 enum Scalar {
     #[prost(float, tag = "2")]
     SimpleValue(f32),
+    #[prost(message, tag = "4")]
+    Image(Image),
+}
+
+/// summary.proto's `Summary.Image`: an encoded image (PNG, JPEG or GIF; an animated GIF plays
+/// in TensorBoard's image dashboard, which is how video summaries are shown).
+#[derive(Clone, PartialEq, prost::Message)]
+struct Image {
+    #[prost(int32, tag = "1")]
+    height: i32,
+    #[prost(int32, tag = "2")]
+    width: i32,
+    /// 3: RGB.
+    #[prost(int32, tag = "3")]
+    colorspace: i32,
+    #[prost(bytes = "vec", tag = "4")]
+    encoded_image_string: Vec<u8>,
 }
 
 #[derive(Clone, PartialEq, prost::Message)]
@@ -141,6 +159,15 @@ impl EventWriter {
             self.flush()?;
         }
         Ok(())
+    }
+
+    /// Logs the GIF file `gif` (`width` x `height`) as the image `tag` at `step`.
+    pub(crate) fn gif(&mut self, tag: &str, step: u64, gif: &Path, width: usize, height: usize) -> Result<()> {
+        let bytes = std::fs::read(gif).with_context(|| format!("reading {}", gif.display()))?;
+        let image = Image { height: height as i32, width: width as i32, colorspace: 3, encoded_image_string: bytes };
+        let value = vec![SummaryValue { tag: tag.to_string(), value: Some(Scalar::Image(image)) }];
+        self.write(&Event { wall_time: now(), step: step as i64, what: Some(What::Summary(Summary { value })) })?;
+        self.flush()
     }
 
     /// Writes what is buffered to the file.

@@ -1,0 +1,258 @@
+//! The report's videos (`report --videos`): per env and algorithm, the best row's policy on the
+//! first held-out episode, beside the controller commanded to that row's speed on the same
+//! episode where the env has a controller; and on those envs the same pair under a push (the
+//! evaluation's push, marked in the frame). Each clip is an MP4 for `index.html` (the whole
+//! episode, with a poster frame) and a short GIF for the Markdown page, under `videos/`.
+use std::path::Path;
+
+use anyhow::{Context, Result};
+
+use super::budgets::policy_at;
+use super::format::budget;
+use super::heldout::BudgetRow;
+use super::runs::{Group, Run};
+use crate::controller::baseline::baseline_controller;
+use crate::envs::EnvConfig;
+use crate::evaluation::parallel::map_in_order;
+use crate::evaluation::{Protocol, Push};
+use crate::policy::AgentPolicy;
+use crate::render::clip::{film_episode, tile_panels, write_video, Panel};
+use crate::render::{Camera, RenderSettings};
+
+/// The folder of the clips, in the report's directory.
+pub const VIDEO_DIR: &str = "videos";
+
+/// Each panel's size: two side by side make a 640x240 clip.
+const PANEL: (usize, usize) = (320, 240);
+
+/// At most this many frames per simulated second, and about this many frames per panel at most
+/// (a 50-second Ant episode is filmed at fewer frames per second than a 10-second Minitaur one).
+const MAX_FPS: f64 = 25.0;
+const MAX_FRAMES: f64 = 300.0;
+
+/// The GIF copy: at most this many frames per second and seconds (a push clip's seconds start a
+/// second before the push).
+pub(crate) const GIF_FPS: f64 = 6.0;
+pub(crate) const GIF_SECONDS: f64 = 6.0;
+
+/// The push filmed (velocity change, m/s): the second level of the push table.
+pub const FILMED_PUSH: f64 = super::controller::PUSH_LEVELS[1];
+
+/// One panel of a clip: a learned row's representative run, or the controller at a speed.
+#[derive(Debug, Clone)]
+enum Actor {
+    Learned { run_dir: std::path::PathBuf, budget: u64, label: String },
+    Controller { speed: f64 },
+}
+
+/// One clip to film.
+#[derive(Debug, Clone)]
+pub struct ClipPlan {
+    /// File name without extension, e.g. `minitaur_ppo` or `minitaur_ppo_push`.
+    pub stem: String,
+    /// What the clip shows, for its caption.
+    pub caption: String,
+    panels: Vec<Actor>,
+    push: Option<Push>,
+    env: EnvConfig,
+}
+
+/// A clip written.
+#[derive(Debug, Clone)]
+pub struct Clip {
+    /// The plan's file name without extension.
+    pub stem: String,
+    /// What it shows.
+    pub caption: String,
+    /// The MP4, relative to the report.
+    pub video: String,
+    /// The GIF, relative to the report.
+    pub gif: String,
+    /// The poster frame (JPEG), relative to the report.
+    pub poster: String,
+    /// The longest panel's episode, in simulated seconds: what the MP4 lasts (it plays in real
+    /// time), give or take a frame.
+    pub duration: f64,
+    /// The MP4's frames per second.
+    pub fps: f64,
+    /// Bytes of the MP4 and the GIF.
+    pub bytes: (u64, u64),
+}
+
+/// Per algorithm, the index of the row with the highest mean held-out return among the rows
+/// with a policy whose index `keep` admits; in algorithm order.
+pub fn best_rows(rows: &[BudgetRow], keep: impl Fn(usize) -> bool) -> Vec<usize> {
+    let mut best: std::collections::BTreeMap<&str, (usize, f64)> = std::collections::BTreeMap::new();
+    for (i, r) in rows.iter().enumerate().filter(|(i, r)| r.seeds() > 0 && keep(*i)) {
+        let m = mean_over_seeds(r);
+        let e = best.entry(r.group.algo.as_str()).or_insert((i, m));
+        if m > e.1 {
+            *e = (i, m);
+        }
+    }
+    best.into_values().map(|(i, _)| i).collect()
+}
+
+/// The mean over seeds of each seed's mean return (the point estimate of the return column).
+pub(crate) fn mean_over_seeds(r: &BudgetRow) -> f64 {
+    let per_seed: Vec<f64> = r.returns_per_seed().iter().map(|v| crate::evaluation::stats::mean(v)).collect();
+    crate::evaluation::stats::mean(&per_seed)
+}
+
+/// The run whose mean held-out return is the row's median (the lower one of an even count): the
+/// seed a clip shows, so it is neither the luckiest nor the unluckiest.
+fn representative(row: &BudgetRow) -> Option<&super::heldout::SeedResult> {
+    let mut seeds: Vec<(f64, &super::heldout::SeedResult)> = row
+        .evaluated
+        .iter()
+        .map(|s| (crate::evaluation::stats::mean(&s.episodes.iter().map(|e| e.episode_return).collect::<Vec<_>>()), s))
+        .collect();
+    seeds.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.seed.cmp(&b.1.seed)));
+    seeds.get((seeds.len().max(1) - 1) / 2).map(|(_, s)| *s)
+}
+
+/// The clips of one env: per algorithm's best row, the policy (beside the controller at the row's
+/// speed when `controller_speed` gives one), and the same panels pushed when `push` is on.
+pub fn plan(
+    env: &str,
+    rows: &[BudgetRow],
+    best: &[usize],
+    controller_speed: &dyn Fn(usize) -> Option<f64>,
+    push: bool,
+) -> Vec<ClipPlan> {
+    let mut plans = Vec::new();
+    for &i in best {
+        let row = &rows[i];
+        let (Some(seed), Some(cfg)) = (representative(row), row.env_config.clone()) else { continue };
+        let label = format!("{} {}", row.group.algo, budget(row.budget));
+        let learned = Actor::Learned {
+            run_dir: seed.run_dir.clone(),
+            budget: row.budget,
+            label: format!("{label} seed {}", seed.seed),
+        };
+        let stem = format!("{env}_{}", row.group.algo);
+        let who = format!(
+            "{} at {} (seed {}, the median of the row's {} seeds)",
+            row.group.label(),
+            budget(row.budget),
+            seed.seed,
+            row.seeds()
+        );
+        let (panels, caption) = match controller_speed(i) {
+            Some(speed) => (
+                vec![learned, Actor::Controller { speed }],
+                format!(
+                    "{who}, left, beside the controller commanded to its speed ({speed:.2} m/s), right; the first held-out episode"
+                ),
+            ),
+            None if push => (
+                vec![learned],
+                format!("{who}; the first held-out episode (the controller does not reach its speed)"),
+            ),
+            None => (vec![learned], format!("{who}; the first held-out episode")),
+        };
+        plans.push(ClipPlan { stem: stem.clone(), caption, panels: panels.clone(), push: None, env: cfg.clone() });
+        if push {
+            plans.push(ClipPlan {
+                stem: format!("{stem}_push"),
+                caption: format!(
+                    "The same episode pushed sideways (Δv {FILMED_PUSH} m/s, marked by the red arrow and the caption)"
+                ),
+                panels,
+                push: Some(Push { delta_v: FILMED_PUSH }),
+                env: cfg,
+            });
+        }
+    }
+    plans
+}
+
+/// Films and writes every planned clip into `out/videos/`, panels filmed `threads` at a time.
+pub fn film(
+    plans: &[ClipPlan],
+    runs: &[(&Group, &Vec<&Run>)],
+    out: &Path,
+    protocol: &Protocol,
+    threads: usize,
+) -> Result<Vec<Clip>> {
+    let dir = out.join(VIDEO_DIR);
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    let episode_seed = protocol.reset_seeds().first().copied().context("the protocol has no episodes")?;
+    let jobs: Vec<(usize, usize)> =
+        plans.iter().enumerate().flat_map(|(c, p)| (0..p.panels.len()).map(move |k| (c, k))).collect();
+    let panels = map_in_order(&jobs, threads, |&(c, k)| {
+        let plan = &plans[c];
+        film_panel(&plan.panels[k], &plan.env, plan.push, runs, episode_seed)
+            .with_context(|| format!("filming {} (panel {})", plan.stem, k + 1))
+    })?;
+    let mut clips = Vec::new();
+    let mut at = 0;
+    for plan in plans {
+        let mine = &panels[at..at + plan.panels.len()];
+        at += plan.panels.len();
+        clips.push(write_clip(plan, mine, &dir)?);
+    }
+    Ok(clips)
+}
+
+fn film_panel(
+    actor: &Actor,
+    env: &EnvConfig,
+    push: Option<Push>,
+    runs: &[(&Group, &Vec<&Run>)],
+    episode_seed: u64,
+) -> Result<Panel> {
+    let settings = RenderSettings { width: PANEL.0, height: PANEL.1, camera: Camera::Follow };
+    let spec = crate::envs::make(env)?.spec().clone();
+    let episode_time = spec.max_episode_steps as f64 * spec.dt;
+    let fps = MAX_FPS.min(MAX_FRAMES / episode_time);
+    match actor {
+        Actor::Learned { run_dir, budget, label, .. } => {
+            let run = runs
+                .iter()
+                .flat_map(|(_, rs)| rs.iter())
+                .find(|r| &r.dir == run_dir)
+                .with_context(|| format!("{} is not among the report's runs", run_dir.display()))?;
+            let source = policy_at(run, *budget).map_err(|why| anyhow::anyhow!("{}: {why}", run_dir.display()))?;
+            let (cfg, agent) = source.load(run_dir, *budget)?;
+            let mut policy = AgentPolicy { agent: agent.as_ref(), label: label.clone() };
+            film_episode(&cfg.env, &mut policy, &settings, fps, episode_seed, Some(label), push)
+        }
+        Actor::Controller { speed } => {
+            // In the learned policy's env, switched to the controller's action mode, as the
+            // report's controller rows are.
+            let env = crate::controller::baseline::baseline_env_like(env)?;
+            let mut controller = baseline_controller(&env.name, *speed, None)?;
+            let label = format!("controller {speed:.2} m/s");
+            film_episode(&env, controller.as_mut(), &settings, fps, episode_seed, Some(&label), push)
+        }
+    }
+}
+
+fn write_clip(plan: &ClipPlan, panels: &[Panel], dir: &Path) -> Result<Clip> {
+    let (frames, fps) = tile_panels(panels)?;
+    let name = |ext: &str| format!("{}.{ext}", plan.stem);
+    let video = write_video(&dir.join(name("mp4")), &frames, fps)?;
+    crate::render::video::write_poster(&dir.join(name("jpg")), &frames[frames.len() / 2])?;
+    // The GIF: every k-th frame, for at most GIF_SECONDS from the start or from a second before
+    // the push (the first frame a panel's caption marks it in).
+    let every = (fps / GIF_FPS).ceil().max(1.0) as usize;
+    let start = panels.iter().filter_map(|p| p.push_time).fold(f64::INFINITY, f64::min);
+    let start = if start.is_finite() { (start - 1.0).max(0.0) } else { 0.0 };
+    let first = (start * fps) as usize;
+    let last = (first + (GIF_SECONDS * fps) as usize).min(frames.len());
+    // At half the size: a GIF's frames compress far worse than a video's.
+    let gif_frames: Vec<_> = frames[first..last].iter().step_by(every).map(|f| f.half()).collect();
+    let gif = write_video(&dir.join(name("gif")), &gif_frames, fps / every as f64)?;
+    let size = |p: &Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+    Ok(Clip {
+        stem: plan.stem.clone(),
+        caption: plan.caption.clone(),
+        video: format!("{VIDEO_DIR}/{}", name("mp4")),
+        gif: format!("{VIDEO_DIR}/{}", name("gif")),
+        poster: format!("{VIDEO_DIR}/{}", name("jpg")),
+        duration: panels.iter().map(|p| p.seconds).fold(0.0, f64::max),
+        fps,
+        bytes: (size(&video), size(&gif)),
+    })
+}
