@@ -5,9 +5,9 @@
 #   3. three Minitaur walking policies (trained with SAC for 300k steps, TD3 for 1M and PPO for
 #      1M, shipped in models/policies/, retrain them with the commands in their READMEs) are
 #      evaluated and recorded, beside the Raibert/QP baseline controller at 0.35 m/s and at
-#      1.5 m/s, its fastest;
+#      1.5 m/s, its fastest; the PPO policy is filmed beside the controller at its speed;
 #   4. a report evaluates every policy on the same held-out episodes, beside the controller
-#      across its speeds and under pushes.
+#      across its speeds and under pushes, and films each algorithm's best policy.
 # Everything goes under demo/; the paths are printed at the end.
 set -euo pipefail
 cd "$(dirname "$0")/.."
@@ -32,8 +32,12 @@ for p in "$policy" "$td3_policy" "$ppo_policy"; do "$bin" eval --policy "$p" --e
 "$bin" record --policy "$policy" --out "$out/minitaur-sac.rrd"
 "$bin" record --policy "$td3_policy" --out "$out/minitaur-td3.rrd"
 "$bin" record --policy "$ppo_policy" --out "$out/minitaur-ppo.rrd"
-"$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/pendulum-sweep" "$policy" "$td3_policy" "$ppo_policy" --out "$out/report" --episodes 3 --push-episodes 2
+"$bin" record --policy "$ppo_policy" --side-by-side controller --caption --seed 100 \
+  --video "$out/minitaur-ppo-vs-controller.mp4"
+"$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/pendulum-sweep" "$policy" "$td3_policy" "$ppo_policy" \
+  --out "$out/report" --episodes 3 --push-episodes 2 --videos
 echo
 echo "Report (open in a browser):   $(pwd)/$out/report/index.html  (Markdown: $out/report/README.md)"
+echo "Video (PPO beside the controller): $(pwd)/$out/minitaur-ppo-vs-controller.mp4"
 echo "rerun recordings:             $(pwd)/$out/*.rrd  (viewer: pip install rerun-sdk==0.36.3; rerun FILE)"
 echo "Training runs:                $(pwd)/$out/run-inverted-pendulum-sac, $(pwd)/$out/pendulum-sweep/runs/"

@@ -11,6 +11,7 @@ Importing the package registers every environment with Gymnasium::
 from locobench._core import env_names_ as _env_names
 from locobench._core import episode_seed
 from locobench.envs import ENV_IDS, LocobenchEnv, register_envs
+from locobench.evaluation import evaluate
 from locobench.policies import Controller, TrainedPolicy, load_policy
 from locobench.vector import LocobenchVectorEnv
 
@@ -23,6 +24,7 @@ __all__ = [
     "TrainedPolicy",
     "load_policy",
     "env_names",
+    "evaluate",
     "register_envs",
 ]
 

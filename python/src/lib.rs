@@ -310,6 +310,7 @@ struct PyTrainedPolicy {
     low: Vec<f64>,
     high: Vec<f64>,
     obs_dim: usize,
+    training: (u64, u64, usize),
 }
 
 #[pymethods]
@@ -331,7 +332,15 @@ impl PyTrainedPolicy {
             low: spec.action_space.low.clone(),
             high: spec.action_space.high.clone(),
             obs_dim: spec.observation_space.dim(),
+            training: (run.seed, run.train.total_steps, run.train.eval_episodes),
         })
+    }
+
+    /// (seed, steps, evaluation episodes) of the run that trained it: what the protocol's
+    /// held-out episodes are checked apart from.
+    #[getter]
+    fn training(&self) -> (u64, u64, usize) {
+        self.training
     }
 
     /// The env the policy was trained on.
@@ -367,6 +376,154 @@ impl PyTrainedPolicy {
             .map(|(&a, (&l, &h))| l + (a as f64 + 1.0) * 0.5 * (h - l))
             .collect())
     }
+}
+
+/// A Python callable from observation (a list of floats) to action (a list of floats), as a
+/// policy the protocol plays. A Python exception raised by the callable is kept and raised again
+/// when the evaluation stops.
+struct CallablePolicy {
+    act: Py<PyAny>,
+    act_dim: usize,
+    error: Option<PyErr>,
+}
+
+impl Policy for CallablePolicy {
+    fn name(&self) -> String {
+        "python policy".into()
+    }
+
+    fn act(&mut self, _env: &dyn locobench::envs::Env, observation: &[f64]) -> anyhow::Result<Vec<f64>> {
+        let result = Python::attach(|py| -> PyResult<Vec<f64>> {
+            self.act.call1(py, (observation.to_vec(),))?.extract::<Vec<f64>>(py)
+        });
+        let action = match result {
+            Ok(a) => a,
+            Err(e) => {
+                let message = e.to_string();
+                self.error = Some(e);
+                anyhow::bail!("the policy raised {message}");
+            }
+        };
+        if action.len() != self.act_dim {
+            let e = PyValueError::new_err(format!(
+                "the policy returned {} action values, the env takes {}",
+                action.len(),
+                self.act_dim
+            ));
+            self.error = Some(e);
+            anyhow::bail!("wrong action size");
+        }
+        if let Some(i) = action.iter().position(|v| !v.is_finite()) {
+            self.error = Some(PyValueError::new_err(format!("the policy returned action[{i}] = {}", action[i])));
+            anyhow::bail!("non-finite action");
+        }
+        Ok(action)
+    }
+}
+
+fn interval_tuple(i: locobench::evaluation::stats::Interval) -> (f64, f64, f64) {
+    (i.estimate, i.low, i.high)
+}
+
+fn summary_dict<'py>(
+    py: Python<'py>,
+    s: &locobench::evaluation::summary::HeldOutSummary,
+) -> PyResult<Bound<'py, PyDict>> {
+    let d = PyDict::new(py);
+    d.set_item("episodes", s.episodes)?;
+    d.set_item("return_mean", interval_tuple(s.mean))?;
+    d.set_item("return_iqm", interval_tuple(s.iqm))?;
+    d.set_item("return_std", s.std)?;
+    d.set_item("falls", s.falls)?;
+    d.set_item("fall_rate", interval_tuple(s.fall_rate))?;
+    d.set_item("length", s.length)?;
+    d.set_item("speed", s.speed)?;
+    d.set_item("cost_of_transport", s.cost_of_transport)?;
+    let terms = PyDict::new(py);
+    for (t, v) in &s.reward_terms {
+        terms.set_item(t, *v)?;
+    }
+    d.set_item("reward_terms", terms)?;
+    d.set_item("text", s.lines().join("\n"))?;
+    Ok(d)
+}
+
+/// Plays `act` on the protocol's held-out episodes of `env`'s configuration (fresh envs, the
+/// reset seeds of `locobench eval --seed SEED`) and returns the statistics `locobench eval`
+/// prints, optionally with the controller at the policy's speed and survival under pushes.
+/// `run`: (seed, steps, evaluation episodes) of the run that trained the policy, when known, to
+/// check that no held-out episode is one it trained or was evaluated on.
+#[pyfunction]
+#[pyo3(signature = (env, act, episodes, seed, pushes, controller, run=None))]
+#[allow(clippy::too_many_arguments)]
+fn evaluate<'py>(
+    py: Python<'py>,
+    env: &PyEnv,
+    act: Py<PyAny>,
+    episodes: usize,
+    seed: u64,
+    pushes: Vec<f64>,
+    controller: bool,
+    run: Option<(u64, u64, usize)>,
+) -> PyResult<Bound<'py, PyDict>> {
+    use locobench::evaluation::summary::{controller_at_speed, push_survival, HeldOutSummary};
+    if episodes == 0 {
+        return Err(PyValueError::new_err("episodes must be at least 1"));
+    }
+    if let Some(dv) = pushes.iter().find(|v| !(v.is_finite() && **v >= 0.0)) {
+        return Err(PyValueError::new_err(format!("push level {dv}: a velocity change must be a finite number >= 0")));
+    }
+    let protocol = locobench::evaluation::Protocol { episodes, seed };
+    if let Some((run_seed, steps, eval_episodes)) = run {
+        protocol.check_disjoint(run_seed, steps, eval_episodes).map_err(runtime_error)?;
+    }
+    let cfg = env.config.clone();
+    let mut fresh = make(&cfg).map_err(value_error)?;
+    let act_dim = fresh.spec().action_space.dim();
+    let mut policy = CallablePolicy { act, act_dim, error: None };
+    let _runtime = Runtime::enter(1);
+    let played = protocol.run(fresh.as_mut(), &mut policy, None, None);
+    let eps = match (played, policy.error.take()) {
+        (_, Some(e)) => return Err(e),
+        (Err(e), None) => return Err(runtime_error(e)),
+        (Ok(eps), None) => eps,
+    };
+    let summary = HeldOutSummary::of(&eps);
+    let d = summary_dict(py, &summary)?;
+    d.set_item("env", cfg.name.clone())?;
+    d.set_item("protocol_seed", seed)?;
+    d.set_item("episode_returns", eps.iter().map(|e| e.episode_return).collect::<Vec<_>>())?;
+    d.set_item("episode_falls", eps.iter().map(|e| e.fell).collect::<Vec<_>>())?;
+    if controller {
+        if locobench::controller::baseline::baseline_env(&cfg.name).is_err() {
+            return Err(PyValueError::new_err(format!("{} has no controller (minitaur and ant do)", cfg.name)));
+        }
+        match controller_at_speed(&cfg, protocol, (summary.speed * 1000.0).round() / 1000.0, &eps)
+            .map_err(runtime_error)?
+        {
+            Some(m) => {
+                let c = summary_dict(py, &m.summary)?;
+                c.set_item("commanded", m.commanded)?;
+                c.set_item("policy_better", interval_tuple(m.policy_better))?;
+                d.set_item("controller", c)?;
+            }
+            None => d.set_item("controller", py.None())?,
+        }
+    }
+    if !pushes.is_empty() {
+        let p = PyDict::new(py);
+        for dv in pushes {
+            let (survived, n) =
+                push_survival(&cfg, protocol, &mut policy, dv).map_err(|e| match policy.error.take() {
+                    Some(py_err) => py_err,
+                    None => runtime_error(e),
+                })?;
+            let w = locobench::evaluation::stats::wilson(survived, n);
+            p.set_item(dv, (survived, n, (w.estimate, w.low, w.high)))?;
+        }
+        d.set_item("pushes", p)?;
+    }
+    Ok(d)
 }
 
 /// The registered environment names.
@@ -416,5 +573,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyTrainedPolicy>()?;
     m.add_class::<PyRenderer>()?;
     m.add_function(wrap_pyfunction!(env_names_, m)?)?;
+    m.add_function(wrap_pyfunction!(evaluate, m)?)?;
     Ok(())
 }

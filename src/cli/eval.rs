@@ -2,12 +2,9 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use locobench::envs::make;
-use locobench::evaluation::stats::{self, wilson};
+use locobench::evaluation::summary::HeldOutSummary;
 use locobench::evaluation::Protocol;
 use locobench::policy::AgentPolicy;
-use locobench::report::format::interval;
-use locobench::report::heldout::estimate;
-use locobench::report::BOOTSTRAP_SEED;
 use locobench::train::{evaluate::evaluate, resolve_policy};
 
 #[derive(clap::Args, Debug)]
@@ -63,26 +60,9 @@ pub fn run(args: EvalArgs) -> Result<()> {
     protocol.check_disjoint(run.seed, run.train.total_steps, run.train.eval_episodes)?;
     let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.train.algo.name().into() };
     let eps = protocol.run(env.as_mut(), &mut policy, None, None)?;
-    let returns: Vec<f64> = eps.iter().map(|e| e.episode_return).collect();
-    let fmt = |v: f64| format!("{v:.3}");
-    let falls = eps.iter().filter(|e| e.fell).count();
-    let w = wilson(falls, eps.len());
     println!("{what}: {} held-out episodes (protocol seed {})", eps.len(), args.seed);
-    println!(
-        "  return  mean {} (95% CI over episodes)",
-        interval(estimate(std::slice::from_ref(&returns), stats::mean, BOOTSTRAP_SEED).interval, fmt)
-    );
-    println!(
-        "  return  IQM  {}",
-        interval(estimate(std::slice::from_ref(&returns), stats::iqm, BOOTSTRAP_SEED ^ 1).interval, fmt)
-    );
-    println!("  return  sample std {:.3}", stats::sample_std(&returns));
-    println!("  falls   {falls}/{} ({:.2}-{:.2})", eps.len(), w.low, w.high);
-    println!("  length  {:.1}", stats::mean(&eps.iter().map(|e| e.length as f64).collect::<Vec<_>>()));
-    println!("  speed   {:.3} m/s", stats::mean(&eps.iter().map(|e| e.mean_speed).collect::<Vec<_>>()));
-    for (i, (term, _)) in eps[0].reward_terms.iter().enumerate() {
-        let m = stats::mean(&eps.iter().map(|e| e.reward_terms[i].1).collect::<Vec<_>>());
-        println!("  {term:<14} {m:>12.3}");
+    for line in HeldOutSummary::of(&eps).lines() {
+        println!("{line}");
     }
     Ok(())
 }

@@ -162,6 +162,35 @@ pub(crate) fn render_speed(results: &Path) -> Result<String> {
     Ok(out)
 }
 
+/// The newest `report-timing.csv` (`bash benches/report_timing.sh`): the committed report's
+/// regeneration time and size, without and with videos.
+pub(crate) fn report_timing(results: &Path) -> Result<String> {
+    let path = newest(results, "report-timing.csv")?;
+    let rows = read(&path)?;
+    let mut out = quoting(&path)?
+        + "\n\n| videos | wall time | index.html | videos | whole report | clips |\n|---|---|---|---|---|---|\n";
+    let mb = |b: f64| format!("{:.1} MB", b / 1e6);
+    for r in &rows {
+        let _ = writeln!(
+            out,
+            "| {} | {:.1} min | {:.0} KB | {} | {} | {:.0} |",
+            if r.text("videos") == "true" { "yes" } else { "no" },
+            r.num("wall_s") / 60.0,
+            r.num("index_html_bytes") / 1e3,
+            mb(r.num("videos_bytes")),
+            mb(r.num("report_bytes")),
+            r.num("clips")
+        );
+    }
+    if let (Some(plain), Some(filmed)) =
+        (rows.iter().find(|r| r.text("videos") == "false"), rows.iter().find(|r| r.text("videos") == "true"))
+    {
+        let _ =
+            writeln!(out, "\nWith videos the report takes {:.2}x as long.", filmed.num("wall_s") / plain.num("wall_s"));
+    }
+    Ok(out)
+}
+
 /// The newest `time-to-walk.csv` (`cargo bench --bench time_to_walk`): per algorithm and
 /// threshold, how many runs reached it and how long they took.
 pub(crate) fn time_to_walk(results: &Path) -> Result<String> {

@@ -62,6 +62,11 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
             name: "render-speed",
             text: benchmarks::render_speed(&root.join(BENCH_RESULTS_DIR))?,
         },
+        Section {
+            file: "docs/evaluation.md",
+            name: "report-timing",
+            text: benchmarks::report_timing(&root.join(BENCH_RESULTS_DIR))?,
+        },
         Section { file: "docs/environments.md", name: "envs", text: envs::table()? },
         Section {
             file: "docs/python.md",

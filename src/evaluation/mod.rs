@@ -7,6 +7,7 @@ pub mod protocol;
 pub mod push;
 pub mod speed_grid;
 pub mod stats;
+pub mod summary;
 pub mod walking;
 
 pub use protocol::{Protocol, DEFAULT_EPISODES};

@@ -178,7 +178,8 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
     let mut first = vec![document::Block::Heading { level: 1, text: "Summary".into() }];
     first.push(document::Block::Paragraph(format!(
         "{} runs ({}; listed in the appendix), each policy on the held-out episodes of the protocol below. \
-         Per env: the best learned row (highest mean return) and, where the env has one, the controller.",
+         Per env: the best learned row (the highest lower 95% bound of the mean return, so a high but \
+         uncertain row does not win on luck) and, where the env has one, the controller.",
         runs.len(),
         paths_summary(paths)
     )));

@@ -705,11 +705,14 @@ pub(crate) fn gaits(
     section: Option<&ControllerSection>,
     opts: &ReportOptions,
 ) -> Result<Vec<super::videos::Clip>> {
+    use super::videos::ControllerSpeed;
     let speed = |i: usize| {
-        section
-            .and_then(|s| s.matched.iter().find(|m| m.row == i))
-            .and_then(|m| m.controller.as_ref().ok())
-            .map(|c| c.commanded)
+        let s = section?;
+        let matched = s.matched.iter().find(|m| m.row == i).and_then(|m| m.controller.as_ref().ok());
+        match matched {
+            Some(c) => Some(ControllerSpeed::Matched(c.commanded)),
+            None => s.best.as_ref().map(|b| ControllerSpeed::Best(b.commanded)),
+        }
     };
     let best = super::videos::best_rows(rows, |_| true);
     let plans = super::videos::plan(env, rows, &best, &speed, section.is_some() && opts.push_episodes > 0);
@@ -719,8 +722,8 @@ pub(crate) fn gaits(
     let clips = super::videos::film(&plans, groups, out, &opts.protocol, opts.threads)?;
     doc.heading(2, "Gaits");
     doc.paragraph(format!(
-        "Per algorithm, its best row's policy (the seed with the row's median return) on the first held-out \
-         episode{}. Captions in the frame: step, return and mean forward speed so far. The GIFs show at most the \
+        "Per algorithm, its best row's policy (the row with the highest lower 95% bound of its mean return; the \
+         seed with the row's median return) on the first held-out episode{}. Captions in the frame: step, return and mean forward speed so far. The GIFs show at most the \
          first {} s at {} frames/s (a push clip's start a second before the push); the videos show the whole episode.",
         if section.is_some() {
             ", beside the controller commanded to the row's speed, and the pair under a push"
@@ -759,11 +762,9 @@ pub(crate) fn summary(
             rate(falls, n)
         )
     };
-    let best = super::videos::best_rows(rows, |_| true);
-    let mut ranked: Vec<usize> = best.clone();
-    ranked.sort_by(|&a, &b| {
-        super::videos::mean_over_seeds(&rows[b]).total_cmp(&super::videos::mean_over_seeds(&rows[a]))
-    });
+    let mut ranked = super::videos::best_rows(rows, |_| true);
+    let key = |i: usize| super::videos::rank_key(&rows[i]);
+    ranked.sort_by(|&a, &b| key(b).partial_cmp(&key(a)).unwrap_or(std::cmp::Ordering::Equal));
     let mut text = format!("{env}: ");
     let Some(&top) = ranked.first() else {
         text.push_str("No run kept a policy, so nothing was evaluated on the held-out episodes; learning curves only.");
@@ -783,7 +784,7 @@ pub(crate) fn summary(
             };
             let separated = learned.low > c.high || c.low > learned.high;
             text.push_str(&format!(
-                "Best learned: {}. The controller's best: {} at {} m/s commanded ({} achieved), falls {}. \
+                "Best learned (the highest lower bound): {}. The controller's best: {} at {} m/s commanded ({} achieved), falls {}. \
                  Higher mean return: {winner}, by {}{}.",
                 describe(row),
                 interval(c, fmt_return),

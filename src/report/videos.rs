@@ -79,24 +79,26 @@ pub struct Clip {
     pub bytes: (u64, u64),
 }
 
-/// Per algorithm, the index of the row with the highest mean held-out return among the rows
-/// with a policy whose index `keep` admits; in algorithm order.
+/// How rows are ranked: by the lower end of the 95% interval of their mean held-out return, then
+/// by the mean. A row whose return is high but uncertain (few seeds that disagree, or frequent
+/// falls) ranks below one that is almost as high and sure.
+pub(crate) fn rank_key(r: &BudgetRow) -> (f64, f64) {
+    let i = r.mean_return(super::BOOTSTRAP_SEED).interval;
+    (i.low, i.estimate)
+}
+
+/// Per algorithm, the index of its best row ([`rank_key`]) among the rows with a policy whose
+/// index `keep` admits; in algorithm order.
 pub fn best_rows(rows: &[BudgetRow], keep: impl Fn(usize) -> bool) -> Vec<usize> {
-    let mut best: std::collections::BTreeMap<&str, (usize, f64)> = std::collections::BTreeMap::new();
+    let mut best: std::collections::BTreeMap<&str, (usize, (f64, f64))> = std::collections::BTreeMap::new();
     for (i, r) in rows.iter().enumerate().filter(|(i, r)| r.seeds() > 0 && keep(*i)) {
-        let m = mean_over_seeds(r);
-        let e = best.entry(r.group.algo.as_str()).or_insert((i, m));
-        if m > e.1 {
-            *e = (i, m);
+        let k = rank_key(r);
+        let e = best.entry(r.group.algo.as_str()).or_insert((i, k));
+        if k.0 > e.1 .0 || (k.0 == e.1 .0 && k.1 > e.1 .1) {
+            *e = (i, k);
         }
     }
     best.into_values().map(|(i, _)| i).collect()
-}
-
-/// The mean over seeds of each seed's mean return (the point estimate of the return column).
-pub(crate) fn mean_over_seeds(r: &BudgetRow) -> f64 {
-    let per_seed: Vec<f64> = r.returns_per_seed().iter().map(|v| crate::evaluation::stats::mean(v)).collect();
-    crate::evaluation::stats::mean(&per_seed)
 }
 
 /// The run whose mean held-out return is the row's median (the lower one of an even count): the
@@ -111,13 +113,23 @@ fn representative(row: &BudgetRow) -> Option<&super::heldout::SeedResult> {
     seeds.get((seeds.len().max(1) - 1) / 2).map(|(_, s)| *s)
 }
 
-/// The clips of one env: per algorithm's best row, the policy (beside the controller at the row's
-/// speed when `controller_speed` gives one), and the same panels pushed when `push` is on.
+/// Where the controller stands beside a learned row: commanded to the row's speed, or, when it
+/// cannot reach that speed, at its own best speed.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum ControllerSpeed {
+    /// The row's speed, which the controller reaches.
+    Matched(f64),
+    /// The controller's best speed; the row is faster or slower than the controller goes.
+    Best(f64),
+}
+
+/// The clips of one env: per algorithm's best row, the policy (beside the controller when
+/// `controller_speed` places one), and the same panels pushed when `push` is on.
 pub fn plan(
     env: &str,
     rows: &[BudgetRow],
     best: &[usize],
-    controller_speed: &dyn Fn(usize) -> Option<f64>,
+    controller_speed: &dyn Fn(usize) -> Option<ControllerSpeed>,
     push: bool,
 ) -> Vec<ClipPlan> {
     let mut plans = Vec::new();
@@ -139,15 +151,19 @@ pub fn plan(
             row.seeds()
         );
         let (panels, caption) = match controller_speed(i) {
-            Some(speed) => (
+            Some(ControllerSpeed::Matched(speed)) => (
                 vec![learned, Actor::Controller { speed }],
                 format!(
                     "{who}, left, beside the controller commanded to its speed ({speed:.2} m/s), right; the first held-out episode"
                 ),
             ),
-            None if push => (
-                vec![learned],
-                format!("{who}; the first held-out episode (the controller does not reach its speed)"),
+            Some(ControllerSpeed::Best(speed)) => (
+                vec![learned, Actor::Controller { speed }],
+                format!(
+                    "{who}, left, beside the controller at its best speed ({speed:.2} m/s commanded; it does not reach the \
+                     policy's {:.2} m/s), right; the first held-out episode",
+                    row.speed()
+                ),
             ),
             None => (vec![learned], format!("{who}; the first held-out episode")),
         };
