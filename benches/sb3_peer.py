@@ -11,12 +11,15 @@ with `normalize: true` (SB3's VecNormalize on observations and rewards). Writes 
 - `held_out.json`: `locobench.evaluate` on the protocol's held-out episodes (50, protocol seed 0,
   deterministic actions through the VecNormalize observation statistics), with the controller at
   the policy's speed where the env has one;
+- `external/`: those episodes with their provenance, for `locobench report --external`;
 - `run.toml`: the hyperparameters, the library versions, the machine, the wall time.
 
 Run with `OMP_NUM_THREADS=1` (one core per run), from a venv with stable-baselines3 and locobench
 (`bash python/check_sb3.sh` makes target/sb3-check-venv):
 
     python benches/sb3_peer.py minitaur 0 1000000 benches/results/minitaur/sb3-ppo-seed0-1m
+
+Where OUT already holds `model.zip` and `vecnormalize.pkl`, it only evaluates them again.
 """
 import json
 import os
@@ -83,13 +86,22 @@ def main():
     zoo = ZOO[env_name]
     out.mkdir(parents=True, exist_ok=True)
     torch.set_num_threads(1)
-    venv = VecNormalize(make_vec_env(zoo["id"], n_envs=zoo["n_envs"], seed=seed))
-    model = PPO("MlpPolicy", venv, seed=seed, verbose=0, device="cpu", policy_kwargs=zoo["policy_kwargs"], **zoo["ppo"])
-    started = time.perf_counter()
-    model.learn(total_timesteps=steps, callback=Progress(out / "progress.csv", started))
-    wall = time.perf_counter() - started
-    model.save(out / "model.zip")
-    venv.save(out / "vecnormalize.pkl")
+    # No rendering while training (SB3 asks every env for render_mode="rgb_array" by default).
+    venv = make_vec_env(zoo["id"], n_envs=zoo["n_envs"], seed=seed, env_kwargs={"render_mode": None})
+    trained = (out / "model.zip").exists() and (out / "vecnormalize.pkl").exists()
+    if trained:
+        venv = VecNormalize.load(str(out / "vecnormalize.pkl"), venv)
+        model = PPO.load(out / "model.zip", env=venv, device="cpu")
+        wall = None
+    else:
+        venv = VecNormalize(venv)
+        model = PPO("MlpPolicy", venv, seed=seed, verbose=0, device="cpu", policy_kwargs=zoo["policy_kwargs"],
+                    **zoo["ppo"])
+        started = time.perf_counter()
+        model.learn(total_timesteps=steps, callback=Progress(out / "progress.csv", started))
+        wall = time.perf_counter() - started
+        model.save(out / "model.zip")
+        venv.save(out / "vecnormalize.pkl")
 
     rms, clip, eps = venv.obs_rms, venv.clip_obs, venv.epsilon
 
@@ -99,8 +111,13 @@ def main():
         return action
 
     controller = env_name in ("minitaur", "ant")
-    held_out = locobench.evaluate(act, zoo["id"], episodes=50, seed=0, controller=controller)
+    held_out = locobench.evaluate(act, zoo["id"], episodes=50, seed=0, controller=controller, out=out / "external",
+                                  label="sb3-ppo", training_seed=seed, steps=steps, policy_file=out / "model.zip",
+                                  library=("stable-baselines3", stable_baselines3.__version__))
     (out / "held_out.json").write_text(json.dumps(held_out, indent=1, default=float))
+    if trained:
+        print(f"{env_name} seed {seed}: evaluated the saved model again")
+        return
     kwargs = {k: (v.__name__ if isinstance(v, type) else v) for k, v in zoo["policy_kwargs"].items()}
     lines = [
         "# A Stable-Baselines3 PPO peer run (benches/sb3_peer.py)",

@@ -1,6 +1,9 @@
 """Every locobench environment as a Gymnasium environment."""
+import importlib
+import importlib.util
 import json
 import numbers
+import sys
 
 import gymnasium as gym
 import numpy as np
@@ -38,6 +41,15 @@ def _toml_value(key, value):
     if isinstance(value, (list, tuple)):
         return "[" + ", ".join(_toml_value(key, v) for v in value) + "]"
     raise TypeError(f"option {key}: {value!r} is not a bool, number, string or list")
+
+
+def _load_triton_first():
+    """PyTorch's triton (which PyTorch imports when it first builds an optimizer) crashes the
+    process with a segmentation fault when it is loaded after Mesa's OpenGL (OSMesa), which
+    rendering loads: both bring their own LLVM. Loaded first, both work; so where triton is
+    installed, it is imported before the first renderer."""
+    if "triton" not in sys.modules and importlib.util.find_spec("triton") is not None:
+        importlib.import_module("triton")
 
 
 def _core_arguments(options, reward):
@@ -89,6 +101,8 @@ class LocobenchEnv(gym.Env):
         self.metadata = {"render_modes": _RENDER_MODES, "render_fps": 1.0 / self._core.dt}
         self.episode = -1
         # Made here, so that a missing OpenGL library or a bad camera is an error at once.
+        if render_mode is not None:
+            _load_triton_first()
         self._renderer = None if render_mode is None else _core.Renderer(self._core, width, height, camera)
         self._frames = []
 

@@ -1,5 +1,11 @@
 """The evaluation protocol from Python: any policy on the held-out episodes `locobench eval` and
 `locobench report` play, with the same statistics."""
+import getpass
+import hashlib
+import os
+import platform
+import sys
+
 import numpy as np
 
 from locobench import _core
@@ -56,8 +62,43 @@ def _act_function(policy, deterministic, act_dim):
     return act
 
 
+def _library(policy):
+    """(library, version) of the package a policy object comes from."""
+    if isinstance(policy, TrainedPolicy):
+        from importlib.metadata import PackageNotFoundError, version
+        try:
+            return "locobench", version("locobench")
+        except PackageNotFoundError:
+            return "locobench", "unknown"
+    root = (getattr(type(policy), "__module__", "") or "").split(".")[0]
+    if root in ("", "builtins", "__main__", "numpy"):
+        return "python", platform.python_version()
+    return root.replace("_", "-"), str(getattr(sys.modules.get(root), "__version__", "unknown"))
+
+
+def _meta(policy, label, author, policy_file, library, training_seed, steps):
+    if not label:
+        raise ValueError("out= needs label= (the row's name in the report)")
+    lib, version = library if library else _library(policy)
+    digest = ""
+    if policy_file is not None:
+        with open(policy_file, "rb") as f:
+            digest = hashlib.sha256(f.read()).hexdigest()
+    return {
+        "label": str(label),
+        "library": lib,
+        "library_version": version,
+        "policy_file": "" if policy_file is None else os.fspath(policy_file),
+        "policy_sha256": digest,
+        "author": author or getpass.getuser(),
+        "seed": None if training_seed is None else int(training_seed),
+        "steps": None if steps is None else int(steps),
+    }
+
+
 def evaluate(policy, env=None, *, episodes=50, seed=0, deterministic=True, options=None, reward=None,
-             controller=False, pushes=()):
+             controller=False, pushes=(), out=None, label=None, author=None, policy_file=None, library=None,
+             training_seed=None, steps=None):
     """Plays ``policy`` on the protocol's held-out episodes and returns their statistics.
 
     ``policy``: anything with Stable-Baselines3's ``predict(obs, deterministic=...)``, a callable
@@ -75,6 +116,13 @@ def evaluate(policy, env=None, *, episodes=50, seed=0, deterministic=True, optio
     policy's mean speed on the same episodes, its statistics and ``policy_better``, P(policy's
     return > controller's) over the paired episodes. ``pushes`` (velocity changes in m/s) adds
     ``pushes``: {level: (survived, episodes, (rate, low, high))} under the evaluation's push.
+
+    ``out=DIR`` writes the episodes (``episodes.csv``) and their provenance (``external.toml``:
+    ``label``, the library and its version, found from the policy's package unless
+    ``library=(name, version)`` says, ``policy_file`` and its SHA-256, the machine, ``author``,
+    ``training_seed`` and ``steps``) for ``locobench report --external DIR``, which adds them as
+    a row beside the report's own, marked as evaluated outside locobench. Runs with one label are
+    one row, their seeds pooled.
     """
     training = None
     if isinstance(policy, TrainedPolicy):
@@ -93,4 +141,8 @@ def evaluate(policy, env=None, *, episodes=50, seed=0, deterministic=True, optio
         core = _core_env(env, options, reward)
     low, _ = core.action_bounds
     act = _act_function(policy, deterministic, len(low))
-    return _core.evaluate(core, act, int(episodes), int(seed), [float(p) for p in pushes], bool(controller), training)
+    meta = None
+    if out is not None:
+        meta = _meta(policy, label, author, policy_file, library, training_seed, steps)
+    return _core.evaluate(core, act, int(episodes), int(seed), [float(p) for p in pushes], bool(controller), training,
+                          None if out is None else os.fspath(out), meta)

@@ -454,7 +454,10 @@ fn summary_dict<'py>(
 /// `run`: (seed, steps, evaluation episodes) of the run that trained the policy, when known, to
 /// check that no held-out episode is one it trained or was evaluated on.
 #[pyfunction]
-#[pyo3(signature = (env, act, episodes, seed, pushes, controller, run=None))]
+/// `out` and `meta`: write the episodes and their provenance there (`evaluation::external`);
+/// `meta` holds label, library, library_version, policy_file, policy_sha256, author and
+/// optionally seed and steps.
+#[pyo3(signature = (env, act, episodes, seed, pushes, controller, run=None, out=None, meta=None))]
 #[allow(clippy::too_many_arguments)]
 fn evaluate<'py>(
     py: Python<'py>,
@@ -465,6 +468,8 @@ fn evaluate<'py>(
     pushes: Vec<f64>,
     controller: bool,
     run: Option<(u64, u64, usize)>,
+    out: Option<PathBuf>,
+    meta: Option<Bound<'py, PyDict>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     use locobench::evaluation::summary::{controller_at_speed, push_survival, HeldOutSummary};
     if episodes == 0 {
@@ -488,6 +493,35 @@ fn evaluate<'py>(
         (Err(e), None) => return Err(runtime_error(e)),
         (Ok(eps), None) => eps,
     };
+    if let Some(dir) = &out {
+        let meta = meta.ok_or_else(|| PyValueError::new_err("out needs meta (label, library, ...)"))?;
+        let text = |key: &str| -> PyResult<String> {
+            Ok(meta.get_item(key)?.map(|v| v.extract::<String>()).transpose()?.unwrap_or_default())
+        };
+        let number = |key: &str| -> PyResult<Option<u64>> {
+            Ok(match meta.get_item(key)? {
+                Some(v) if !v.is_none() => Some(v.extract::<u64>()?),
+                _ => None,
+            })
+        };
+        let record = locobench::evaluation::external::ExternalMeta {
+            label: text("label")?,
+            env: cfg.name.clone(),
+            options: cfg.resolved_options().map_err(value_error)?,
+            episodes,
+            protocol_seed: seed,
+            library: text("library")?,
+            library_version: text("library_version")?,
+            policy_file: text("policy_file")?,
+            policy_sha256: text("policy_sha256")?,
+            machine: locobench::evaluation::external::this_machine(),
+            author: text("author")?,
+            locobench_version: env!("CARGO_PKG_VERSION").to_string(),
+            seed: number("seed")?,
+            steps: number("steps")?,
+        };
+        locobench::evaluation::external::write(dir, &record, &eps).map_err(runtime_error)?;
+    }
     let summary = HeldOutSummary::of(&eps);
     let d = summary_dict(py, &summary)?;
     d.set_item("env", cfg.name.clone())?;

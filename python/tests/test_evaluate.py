@@ -13,17 +13,9 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 PPO = ROOT / "models" / "policies" / "minitaur-ppo"
 
 
-def locobench_binary():
-    for profile in ("debug", "release"):
-        path = ROOT / "target" / profile / "locobench"
-        if path.exists():
-            return path
-    pytest.fail("no target/debug/locobench: build it first (cargo build; scripts/test.sh does)")
-
-
-def test_a_locobench_policy_gets_the_figures_locobench_eval_prints():
+def test_a_locobench_policy_gets_the_figures_locobench_eval_prints(binary):
     result = locobench.evaluate(locobench.load_policy(PPO), episodes=4, seed=3)
-    printed = subprocess.run([str(locobench_binary()), "eval", "--policy", str(PPO), "--episodes", "4", "--seed", "3"],
+    printed = subprocess.run([str(binary), "eval", "--policy", str(PPO), "--episodes", "4", "--seed", "3"],
                              check=True, capture_output=True, text=True).stdout.splitlines()
     assert printed[0].endswith("4 held-out episodes (protocol seed 3)")
     assert result["text"].splitlines() == printed[1:]
@@ -77,3 +69,50 @@ def test_policies_and_envs_that_do_not_fit_are_clear_errors():
         locobench.evaluate(lambda obs: np.zeros(3), "hopper", episodes=1, pushes=[-1.0])
     with pytest.raises(TypeError, match="predict or be a callable"):
         locobench.evaluate(42, "hopper", episodes=1)
+
+
+def test_external_episodes_become_a_report_row_beside_ours(tmp_path, binary):
+    """evaluate(..., out=DIR) writes the episodes with their provenance; `report --external`
+    adds them as one row per label, marked as external, with the statistics computed from them;
+    files from another protocol or env options, or damaged ones, are refused by name."""
+    zero = lambda obs: np.zeros(8)  # noqa: E731
+    results = []
+    for s in (0, 1):
+        results.append(locobench.evaluate(zero, "minitaur", episodes=2, out=tmp_path / f"zero-{s}", label="zero",
+                                          training_seed=s, steps=1000, author="test"))
+    meta = (tmp_path / "zero-0" / "external.toml").read_text()
+    assert 'label = "zero"' in meta and 'library = "python"' in meta and 'author = "test"' in meta
+    binary = str(binary)
+    report = tmp_path / "report"
+
+    def run_report(*external):
+        return subprocess.run([binary, "report", "--runs", str(PPO), "--out", str(report), "--episodes", "2",
+                               "--push-episodes", "0", "--external", *map(str, external)],
+                              capture_output=True, text=True)
+
+    done = run_report(tmp_path / "zero-0", tmp_path / "zero-1")
+    assert done.returncode == 0, done.stderr
+    md = (report / "README.md").read_text()
+    assert "| zero (external) | 1k | 2 of 2 | 2 |" in md, md
+    assert "evaluated outside locobench" in md
+    rows = [line.split(",") for line in (report / "held_out.csv").read_text().splitlines()]
+    row = next(r for r in rows if r[1] == "zero (external)")
+    per_seed = [np.mean(r["episode_returns"]) for r in results]
+    assert abs(float(row[6]) - np.mean(per_seed)) < 1e-12, (row, per_seed)
+    assert "zero (external)" in (report / "versus_controller.csv").read_text()
+
+    locobench.evaluate(zero, "minitaur", episodes=3, out=tmp_path / "three", label="zero")
+    refused = run_report(tmp_path / "three")
+    assert refused.returncode != 0 and "three: 3 episodes with protocol seed 0" in refused.stderr
+    locobench.evaluate(zero, "minitaur", episodes=2, options={"randomize_dynamics": False}, out=tmp_path / "other",
+                       label="zero")
+    refused = run_report(tmp_path / "other")
+    assert refused.returncode != 0 and "other options or rewards" in refused.stderr and "randomize_dynamics" in refused.stderr
+    episodes = tmp_path / "zero-1" / "episodes.csv"
+    lines = episodes.read_text().splitlines()
+    lines[2] = lines[2].replace(",", ",x", 1)
+    episodes.write_text("\n".join(lines) + "\n")
+    refused = run_report(tmp_path / "zero-1")
+    assert refused.returncode != 0 and "episodes.csv, line 3" in refused.stderr, refused.stderr
+    with pytest.raises(ValueError, match="label"):
+        locobench.evaluate(zero, "minitaur", episodes=1, out=tmp_path / "nolabel")

@@ -3,26 +3,15 @@ every metrics.csv row is a scalar at the row's step, and after a kill and a resu
 shows the resumed run's values, not the ones the killed stretch logged past its checkpoint."""
 import csv
 import os
-import pathlib
 import subprocess
 
 import numpy as np
 import pytest
 
-ROOT = pathlib.Path(__file__).resolve().parents[2]
 SETTINGS = (
     "hidden=[16,16],batch_size=32,warmup_steps=200,learning_starts=200,eval_every=500,eval_episodes=2,"
     "checkpoint_every=300"
 )
-
-
-def locobench_binary():
-    """The command-line binary `cargo test` builds (the test command runs it before these tests)."""
-    for profile in ("debug", "release"):
-        path = ROOT / "target" / profile / "locobench"
-        if path.exists():
-            return path
-    pytest.fail("no target/debug/locobench: build it first (cargo build; scripts/test.sh does)")
 
 
 def scalars(logdir):
@@ -51,8 +40,7 @@ def close(tag, got, want):
     return np.allclose([v for _, v in got], [v for _, v in want], rtol=1e-6, atol=atol)
 
 
-def test_every_metric_reaches_tensorboard_and_a_resume_replaces_what_a_kill_left(tmp_path):
-    binary = locobench_binary()
+def test_every_metric_reaches_tensorboard_and_a_resume_replaces_what_a_kill_left(tmp_path, binary):
     train = [str(binary), "train", "--env", "inverted-pendulum", "--algo", "td3", "--seed", "3", "--steps", "1500",
              "--set", SETTINGS, "--quiet", "--threads", "1"]
 
@@ -81,12 +69,11 @@ def test_every_metric_reaches_tensorboard_and_a_resume_replaces_what_a_kill_left
         assert got[tag] == scalars(whole_tb)[tag], tag
 
 
-def test_training_clips_reach_tensorboard_as_animated_gifs(tmp_path):
+def test_training_clips_reach_tensorboard_as_animated_gifs(tmp_path, binary):
     """With --video-every, each filmed evaluation is an image summary `eval/video` at its step: the
     GIF beside the run, which TensorBoard's image dashboard plays."""
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    binary = locobench_binary()
     run, tb = tmp_path / "run", tmp_path / "tb"
     subprocess.run([str(binary), "train", "--env", "inverted-pendulum", "--algo", "td3", "--seed", "3", "--steps",
                     "1000", "--set", SETTINGS, "--quiet", "--threads", "1", "--out", str(run), "--tensorboard",

@@ -31,6 +31,12 @@ pub struct ReportArgs {
     /// index.html, GIFs for README.md. Needs OpenGL (OSMesa) and ffmpeg, as `record --video`.
     #[arg(long)]
     pub videos: bool,
+    /// Directories of episodes evaluated outside locobench (`locobench.evaluate(..., out=DIR)` in
+    /// Python): each label becomes a row beside the runs', marked as external, with the same
+    /// statistics and the controller at its speed. They must follow this report's protocol
+    /// (--episodes, --seed) and env options.
+    #[arg(long, num_args = 1.., value_name = "DIR")]
+    pub external: Vec<PathBuf>,
     /// Protocol seed: picks the held-out reset seeds.
     #[command(flatten)]
     pub seed: super::SeedArg,
@@ -49,6 +55,7 @@ pub fn run(args: ReportArgs) -> Result<()> {
         push_episodes: args.push_episodes,
         threads: args.threads.unwrap_or_else(locobench::evaluation::parallel::default_threads),
         videos: args.videos,
+        external: args.external.clone(),
     };
     let report = write_report(&args.runs, &args.out, &opts)?;
     for (env, rows) in &report.rows {

@@ -2,6 +2,7 @@
 //! and reward, deterministic actions), the controller evaluated as a family over commanded
 //! speeds, pushes as a robustness axis, and the statistics every table reports. `report` and
 //! the returns bench build their tables on this module alone.
+pub mod external;
 pub mod parallel;
 pub mod protocol;
 pub mod push;

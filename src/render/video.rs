@@ -212,7 +212,7 @@ fn ffmpeg(format: Format, out: &Path, width: usize, height: usize, fps: f64) -> 
         // yuv420p and even sizes: what browsers' H.264 decoders take; faststart: playable while
         // loading.
         Format::Mp4 => {
-            &["-c:v", "libx264", "-preset", "veryfast", "-crf", "26", "-pix_fmt", "yuv420p", "-movflags", "+faststart"]
+            &["-c:v", "libx264", "-preset", "veryfast", "-crf", "28", "-pix_fmt", "yuv420p", "-movflags", "+faststart"]
         }
         _ => &[
             "-c:v",

@@ -50,6 +50,9 @@ pub struct BudgetRow {
     pub wall_time: Option<f64>,
     /// Seeds that more than one run of the row used (not independent samples).
     pub duplicate_seeds: Vec<u64>,
+    /// Evaluated outside locobench (`report --external`): episodes read from files, no policy
+    /// the report can play itself.
+    pub external: bool,
 }
 
 /// An interval and what it was resampled over.
@@ -88,7 +91,90 @@ impl BudgetRow {
             mixed_provenance: false,
             wall_time: None,
             duplicate_seeds: Vec::new(),
+            external: false,
         }
+    }
+
+    /// The rows of external evaluations (`evaluation::external`) of one env: one per label,
+    /// its directories' episodes as seeds. Each must follow `protocol` and have been played in
+    /// `env` (the report's env options and reward for that env); otherwise an error names the
+    /// directory and what differs.
+    pub(crate) fn external_rows(
+        externals: &[crate::evaluation::external::External],
+        env: &EnvConfig,
+        protocol: &Protocol,
+    ) -> Result<Vec<BudgetRow>> {
+        let ours = env.resolved_options()?;
+        let mut rows: Vec<BudgetRow> = Vec::new();
+        for x in externals {
+            anyhow::ensure!(
+                x.protocol() == *protocol,
+                "{}: {} episodes with protocol seed {}; this report plays {} with protocol seed {}",
+                x.dir.display(),
+                x.meta.episodes,
+                x.meta.protocol_seed,
+                protocol.episodes,
+                protocol.seed
+            );
+            if x.meta.options != ours {
+                let differs: Vec<String> = x
+                    .meta
+                    .options
+                    .iter()
+                    .filter(|(k, v)| ours.get(*k) != Some(*v))
+                    .map(|(k, v)| {
+                        format!(
+                            "{k} = {v} (the report's runs: {})",
+                            ours.get(k).map_or("unset".into(), |o| o.to_string())
+                        )
+                    })
+                    .collect();
+                anyhow::bail!(
+                    "{}: played {} under other options or rewards than the report's runs: {}",
+                    x.dir.display(),
+                    x.meta.env,
+                    differs.join(", ")
+                );
+            }
+            let group = Group {
+                env: x.meta.env.clone(),
+                algo: x.meta.label.clone(),
+                reward: String::new(),
+                settings: "evaluated outside locobench".into(),
+                variant: format!("{} (external)", x.meta.label),
+            };
+            let budget = x.meta.steps.unwrap_or(0);
+            let i = match rows.iter().position(|r| r.group == group) {
+                Some(i) => i,
+                None => {
+                    let mut row = BudgetRow::empty(group, budget);
+                    row.external = true;
+                    row.env_config = Some(x.env.clone());
+                    rows.push(row);
+                    rows.len() - 1
+                }
+            };
+            let row = &mut rows[i];
+            row.budget = row.budget.max(budget);
+            row.evaluated.push(SeedResult {
+                run_dir: x.dir.clone(),
+                seed: x.meta.seed.unwrap_or(0),
+                episodes: x.episodes.clone(),
+            });
+            let provenance = x.provenance();
+            if !row.provenance.is_empty() && !row.provenance.split("; ").any(|p| p == provenance) {
+                row.mixed_provenance = true;
+                row.provenance = format!("{}; {provenance}", row.provenance);
+            } else if row.provenance.is_empty() {
+                row.provenance = provenance;
+            }
+        }
+        for row in &mut rows {
+            let mut seeds: Vec<u64> = row.evaluated.iter().map(|s| s.seed).collect();
+            seeds.sort_unstable();
+            row.duplicate_seeds = seeds.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect();
+        }
+        Ok(rows)
     }
 
     /// Number of runs evaluated.

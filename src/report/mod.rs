@@ -53,6 +53,9 @@ pub struct ReportOptions {
     pub threads: usize,
     /// Film each algorithm's best row (and the controller beside it) into `videos/`.
     pub videos: bool,
+    /// Directories of episodes evaluated outside locobench (`evaluation::external`), added as
+    /// rows beside the runs'.
+    pub external: Vec<PathBuf>,
 }
 
 impl Default for ReportOptions {
@@ -62,6 +65,7 @@ impl Default for ReportOptions {
             push_episodes: 20,
             threads: crate::evaluation::parallel::default_threads(),
             videos: false,
+            external: Vec::new(),
         }
     }
 }
@@ -130,12 +134,16 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
     std::fs::create_dir_all(out)?;
     // A report killed while writing left its temporary files; this one writes every file again.
     crate::io::remove_temporaries(out)?;
+    let externals = opts.external.iter().map(|d| crate::evaluation::external::read(d)).collect::<Result<Vec<_>>>()?;
     let groups = group_runs(&runs);
     let mut envs: BTreeMap<String, Vec<(&Group, &Vec<&Run>)>> = BTreeMap::new();
     for (g, rs) in &groups {
         envs.entry(g.env.clone()).or_default().push((g, rs));
     }
 
+    if let Some(x) = externals.iter().find(|x| !envs.contains_key(&x.meta.env)) {
+        anyhow::bail!("{}: its env, {}, has no runs in this report", x.dir.display(), x.meta.env);
+    }
     let mut doc = Document::new("locobench report");
     // The summary goes here, once the sections below have computed what it says.
     let summary_at = doc.blocks.len();
@@ -152,7 +160,8 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
     for (env, env_groups) in &envs {
         doc.heading(1, env.as_str());
         report.groups.extend(sections::learning_curves(&mut doc, out, env, env_groups)?);
-        let rows = sections::held_out(&mut doc, env_groups, opts)?;
+        let here: Vec<_> = externals.iter().filter(|x| x.meta.env == *env).cloned().collect();
+        let rows = sections::held_out(&mut doc, env_groups, opts, &here)?;
         sections::published(&mut doc, env, &rows, env_groups);
         if crate::controller::baseline::baseline_env(env).is_ok() {
             if let Some(c) = sections::controller(&mut doc, out, env, env_groups, &rows, opts)? {

@@ -151,11 +151,20 @@ pub(crate) fn learning_curves(
 }
 
 /// The held-out rows of every group at every budget its runs reached.
-pub fn held_out(doc: &mut Document, groups: &[(&Group, &Vec<&Run>)], opts: &ReportOptions) -> Result<Vec<BudgetRow>> {
+pub fn held_out(
+    doc: &mut Document,
+    groups: &[(&Group, &Vec<&Run>)],
+    opts: &ReportOptions,
+    externals: &[crate::evaluation::external::External],
+) -> Result<Vec<BudgetRow>> {
     doc.heading(2, "Held-out evaluation at fixed budgets");
     let jobs: Vec<(&Group, &Vec<&Run>, u64)> =
         groups.iter().flat_map(|(g, rs)| super::budgets::budgets(rs).into_iter().map(move |b| (*g, *rs, b))).collect();
-    let rows = map_in_order(&jobs, opts.threads, |(g, rs, b)| evaluate_row(g, rs, *b, &opts.protocol, None))?;
+    let mut rows = map_in_order(&jobs, opts.threads, |(g, rs, b)| evaluate_row(g, rs, *b, &opts.protocol, None))?;
+    if !externals.is_empty() {
+        let env = rows.iter().find_map(|r| r.env_config.clone()).unwrap_or_else(|| EnvConfig::new(&groups[0].0.env));
+        rows.extend(BudgetRow::external_rows(externals, &env, &opts.protocol)?);
+    }
     let mut notes = Vec::new();
     let table = rows
         .iter()
@@ -178,7 +187,15 @@ pub fn held_out(doc: &mut Document, groups: &[(&Group, &Vec<&Run>)], opts: &Repo
                     r.duplicate_seeds
                 ));
             }
-            if r.mixed_provenance {
+            if r.external {
+                notes.push(format!(
+                    "{}: evaluated outside locobench, from the episodes in {} ({}); the same statistics, computed \
+                     here from those episodes.",
+                    r.group.label(),
+                    r.evaluated.iter().map(|s| format!("`{}`", s.run_dir.display())).collect::<Vec<_>>().join(", "),
+                    r.provenance
+                ));
+            } else if r.mixed_provenance {
                 notes.push(format!(
                     "{} at {}: pools runs computed on different machines or commits ({}).",
                     r.group.label(),
@@ -714,7 +731,7 @@ pub(crate) fn gaits(
             None => s.best.as_ref().map(|b| ControllerSpeed::Best(b.commanded)),
         }
     };
-    let best = super::videos::best_rows(rows, |_| true);
+    let best = super::videos::best_rows(rows, |i| !rows[i].external);
     let plans = super::videos::plan(env, rows, &best, &speed, section.is_some() && opts.push_episodes > 0);
     if plans.is_empty() {
         return Ok(Vec::new());

@@ -33,7 +33,7 @@ const MAX_FRAMES: f64 = 300.0;
 /// The GIF copy: at most this many frames per second and seconds (a push clip's seconds start a
 /// second before the push).
 pub(crate) const GIF_FPS: f64 = 6.0;
-pub(crate) const GIF_SECONDS: f64 = 6.0;
+pub(crate) const GIF_SECONDS: f64 = 5.0;
 
 /// The push filmed (velocity change, m/s): the second level of the push table.
 pub const FILMED_PUSH: f64 = super::controller::PUSH_LEVELS[1];
