@@ -189,8 +189,7 @@ pub fn held_out(
             }
             if r.external {
                 notes.push(format!(
-                    "{}: evaluated outside locobench, from the episodes in {} ({}); the same statistics, computed \
-                     here from those episodes.",
+                    "{}: from the episodes in {} ({}); the same statistics, computed here from those episodes.",
                     r.group.label(),
                     r.evaluated.iter().map(|s| format!("`{}`", s.run_dir.display())).collect::<Vec<_>>().join(", "),
                     r.provenance
