@@ -37,8 +37,7 @@ impl<'a> Pushed<'a> {
             push.delta_v
         );
         let m = inner.data().model();
-        // One free joint first: 7 position and 6 velocity coordinates ahead of the rest.
-        ensure!(m.nq() == m.nv() + 1 && m.nv() >= 6, "{} has no floating base to push", inner.spec().name);
+        ensure!(m.has_floating_base(), "{} has no floating base to push", inner.spec().name);
         let mass: f64 = m.body_mass().iter().sum();
         let dt = inner.spec().dt;
         let steps = ((PUSH_DURATION / dt).round() as usize).max(1);

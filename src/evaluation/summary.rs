@@ -114,11 +114,7 @@ pub fn controller_at_speed(
     let wins: Vec<f64> = episodes
         .iter()
         .zip(&point.episodes)
-        .map(|(p, c)| match p.episode_return.partial_cmp(&c.episode_return) {
-            Some(std::cmp::Ordering::Greater) => 1.0,
-            Some(std::cmp::Ordering::Equal) => 0.5,
-            _ => 0.0,
-        })
+        .map(|(p, c)| stats::probability_of_improvement(&[(p.episode_return, c.episode_return)]))
         .collect();
     Ok(Some(MatchedController {
         commanded: point.commanded,

@@ -205,6 +205,11 @@ impl Model {
     pub fn nv(&self) -> usize {
         self.raw().nv as usize
     }
+    /// Whether the model starts with one free joint (7 position and 6 velocity coordinates ahead
+    /// of the rest): a floating base that can be pushed.
+    pub fn has_floating_base(&self) -> bool {
+        self.nq() == self.nv() + 1 && self.nv() >= 6
+    }
     /// Number of actuators (`nu`).
     pub fn nu(&self) -> usize {
         self.raw().nu as usize

@@ -60,10 +60,9 @@ pub fn film_episode(
         }
         None => env.as_mut(),
     };
-    env.reset(Some(seed))?;
-    let x0 = env.data().xpos()[3];
     let summary = crate::rollout::run_episode(env, policy, 0, Some(seed), &mut film)?;
-    let speed = (env.data().xpos()[3] - x0) / (summary.length.max(1) as f64 * dt);
+    // The film kept the base's position at the reset.
+    let speed = (env.data().xpos()[3] - film.start_x()) / (summary.length.max(1) as f64 * dt);
     let push_time = film.push_time();
     Ok(Panel {
         push_time,
@@ -79,19 +78,20 @@ pub fn film_episode(
 
 /// Panels side by side, left to right, frame by frame; a panel whose episode ended earlier holds
 /// its last frame. Every panel must have the same height.
-pub fn tile(panels: &[Vec<Frame>]) -> Result<Vec<Frame>> {
+pub fn tile<P: AsRef<[Frame]>>(panels: &[P]) -> Result<Vec<Frame>> {
+    let panels: Vec<&[Frame]> = panels.iter().map(AsRef::as_ref).collect();
     let Some(first) = panels.first().and_then(|p| p.first()) else { anyhow::bail!("no frames to tile") };
     let height = first.height;
     if let Some(p) = panels.iter().find(|p| p.is_empty() || p[0].height != height) {
         anyhow::bail!("panels must have frames of one height ({} and {})", height, p.first().map_or(0, |f| f.height));
     }
     let width: usize = panels.iter().map(|p| p[0].width).sum();
-    let length = panels.iter().map(Vec::len).max().unwrap_or(0);
+    let length = panels.iter().map(|p| p.len()).max().unwrap_or(0);
     Ok((0..length)
         .map(|i| {
             let mut rgb = Vec::with_capacity(width * height * 3);
             for y in 0..height {
-                for panel in panels {
+                for panel in &panels {
                     let f = &panel[i.min(panel.len() - 1)];
                     rgb.extend_from_slice(&f.rgb[y * f.width * 3..(y + 1) * f.width * 3]);
                 }
@@ -108,7 +108,7 @@ pub fn tile_panels(panels: &[Panel]) -> Result<(Vec<Frame>, f64)> {
     for (i, p) in panels.iter().enumerate() {
         ensure!((p.fps - fps).abs() < 1e-9, "panel {} is filmed at {} frames/s, the first at {fps}", i + 1, p.fps);
     }
-    let frames: Vec<Vec<Frame>> = panels.iter().map(|p| p.frames.clone()).collect();
+    let frames: Vec<&[Frame]> = panels.iter().map(|p| p.frames.as_slice()).collect();
     Ok((tile(&frames)?, fps))
 }
 

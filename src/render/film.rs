@@ -79,7 +79,7 @@ impl Film {
     fn with_sink(renderer: Renderer, dt: f64, every: usize, sink: Sink) -> Film {
         let model = renderer.model();
         let mass = model.body_mass().iter().sum();
-        let floating = model.nq() == model.nv() + 1 && model.nv() >= 6;
+        let floating = model.has_floating_base();
         Film {
             renderer,
             every: every.max(1),
@@ -117,6 +117,11 @@ impl Film {
     /// Frames per simulated second.
     pub fn fps(&self) -> f64 {
         1.0 / (self.every as f64 * self.dt)
+    }
+
+    /// The base's x position at the last reset.
+    pub fn start_x(&self) -> f64 {
+        self.x0
     }
 
     /// When the last push on the base began (simulated seconds from the reset), if one did.

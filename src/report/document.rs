@@ -35,6 +35,19 @@ pub enum Block {
     },
 }
 
+impl Block {
+    /// A report clip: its MP4 with its poster, its GIF, and the episode's timing.
+    pub(crate) fn clip(clip: &super::videos::Clip) -> Block {
+        Block::Video {
+            video: clip.video.clone(),
+            gif: clip.gif.clone(),
+            poster: Some(clip.poster.clone()),
+            caption: clip.caption.clone(),
+            timing: Some((clip.duration, clip.fps)),
+        }
+    }
+}
+
 #[derive(Debug, Clone, Default, PartialEq)]
 pub(crate) struct Document {
     pub(crate) title: String,
@@ -77,13 +90,7 @@ impl Document {
     }
 
     pub(crate) fn video(&mut self, clip: &super::videos::Clip) {
-        self.blocks.push(Block::Video {
-            video: clip.video.clone(),
-            gif: clip.gif.clone(),
-            poster: Some(clip.poster.clone()),
-            caption: clip.caption.clone(),
-            timing: Some((clip.duration, clip.fps)),
-        });
+        self.blocks.push(Block::clip(clip));
     }
 
     /// Puts `blocks` before the block at `index` (what was written later but is read first).

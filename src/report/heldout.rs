@@ -170,9 +170,7 @@ impl BudgetRow {
             }
         }
         for row in &mut rows {
-            let mut seeds: Vec<u64> = row.evaluated.iter().map(|s| s.seed).collect();
-            seeds.sort_unstable();
-            row.duplicate_seeds = seeds.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect();
+            row.duplicate_seeds = duplicate_seeds(&row.evaluated);
         }
         Ok(rows)
     }
@@ -210,7 +208,13 @@ impl BudgetRow {
     }
 }
 
-/// Evaluates `runs` (one group) at `budget`.
+/// Seeds that more than one of `evaluated` used (a seed used k times is listed k - 1 times).
+fn duplicate_seeds(evaluated: &[SeedResult]) -> Vec<u64> {
+    let mut seeds: Vec<u64> = evaluated.iter().map(|s| s.seed).collect();
+    seeds.sort_unstable();
+    seeds.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect()
+}
+
 /// Evaluates `runs` (one group) at `budget`, optionally under a push.
 pub(crate) fn evaluate_row(
     group: &Group,
@@ -248,9 +252,7 @@ pub(crate) fn evaluate_row(
             walls.push(w);
         }
     }
-    let mut seeds: Vec<u64> = row.evaluated.iter().map(|s| s.seed).collect();
-    seeds.sort_unstable();
-    row.duplicate_seeds = seeds.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect();
+    row.duplicate_seeds = duplicate_seeds(&row.evaluated);
     row.mixed_provenance = machines.len() > 1;
     row.provenance = machines.into_iter().collect::<Vec<_>>().join("; ");
     if !walls.is_empty() && walls.len() == row.evaluated.len() {

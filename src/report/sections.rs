@@ -838,10 +838,6 @@ pub(crate) fn summary(
         }
     }
     let mut blocks = vec![Block::Paragraph(text)];
-    let mut doc = super::document::Document::new("");
-    if let Some(c) = winner_clip {
-        doc.video(c);
-    }
-    blocks.extend(doc.blocks);
+    blocks.extend(winner_clip.map(Block::clip));
     blocks
 }
