@@ -152,6 +152,11 @@ pub struct TrainArgs {
     /// more cores.
     #[arg(long, value_name = "1|2", value_parser = clap::value_parser!(u8).range(1..=2))]
     pub threads: Option<u8>,
+    /// Where the networks train: cpu (the exact fused path), or cuda / cuda:N (a GPU, through
+    /// the device-generic path; needs a build with the `cuda` feature, docs/gpu.md). TD3, DDPG,
+    /// SAC and CrossQ.
+    #[arg(long, default_value = "cpu", value_name = "cpu|cuda[:N]")]
+    pub device: crate::device::ComputeDevice,
 }
 
 impl Default for TrainArgs {
@@ -176,6 +181,7 @@ impl Default for TrainArgs {
             tensorboard: None,
             record_every: 1,
             threads: None,
+            device: crate::device::ComputeDevice::Cpu,
         }
     }
 }
@@ -230,6 +236,9 @@ impl TrainArgs {
         if let Some(t) = self.threads {
             push("--threads", t.to_string());
         }
+        if self.device != crate::device::ComputeDevice::Cpu {
+            push("--device", self.device.to_string());
+        }
         for (flag, on) in
             [("--force", self.force), ("--resume-if-exists", self.resume_if_exists), ("--quiet", self.quiet)]
         {
@@ -273,6 +282,7 @@ mod tests {
             record: Some("t.rrd".into()),
             record_every: 3,
             threads: Some(1),
+            device: crate::device::ComputeDevice::Cuda(1),
             resume_if_exists: true,
             ..TrainArgs::default()
         };

@@ -4,6 +4,7 @@
 pub mod agents;
 pub mod args;
 pub mod controller;
+pub mod device;
 pub mod docgen;
 pub mod envs;
 pub mod evaluation;

@@ -448,3 +448,54 @@ fn every_kind_of_policy_reference_loads_the_same_policy_everywhere() {
         assert!(!ok && err.contains(expect), "{args:?}: {err}");
     }
 }
+
+#[test]
+fn device_commands_compare_the_paths_and_refuse_what_they_cannot_do() {
+    let (ok, out, err) = locobench(&["device", "check"]);
+    assert!(ok, "{err}");
+    let rows: Vec<&str> = out.lines().skip(1).collect();
+    assert_eq!(rows.len(), 4, "{out}");
+    for (row, algo) in rows.iter().zip(["td3", "ddpg", "sac", "crossq"]) {
+        assert!(row.starts_with(&format!("{algo},cpu,100,")) && row.ends_with(",true"), "{row}");
+    }
+    let (ok, out, err) = locobench(&[
+        "device",
+        "speed",
+        "--algo",
+        "sac",
+        "--hidden",
+        "16,16",
+        "--batch",
+        "8",
+        "--seconds",
+        "0.2",
+        "--header",
+    ]);
+    assert!(ok, "{err}");
+    let row = out.lines().nth(1).unwrap();
+    assert!(row.starts_with("sac,cpu,generic,16-16,,8,"), "{row}");
+
+    let (ok, _, err) = locobench(&["device", "speed", "--algo", "sac", "--path", "fused", "--device", "cuda"]);
+    assert!(!ok && err.contains("fused path runs on the CPU only"), "{err}");
+    let (ok, _, err) = locobench(&["device", "speed", "--algo", "ppo", "--seconds", "0.1"]);
+    assert!(!ok && err.contains("no device-generic path"), "{err}");
+    if !cfg!(feature = "cuda") {
+        let dir = tempfile::tempdir().unwrap();
+        let out_dir = dir.path().join("run");
+        let (ok, _, err) = locobench(&[
+            "train",
+            "--env",
+            "inverted-pendulum",
+            "--algo",
+            "td3",
+            "--device",
+            "cuda:1",
+            "--out",
+            out_dir.to_str().unwrap(),
+        ]);
+        assert!(!ok && err.contains("--device cuda:1") && err.contains("without the `cuda` feature"), "{err}");
+        assert!(!out_dir.exists(), "a refused run left {}", out_dir.display());
+        let (ok, _, err) = locobench(&["train", "--env", "inverted-pendulum", "--algo", "td3", "--device", "tpu"]);
+        assert!(!ok && err.contains("unknown device 'tpu'"), "{err}");
+    }
+}

@@ -17,13 +17,13 @@ use super::{layer_sizes, Agent, Losses};
 use crate::numeric::batch_renorm::{batch_renorm, RenormLimits, RenormMode};
 use crate::numeric::dense::dense;
 use crate::numeric::inplace::Activation;
-use crate::numeric::optim::Adam;
+use crate::numeric::optim::{Adam, Optimizer};
 
 /// Batch renormalisation's limits on r and d (Ioffe 2017; sbx's `BatchRenorm`).
-const R_MAX: f64 = 3.0;
-const D_MAX: f64 = 5.0;
+pub(crate) const R_MAX: f64 = 3.0;
+pub(crate) const D_MAX: f64 = 5.0;
 /// Added to every variance (sbx, flax).
-const EPSILON: f64 = 1e-3;
+pub(crate) const EPSILON: f64 = 1e-3;
 
 /// Batch renormalisation over the batch dimension of `[n, features]` inputs, with a learned
 /// scale and bias. In training mode it normalises with the batch's statistics, corrected towards
@@ -271,9 +271,9 @@ impl Agent for CrossqAgent {
         out
     }
 
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
         vec![
-            ("actor_opt", &mut self.actor_opt),
+            ("actor_opt", &mut self.actor_opt as &mut dyn Optimizer),
             ("critic_opt", &mut self.critic_opt),
             ("alpha_opt", &mut self.alpha_opt),
         ]

@@ -12,7 +12,7 @@ use super::nets::{batch_tensor, polyak_update, Mlp, Output};
 use super::noise::{Noise, NoiseKind};
 use super::{layer_sizes, Agent, Losses};
 use crate::numeric::objectives::{critic_minimum, td_target};
-use crate::numeric::optim::Adam;
+use crate::numeric::optim::{Adam, Optimizer};
 
 /// TD3 and DDPG: a deterministic actor, one or two critics, and target networks.
 pub struct DeterministicAgent {
@@ -164,8 +164,8 @@ impl Agent for DeterministicAgent {
         out
     }
 
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
-        vec![("actor_opt", &mut self.actor_opt), ("critic_opt", &mut self.critic_opt)]
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
+        vec![("actor_opt", &mut self.actor_opt as &mut dyn Optimizer), ("critic_opt", &mut self.critic_opt)]
     }
 
     fn counters(&self) -> Vec<(&'static str, u64)> {

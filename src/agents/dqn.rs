@@ -19,7 +19,7 @@ use super::buffer::Batch;
 use super::config::{Algo, TrainConfig};
 use super::nets::{batch_tensor, polyak_update, Mlp, Output};
 use super::{layer_sizes, Agent, Losses};
-use crate::numeric::optim::Adam;
+use crate::numeric::optim::{Adam, Optimizer};
 
 /// Branching DQN: a dueling network with one advantage head per action dimension.
 pub struct BranchingDqnAgent {
@@ -173,8 +173,8 @@ impl Agent for BranchingDqnAgent {
         out
     }
 
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
-        vec![("q_opt", &mut self.opt)]
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
+        vec![("q_opt", &mut self.opt as &mut dyn Optimizer)]
     }
 
     fn counters(&self) -> Vec<(&'static str, u64)> {

@@ -10,12 +10,13 @@ mod critics;
 pub mod crossq;
 mod dpg;
 pub mod dqn;
+pub mod generic;
 pub(crate) mod nets;
 pub mod noise;
 pub mod normalize;
 pub mod ppo;
 pub mod registry;
-mod sac;
+pub(crate) mod sac;
 
 use candle_core::{Result, Var};
 use rand_chacha::ChaCha8Rng;
@@ -36,7 +37,7 @@ pub use normalize::NormalizedAgent;
 pub use ppo::PpoAgent;
 pub use sac::SacAgent;
 
-use crate::numeric::optim::Adam;
+use crate::numeric::optim::Optimizer;
 
 /// Losses and temperature of one gradient update (None where the update did not touch them).
 #[derive(Debug, Clone, Copy, Default, PartialEq, serde::Serialize, serde::Deserialize)]
@@ -73,7 +74,7 @@ pub trait Agent: Send {
     /// Every network parameter, targets included, by checkpoint name.
     fn parameters(&self) -> Vec<(String, Var)>;
     /// The Adam optimisers by checkpoint name, to save and restore their moments.
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)>;
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)>;
     /// Counters that must survive a resume (updates done, noise steps).
     fn counters(&self) -> Vec<(&'static str, u64)>;
     /// Restores a counter saved by `counters`; unknown names are ignored.
@@ -84,6 +85,23 @@ pub trait Agent: Send {
 pub fn make_agent(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
     let agent = (registry::entry(cfg.algo).build)(cfg, obs_dim, act_dim, rng)?;
     // PPO keeps running statistics of its own (`agents::ppo`).
+    let frozen_statistics = cfg.normalize_observations && !cfg.algo.is_on_policy();
+    Ok(if frozen_statistics { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
+}
+
+/// [`make_agent`] on `device`: the fused agent on the CPU, the device-generic one
+/// ([`generic`]) elsewhere, from the same initial weights.
+pub fn make_agent_on(
+    cfg: &TrainConfig,
+    obs_dim: usize,
+    act_dim: usize,
+    rng: &mut ChaCha8Rng,
+    device: crate::device::ComputeDevice,
+) -> anyhow::Result<Box<dyn Agent>> {
+    if device == crate::device::ComputeDevice::Cpu {
+        return Ok(make_agent(cfg, obs_dim, act_dim, rng)?);
+    }
+    let agent = generic::make_generic_agent(cfg, obs_dim, act_dim, rng, &device.open()?)?;
     let frozen_statistics = cfg.normalize_observations && !cfg.algo.is_on_policy();
     Ok(if frozen_statistics { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
 }

@@ -15,7 +15,7 @@ use candle_core::{DType, Device, Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 
 use super::{Agent, Algo, Batch, Losses, ReplayBuffer};
-use crate::numeric::optim::Adam;
+use crate::numeric::optim::Optimizer;
 
 /// VecNormalize's defaults (Stable-Baselines3 `vec_normalize.py`).
 pub(crate) const CLIP: f32 = 10.0;
@@ -125,7 +125,7 @@ impl Agent for NormalizedAgent {
         out
     }
 
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
         self.inner.optimizers()
     }
 

@@ -21,7 +21,7 @@ use super::nets::{batch_tensor, orthogonal, DenseStack};
 use super::{layer_sizes, Agent, Losses};
 use crate::numeric::dense::dense;
 use crate::numeric::inplace::Activation;
-use crate::numeric::optim::Adam;
+use crate::numeric::optim::{Adam, Optimizer};
 
 /// gymnasium's `NormalizeObservation` epsilon and the clip CleanRL applies after it.
 const OBS_EPSILON: f64 = 1e-8;
@@ -374,8 +374,8 @@ impl Agent for PpoAgent {
         out
     }
 
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
-        vec![("actor_opt", &mut self.actor_opt), ("critic_opt", &mut self.critic_opt)]
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
+        vec![("actor_opt", &mut self.actor_opt as &mut dyn Optimizer), ("critic_opt", &mut self.critic_opt)]
     }
 
     fn counters(&self) -> Vec<(&'static str, u64)> {

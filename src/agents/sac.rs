@@ -11,7 +11,7 @@ use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
 use super::{layer_sizes, Agent, Losses};
 use crate::numeric::objectives::{actor_objective, critic_input, soft_value, td_target};
-use crate::numeric::optim::Adam;
+use crate::numeric::optim::{Adam, Optimizer};
 use crate::numeric::squashed::squashed_sample;
 
 /// The policy's log-std is clamped to this range (SAC's and CrossQ's).
@@ -219,8 +219,9 @@ impl Agent for SacAgent {
         out
     }
 
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut Adam)> {
-        let mut out = vec![("actor_opt", &mut self.actor_opt), ("critic_opt", &mut self.critic_opt)];
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
+        let mut out: Vec<(&str, &mut dyn Optimizer)> =
+            vec![("actor_opt", &mut self.actor_opt), ("critic_opt", &mut self.critic_opt)];
         if let Some(o) = &mut self.alpha_opt {
             out.push(("alpha_opt", o));
         }

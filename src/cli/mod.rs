@@ -1,5 +1,6 @@
 //! The `locobench` command line.
 mod baseline;
+mod device;
 mod docs;
 mod envs;
 mod eval;
@@ -61,6 +62,11 @@ enum Command {
     Sweep(sweep::SweepArgs),
     /// Rewrite the generated sections of README.md and docs/ from the committed result files.
     Docs(docs::DocsArgs),
+    /// GPU checks: the device-generic path against the fused CPU path, and update speed.
+    #[command(
+        after_help = "Examples:\n  locobench device check --device cuda\n  locobench device speed --algo crossq --device cuda --critic-hidden 2048,2048"
+    )]
+    Device(device::DeviceArgs),
 }
 
 pub fn run() -> Result<()> {
@@ -75,6 +81,7 @@ pub fn run() -> Result<()> {
         Command::Report(args) => report::run(args),
         Command::Sweep(args) => sweep::run(args),
         Command::Docs(args) => docs::run(args),
+        Command::Device(args) => device::run(args),
     }
 }
 

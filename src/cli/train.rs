@@ -19,6 +19,7 @@ pub fn run(args: TrainArgs) -> Result<()> {
         video_every: args.video_every,
         tensorboard: args.tensorboard.clone(),
         threads: args.threads.map(usize::from).unwrap_or_else(default_threads),
+        device: args.device,
         ..Default::default()
     };
     let summary = if let Some(dir) = &args.resume {
@@ -142,7 +143,7 @@ fn note_resume_caveat(dir: &std::path::Path, control: &RunControl) -> Result<()>
         _ => false,
     };
     if !finished {
-        if let Some(note) = train::provenance::resume_caveat_for(dir, control.threads)? {
+        if let Some(note) = train::provenance::resume_caveat_for(dir, control.threads, control.device)? {
             println!("note: {note}");
         }
     }

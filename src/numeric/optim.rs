@@ -32,6 +32,21 @@ impl From<Var> for Param {
     }
 }
 
+/// An optimiser's state as a checkpoint holds it: named tensors (on the CPU) and a step count.
+/// The fused [`Adam`] and the device-generic one (`agents::generic::adam`) write the same names,
+/// so a checkpoint moves between them.
+pub trait Optimizer {
+    /// Moments as named CPU tensors plus the step count.
+    fn state(&self, prefix: &str) -> Result<(Vec<(String, Tensor)>, u64)>;
+    /// Restores the moments and step count saved under `prefix`.
+    fn load_state(
+        &mut self,
+        prefix: &str,
+        tensors: &std::collections::HashMap<String, Tensor>,
+        step: u64,
+    ) -> anyhow::Result<()>;
+}
+
 /// Adam (Kingma and Ba, 2015) over candle variables, updated in place with fixed-order arithmetic.
 pub struct Adam {
     /// Learning rate.
@@ -91,9 +106,10 @@ impl Adam {
         }
         Ok(())
     }
+}
 
-    /// Moments as named tensors plus the step count, for checkpoints.
-    pub fn state(&self, prefix: &str) -> Result<(Vec<(String, Tensor)>, u64)> {
+impl Optimizer for Adam {
+    fn state(&self, prefix: &str) -> Result<(Vec<(String, Tensor)>, u64)> {
         let mut out = Vec::new();
         for (i, (m, v)) in self.m.iter().zip(&self.v).enumerate() {
             out.push((format!("{prefix}.{i}.m"), Tensor::from_slice(m, m.len(), &Device::Cpu)?));
@@ -102,8 +118,7 @@ impl Adam {
         Ok((out, self.step))
     }
 
-    /// Restores the moments and step count saved under `prefix`.
-    pub fn load_state(
+    fn load_state(
         &mut self,
         prefix: &str,
         tensors: &std::collections::HashMap<String, Tensor>,

@@ -62,6 +62,11 @@ const CHECKPOINTS_WITH_BUFFER: usize = 2;
 /// An exported policy: the actor's tensors only (`train::export_policy`).
 pub(crate) const POLICY_FILE: &str = "policy.safetensors";
 
+/// A parameter as a CPU tensor (a copy from the GPU when it lives there), for writing.
+fn host(name: String, var: &candle_core::Var) -> Result<(String, Tensor)> {
+    Ok((name, var.as_tensor().to_device(&Device::Cpu)?))
+}
+
 fn is_actor(name: &str) -> bool {
     name.starts_with("actor.")
 }
@@ -69,7 +74,7 @@ fn is_actor(name: &str) -> bool {
 /// Writes the actor's tensors (not its target) atomically.
 pub(crate) fn save_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
     let params: HashMap<String, Tensor> =
-        agent.parameters().into_iter().filter(|(n, _)| is_actor(n)).map(|(n, v)| (n, v.as_tensor().clone())).collect();
+        agent.parameters().into_iter().filter(|(n, _)| is_actor(n)).map(|(n, v)| host(n, &v)).collect::<Result<_>>()?;
     anyhow::ensure!(!params.is_empty(), "this agent has no actor to export");
     let dir = path.parent().unwrap_or(Path::new("."));
     let tmp = tempfile::Builder::new().prefix(".policy-").suffix(".safetensors").tempfile_in(dir)?;
@@ -100,7 +105,7 @@ pub(crate) fn load_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
             t.dims(),
             var.dims()
         );
-        var.set(&t.to_dtype(var.dtype())?)?;
+        var.set(&t.to_dtype(var.dtype())?.to_device(var.device())?)?;
     }
     Ok(())
 }
@@ -170,7 +175,7 @@ fn write_files(
     trainer_files: impl FnOnce(&Path) -> Result<()>,
 ) -> Result<()> {
     let params: HashMap<String, Tensor> =
-        agent.parameters().into_iter().map(|(n, v)| (n, v.as_tensor().clone())).collect();
+        agent.parameters().into_iter().map(|(n, v)| host(n, &v)).collect::<Result<_>>()?;
     candle_core::safetensors::save(&params, dir.join("model.safetensors"))?;
     fault::reach(Point::CheckpointWrite);
 
@@ -429,7 +434,7 @@ pub(crate) fn load_weights(checkpoint: &Path, agent: &dyn Agent) -> Result<()> {
                 var.dims()
             );
         }
-        var.set(&t.to_dtype(var.dtype())?)?;
+        var.set(&t.to_dtype(var.dtype())?.to_device(var.device())?)?;
     }
     Ok(())
 }

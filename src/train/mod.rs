@@ -29,7 +29,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::agents::{make_agent, Agent, Batch, Losses, ReplayBuffer, TrainConfig};
+use crate::agents::{make_agent_on, Agent, Batch, Losses, ReplayBuffer, TrainConfig};
+use crate::device::ComputeDevice;
 use crate::envs::{make, Env, EnvConfig};
 use crate::io::write_bytes_atomic;
 use crate::policy::to_env_action;
@@ -112,6 +113,10 @@ pub struct RunControl {
     /// run in two halves on both cores (`numeric::second_core`); results are the same bit for
     /// bit. 0 or 1: the training thread alone (parallel runs, e.g. a sweep's jobs).
     pub threads: usize,
+    /// Where the networks train: the CPU's exact fused path (the default), or a CUDA device
+    /// through the device-generic path (`agents::generic`), whose numbers differ from the CPU's
+    /// in the last bits.
+    pub device: ComputeDevice,
     /// Called after every in-training evaluation (after its metrics row is written); returning
     /// `true` finishes the run there, as reaching `target_return` does. The time it takes counts
     /// in the run's wall time.
@@ -277,20 +282,27 @@ pub fn train(
         train,
     };
     if run.train.algo.is_on_policy() {
+        refuse_device(&run.train, control.device)?;
         std::fs::create_dir_all(run_dir)?;
         let _lock = run_lock::RunLock::acquire(run_dir)?;
         write_bytes_atomic(&run_dir.join("config.toml"), run.to_toml()?.as_bytes())?;
-        provenance::append(run_dir, provenance::Stretch::here(0, control.threads, run.git_commit.as_deref()))?;
+        provenance::append(
+            run_dir,
+            provenance::Stretch::here(0, control.threads, run.git_commit.as_deref()).on(control.device),
+        )?;
         return on_policy::train(run_dir, &run, init.as_ref(), control);
     }
-    let mut trainer = Trainer::new(run_dir, &run)?;
+    let mut trainer = Trainer::new(run_dir, &run, control.device)?;
     if let Some(policy) = &init {
         policy.load_into(trainer.agent.as_ref())?;
     }
     std::fs::create_dir_all(run_dir)?;
     let _lock = run_lock::RunLock::acquire(run_dir)?;
     write_bytes_atomic(&run_dir.join("config.toml"), run.to_toml()?.as_bytes())?;
-    provenance::append(run_dir, provenance::Stretch::here(0, control.threads, run.git_commit.as_deref()))?;
+    provenance::append(
+        run_dir,
+        provenance::Stretch::here(0, control.threads, run.git_commit.as_deref()).on(control.device),
+    )?;
     trainer.run(control)
 }
 
@@ -372,10 +384,14 @@ pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
         });
     }
     if run.train.algo.is_on_policy() {
-        provenance::append(run_dir, provenance::Stretch::here(saved.step, control.threads, git_commit().as_deref()))?;
+        refuse_device(&run.train, control.device)?;
+        provenance::append(
+            run_dir,
+            provenance::Stretch::here(saved.step, control.threads, git_commit().as_deref()).on(control.device),
+        )?;
         return on_policy::resume(run_dir, &run, &ckpt, metrics, control);
     }
-    let mut trainer = Trainer::new(run_dir, &run)?;
+    let mut trainer = Trainer::new(run_dir, &run, control.device)?;
     let (state, buffer) = checkpoint::load_all(&ckpt, trainer.agent.as_mut())?;
     trainer.buffer = buffer;
     trainer.rng = state.rng.restore()?;
@@ -385,8 +401,19 @@ pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
     trainer.losses = state.losses;
     trainer.best_eval = state.best_eval_mean;
     trainer.metrics = metrics;
-    provenance::append(run_dir, provenance::Stretch::here(state.step, control.threads, git_commit().as_deref()))?;
+    provenance::append(
+        run_dir,
+        provenance::Stretch::here(state.step, control.threads, git_commit().as_deref()).on(control.device),
+    )?;
     trainer.run(control)
+}
+
+/// On-policy agents train on the CPU only (they have no device-generic path yet).
+fn refuse_device(cfg: &TrainConfig, device: ComputeDevice) -> Result<()> {
+    if device != ComputeDevice::Cpu {
+        bail!("--device {device}: {} has no device-generic path yet; train it with --device cpu", cfg.algo.name());
+    }
+    Ok(())
 }
 
 struct Trainer {
@@ -413,12 +440,12 @@ struct Trainer {
 }
 
 impl Trainer {
-    fn new(run_dir: &Path, run: &RunConfig) -> Result<Trainer> {
+    fn new(run_dir: &Path, run: &RunConfig, device: ComputeDevice) -> Result<Trainer> {
         let env = make(&run.env)?;
         check_bounded_actions(&run.env.name, &env.spec().action_space, run.train.algo)?;
         let eval_env = make(&run.env)?;
         let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
-        let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
+        let agent = make_agent_on(&run.train, obs_dim, act_dim, &mut init_rng(run.seed), device)?;
         Ok(Trainer {
             run_dir: run_dir.to_path_buf(),
             env_config: run.env.clone(),

@@ -35,6 +35,14 @@ pub struct Stretch {
     pub threads: usize,
     /// MuJoCo's library version, as `mj_version` reports it (222 for 2.2.2).
     pub mujoco_version: i32,
+    /// Where the networks trained: `cpu` (the fused path) or `cuda:N` (the device-generic path).
+    /// Files written before this column existed read as `cpu`.
+    #[serde(default = "cpu_device")]
+    pub device: String,
+}
+
+fn cpu_device() -> String {
+    "cpu".into()
 }
 
 impl Stretch {
@@ -49,7 +57,13 @@ impl Stretch {
             kernel_path: kernel_path::active().to_string(),
             threads: threads.max(1),
             mujoco_version: crate::mujoco::version(),
+            device: cpu_device(),
         }
+    }
+
+    /// The same stretch, trained on `device`.
+    pub fn on(self, device: crate::device::ComputeDevice) -> Stretch {
+        Stretch { device: device.to_string(), ..self }
     }
 }
 
@@ -120,7 +134,13 @@ pub(crate) fn resume_caveat(last: Option<&Stretch>, here: &Stretch) -> Option<St
         );
     };
     let exact = |s: &Stretch| s.kernel_path != "library";
-    let why = if exact(last) != exact(here) {
+    let why = if last.device != here.device {
+        format!(
+            "its last stretch trained on {}, this one on {}, and the fused CPU path and the device-generic path \
+             round differently (the run continues from the same weights, optimiser state and counters)",
+            last.device, here.device
+        )
+    } else if exact(last) != exact(here) {
         format!("its last stretch ran on the {} kernels, this one on {}", last.kernel_path, here.kernel_path)
     } else if !exact(here) && (last.cpu_model != here.cpu_model || last.simd != here.simd) {
         format!(
@@ -140,9 +160,13 @@ pub(crate) fn resume_caveat(last: Option<&Stretch>, here: &Stretch) -> Option<St
 }
 
 /// [`resume_caveat`] for `run_dir` resumed by this process with `threads`.
-pub fn resume_caveat_for(run_dir: &Path, threads: usize) -> Result<Option<String>> {
+pub fn resume_caveat_for(
+    run_dir: &Path,
+    threads: usize,
+    device: crate::device::ComputeDevice,
+) -> Result<Option<String>> {
     let rows = read(run_dir)?;
-    Ok(resume_caveat(rows.last(), &Stretch::here(0, threads, super::git_commit().as_deref())))
+    Ok(resume_caveat(rows.last(), &Stretch::here(0, threads, super::git_commit().as_deref()).on(device)))
 }
 
 #[cfg(test)]
@@ -182,6 +206,7 @@ mod tests {
             kernel_path: "avx512".into(),
             threads: 2,
             mujoco_version: 222,
+            device: "cpu".into(),
         };
         let with = |f: &dyn Fn(&mut Stretch)| {
             let mut s = base.clone();
@@ -216,5 +241,16 @@ mod tests {
             .unwrap()
             .contains("MuJoCo 222, this one on 300"));
         assert!(resume_caveat(None, &base).unwrap().contains("predates"));
+        let gpu = with(&|s| s.device = "cuda:0".into());
+        assert!(resume_caveat(Some(&base), &gpu).unwrap().contains("trained on cpu, this one on cuda:0"));
+        assert_eq!(resume_caveat(Some(&gpu), &gpu), None);
+    }
+
+    #[test]
+    fn files_without_the_device_column_read_as_cpu() {
+        let dir = tempfile::tempdir().unwrap();
+        let header = "from_step,git_commit,crate_version,cpu_model,simd,kernel_path,threads,mujoco_version";
+        std::fs::write(dir.path().join(FILE), format!("{header}\n0,abc,0.1.0,AMD,avx2,avx2,2,222\n")).unwrap();
+        assert_eq!(read(dir.path()).unwrap()[0].device, "cpu");
     }
 }

@@ -1,0 +1,111 @@
+//! Update speed of one agent on one device (`locobench device speed`), and the cost of the
+//! per-update host-to-device copy of the batch. Every timed update reads its losses back, so the
+//! clock sees the device's work, not just its queue.
+use std::time::Instant;
+
+use candle_core::{Device, Tensor};
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+
+use super::{make_generic_agent, DeviceBatch};
+use crate::agents::{make_agent, Algo, Batch, TrainConfig};
+
+/// Which implementation to time.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Path {
+    /// The exact fused CPU path.
+    Fused,
+    /// The device-generic path on the given device.
+    Generic,
+}
+
+/// One measurement.
+#[derive(Debug, Clone)]
+pub struct Speed {
+    /// Updates per second over the timed stretch.
+    pub updates_per_s: f64,
+    /// Updates timed.
+    pub updates: u64,
+    /// Microseconds per batch upload (one host-to-device copy, then a read-back of one value
+    /// to wait for it); 0 for the fused path, which copies nothing.
+    pub upload_us: f64,
+}
+
+fn random_batch(rng: &mut ChaCha8Rng, n: usize, obs: usize, act: usize) -> Batch {
+    let mut u = |count: usize| -> Vec<f32> { (0..count).map(|_| rng.random_range(-1.0f32..1.0)).collect() };
+    Batch {
+        size: n,
+        obs: u(n * obs),
+        actions: u(n * act),
+        rewards: u(n),
+        next_obs: u(n * obs),
+        terminated: (0..n).map(|i| if i % 50 == 0 { 1.0 } else { 0.0 }).collect(),
+    }
+}
+
+/// Times `cfg`'s updates for about `seconds` after `warmup` untimed ones, on HalfCheetah-sized
+/// inputs (`obs`, `act`).
+pub fn measure(
+    cfg: &TrainConfig,
+    obs: usize,
+    act: usize,
+    path: Path,
+    device: &Device,
+    warmup: usize,
+    seconds: f64,
+) -> anyhow::Result<Speed> {
+    let mut init = ChaCha8Rng::seed_from_u64(0);
+    let mut agent = match path {
+        Path::Fused => make_agent(cfg, obs, act, &mut init)?,
+        Path::Generic => make_generic_agent(cfg, obs, act, &mut init, device)?,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let batches: Vec<Batch> = (0..16).map(|_| random_batch(&mut rng, cfg.batch_size, obs, act)).collect();
+    for b in batches.iter().cycle().take(warmup) {
+        agent.update(b, &mut rng)?;
+    }
+    let start = Instant::now();
+    let mut updates = 0u64;
+    while start.elapsed().as_secs_f64() < seconds {
+        agent.update(&batches[updates as usize % batches.len()], &mut rng)?;
+        updates += 1;
+    }
+    let updates_per_s = updates as f64 / start.elapsed().as_secs_f64();
+
+    let upload_us = if path == Path::Generic {
+        let noise = vec![vec![0.0; cfg.batch_size * act]; 2];
+        let rounds = 200;
+        let start = Instant::now();
+        for b in batches.iter().cycle().take(rounds) {
+            let d = DeviceBatch::upload(b, obs, act, &noise, device)?;
+            let _: Vec<f32> = d.rewards.narrow(0, 0, 1)?.flatten_all()?.to_vec1()?;
+        }
+        start.elapsed().as_secs_f64() * 1e6 / rounds as f64
+    } else {
+        0.0
+    };
+    Ok(Speed { updates_per_s, updates, upload_us })
+}
+
+/// Microseconds per read-back of one value already on the device (the floor under any
+/// synchronisation).
+pub fn readback_us(device: &Device) -> anyhow::Result<f64> {
+    let t = Tensor::new(&[1f32], device)?;
+    let rounds = 200;
+    let start = Instant::now();
+    for _ in 0..rounds {
+        let _: Vec<f32> = (&t + 1.0)?.to_vec1()?;
+    }
+    Ok(start.elapsed().as_secs_f64() * 1e6 / rounds as f64)
+}
+
+/// `algo`'s default configuration with the given widths and batch size.
+pub fn sized_config(algo: Algo, hidden: &[usize], critic_hidden: Option<&[usize]>, batch: usize) -> TrainConfig {
+    let mut cfg = TrainConfig::defaults(algo);
+    cfg.hidden = hidden.to_vec();
+    cfg.batch_size = batch;
+    if let (Some(c), Some(w)) = (cfg.crossq.as_mut(), critic_hidden) {
+        c.critic_hidden = w.to_vec();
+    }
+    cfg
+}

@@ -1,0 +1,105 @@
+//! The comparison (`check`) on the CPU, per algorithm.
+use candle_core::Device;
+use rand::SeedableRng;
+use rand_chacha::ChaCha8Rng;
+
+use super::check::{compare, config, tolerance, ACT, OBS, UPDATES};
+use super::make_generic_agent;
+use crate::agents::{make_agent, Algo, TrainConfig};
+
+fn check(algo: Algo) {
+    let gap = compare(algo, &Device::Cpu, UPDATES);
+    let tol = tolerance(algo);
+    eprintln!("{algo:?}: largest loss gap {:.2e}, weight gap {:.2e} ({})", gap.loss, gap.weight, gap.weight_name);
+    assert!(gap.loss <= tol.loss, "{algo:?}: losses differ by {:.3e} (relative), over {:.0e}", gap.loss, tol.loss);
+    assert!(
+        gap.weight <= tol.weight,
+        "{algo:?}: weight {} differs by {:.3e}, over {:.0e}",
+        gap.weight_name,
+        gap.weight,
+        tol.weight
+    );
+}
+
+#[test]
+fn td3_generic_path_follows_the_fused_one() {
+    check(Algo::Td3);
+}
+
+#[test]
+fn ddpg_generic_path_follows_the_fused_one() {
+    check(Algo::Ddpg);
+}
+
+#[test]
+fn sac_generic_path_follows_the_fused_one() {
+    check(Algo::Sac);
+}
+
+#[test]
+fn crossq_generic_path_follows_the_fused_one() {
+    check(Algo::Crossq);
+}
+
+#[test]
+fn generic_path_refuses_what_it_does_not_cover() {
+    for algo in [Algo::Ppo, Algo::Dqn] {
+        let err =
+            make_generic_agent(&TrainConfig::defaults(algo), OBS, ACT, &mut ChaCha8Rng::seed_from_u64(1), &Device::Cpu)
+                .err()
+                .unwrap()
+                .to_string();
+        assert!(err.contains("no device-generic path") && err.contains("--device cpu"), "{err}");
+    }
+}
+
+#[test]
+fn acting_agrees_with_the_fused_path() {
+    for algo in [Algo::Td3, Algo::Sac, Algo::Crossq] {
+        let cfg = config(algo);
+        let fused = make_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(2)).unwrap();
+        let mut generic = make_generic_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(2), &Device::Cpu).unwrap();
+        let obs: Vec<f32> = (0..OBS).map(|i| i as f32 * 0.3 - 1.0).collect();
+        let (a, b) = (fused.act(&obs).unwrap(), generic.act(&obs).unwrap());
+        assert_eq!(a.len(), ACT);
+        for (x, y) in a.iter().zip(&b) {
+            assert!((x - y).abs() < 1e-5, "{algo:?}: {a:?} vs {b:?}");
+        }
+        let e = generic.explore(&obs, &mut ChaCha8Rng::seed_from_u64(4)).unwrap();
+        assert!(e.iter().all(|v| v.abs() <= 1.0) && e.len() == ACT);
+    }
+}
+
+#[test]
+fn a_fused_checkpoints_state_continues_on_the_generic_path() {
+    // What a checkpoint holds (parameters by name, optimiser moments by name, counters) moves
+    // from the fused agent into the generic one, which then updates as the fused one does.
+    for algo in [Algo::Td3, Algo::Sac, Algo::Crossq] {
+        let cfg = config(algo);
+        let mut fused = make_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(21)).unwrap();
+        // another seed: every weight must come from the fused agent's state
+        let mut generic = make_generic_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(99), &Device::Cpu).unwrap();
+        let mut data = ChaCha8Rng::seed_from_u64(3);
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        for _ in 0..7 {
+            fused.update(&super::check::batch_for_tests(&mut data, cfg.batch_size), &mut rng).unwrap();
+        }
+        for ((name, theirs), (other, ours)) in fused.parameters().iter().zip(generic.parameters()) {
+            assert_eq!(name, &other);
+            ours.set(theirs.as_tensor()).unwrap();
+        }
+        let states: Vec<_> = fused.optimizers().iter().map(|(n, o)| (n.to_string(), o.state(n).unwrap())).collect();
+        for ((name, opt), (saved_name, (tensors, steps))) in generic.optimizers().into_iter().zip(&states) {
+            assert_eq!(name, saved_name);
+            opt.load_state(name, &tensors.iter().cloned().collect(), *steps).unwrap();
+        }
+        for (name, value) in fused.counters() {
+            generic.set_counter(name, value);
+        }
+        let b = super::check::batch_for_tests(&mut data, cfg.batch_size);
+        let (mut rf, mut rg) = (ChaCha8Rng::seed_from_u64(8), ChaCha8Rng::seed_from_u64(8));
+        let (lf, lg) = (fused.update(&b, &mut rf).unwrap(), generic.update(&b, &mut rg).unwrap());
+        assert!((lf.critic - lg.critic).abs() <= 1e-5 * (1.0 + lf.critic.abs()), "{algo:?}: {lf:?} vs {lg:?}");
+        assert_eq!(lf.actor.is_some(), lg.actor.is_some(), "{algo:?}: the counters did not carry over");
+    }
+}
