@@ -124,6 +124,7 @@ fn main() -> Result<()> {
             set: block.set.iter().map(|s| s.to_string()).collect(),
             options: vec![],
             tensorboard: false,
+            device: locobench::device::ComputeDevice::Cpu,
         };
         let dir = out.join(block.env);
         let js = jobs(&spec, &dir)?;

@@ -7,8 +7,9 @@ use std::str::FromStr;
 use anyhow::{bail, Result};
 use serde::{Deserialize, Serialize};
 
-/// A compute device as the command line names it.
+/// A compute device as the command line names it (and as files write it: `cpu`, `cuda:0`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
+#[serde(try_from = "String", into = "String")]
 pub enum ComputeDevice {
     /// The CPU, with the exact fused kernels.
     #[default]
@@ -29,6 +30,20 @@ impl FromStr for ComputeDevice {
                 _ => bail!("unknown device '{s}': expected cpu, cuda or cuda:N (N a GPU index, 0 first)"),
             },
         }
+    }
+}
+
+impl TryFrom<String> for ComputeDevice {
+    type Error = anyhow::Error;
+
+    fn try_from(s: String) -> Result<ComputeDevice> {
+        s.parse()
+    }
+}
+
+impl From<ComputeDevice> for String {
+    fn from(d: ComputeDevice) -> String {
+        d.to_string()
     }
 }
 
@@ -85,6 +100,13 @@ mod tests {
             assert_eq!(text.parse::<ComputeDevice>().unwrap(), device);
         }
         assert_eq!(ComputeDevice::Cuda(2).to_string(), "cuda:2");
+        #[derive(Serialize, Deserialize)]
+        struct File {
+            device: ComputeDevice,
+        }
+        let text = toml::to_string(&File { device: ComputeDevice::Cuda(1) }).unwrap();
+        assert_eq!(text.trim(), "device = \"cuda:1\"");
+        assert_eq!(toml::from_str::<File>(&text).unwrap().device, ComputeDevice::Cuda(1));
         for bad in ["gpu", "cuda:", "cuda:x", "cuda:-1", "CPU"] {
             let err = bad.parse::<ComputeDevice>().unwrap_err().to_string();
             assert!(err.contains(&format!("'{bad}'")) && err.contains("cpu, cuda or cuda:N"), "{err}");

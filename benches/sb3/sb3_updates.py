@@ -82,6 +82,8 @@ def main():
     algos = sys.argv[3:] or ["td3", "sac", "crossq256", "crossq1024", "crossq2048", "ppo"]
     torch.set_num_threads(1)
     name = torch.cuda.get_device_name(0) if device == "cuda" else "cpu"
+    print(f"# stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}", flush=True)
+    print("library,algo,device,gpu,hidden,critic_hidden,count,rate,unit", flush=True)
     for a in algos:
         if a == "ppo":
             n, rate = ppo_epoch(device, seconds)
@@ -93,7 +95,6 @@ def main():
         hidden = {"td3": "400-300", "sac": "256-256", "crossq": "256-256"}[algo]
         critic = f"{width}-{width}" if width else ""
         print(f"sb3,{algo},{device},{name},{hidden},{critic},{n},{rate:.2f},updates_per_s", flush=True)
-    print(f"# stable-baselines3 {stable_baselines3.__version__}, torch {torch.__version__}", flush=True)
 
 
 if __name__ == "__main__":

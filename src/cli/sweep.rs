@@ -48,6 +48,10 @@ pub struct SweepArgs {
     /// (`tensorboard --logdir SWEEP/tensorboard`).
     #[arg(long)]
     pub tensorboard: bool,
+    /// Where every job trains: cpu, or cuda / cuda:N (`train --device`; jobs side by side share
+    /// the GPU).
+    #[arg(long, default_value = "cpu", value_name = "cpu|cuda[:N]")]
+    pub device: locobench::device::ComputeDevice,
     #[command(flatten)]
     pub slurm: SlurmArgs,
 }
@@ -126,6 +130,7 @@ pub fn run(args: SweepArgs) -> Result<()> {
         set: args.set.clone(),
         options: args.env_options.pairs(&env_name)?.into_iter().map(|(k, v)| format!("{k}={v}")).collect(),
         tensorboard: args.tensorboard,
+        device: args.device,
     };
     let jobs = jobs(&spec, &out)?;
     write_plan(&spec, &out, &jobs)?;

@@ -10,7 +10,7 @@ use crate::report::format::fixed;
 
 /// The newest `benches/results/<date>-<machine>/<file>`: only directories named for a date
 /// (`YYYY-MM-DD-...`) count, and they sort by that date, then by name.
-fn newest(results: &Path, file: &str) -> Result<PathBuf> {
+pub(super) fn newest(results: &Path, file: &str) -> Result<PathBuf> {
     let mut dirs: Vec<PathBuf> = std::fs::read_dir(results)
         .with_context(|| format!("reading {}", results.display()))?
         .filter_map(|e| e.ok().map(|e| e.path()))
@@ -48,7 +48,7 @@ fn source(path: &Path) -> String {
 }
 
 /// "From <source> (<the file's comment lines>)." : the first line of a section quoting a CSV.
-fn quoting(path: &Path) -> Result<String> {
+pub(super) fn quoting(path: &Path) -> Result<String> {
     Ok(format!("From {} ({}).", source(path), comments(path)?.join("; ")))
 }
 

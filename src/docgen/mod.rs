@@ -10,6 +10,7 @@
 mod benchmarks;
 mod csv_rows;
 mod envs;
+mod gpu;
 mod results;
 mod runs;
 
@@ -66,6 +67,17 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
             file: "docs/evaluation.md",
             name: "report-timing",
             text: benchmarks::report_timing(&root.join(BENCH_RESULTS_DIR))?,
+        },
+        Section { file: "docs/gpu.md", name: "gpu-speed", text: gpu::speed(&root.join(BENCH_RESULTS_DIR))? },
+        Section { file: "docs/gpu.md", name: "gpu-check", text: gpu::check(&root.join(BENCH_RESULTS_DIR))? },
+        Section {
+            file: "docs/gpu.md",
+            name: "gpu-crossq",
+            text: gpu::crossq_curve(
+                &root.join(BENCH_RESULTS_DIR),
+                Path::new("benches/results/half-cheetah/crossq-256-seed0"),
+                root,
+            )?,
         },
         Section { file: "docs/environments.md", name: "envs", text: envs::table()? },
         Section {

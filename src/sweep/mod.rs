@@ -80,6 +80,9 @@ pub struct SweepSpec {
     /// directory, so `tensorboard --logdir SWEEP/tensorboard` shows the runs side by side.
     #[serde(default)]
     pub tensorboard: bool,
+    /// Where every job trains (`train --device`); sweeps written before this key train on the CPU.
+    #[serde(default)]
+    pub device: crate::device::ComputeDevice,
 }
 
 /// One training run of a sweep.
@@ -160,6 +163,7 @@ pub fn jobs(spec: &SweepSpec, sweep_dir: &Path) -> Result<Vec<Job>> {
                     tensorboard: spec.tensorboard.then(|| sweep_dir.join("tensorboard").join(&name)),
                     resume_if_exists: true,
                     quiet: true,
+                    device: spec.device,
                     ..TrainArgs::default()
                 };
                 let args = train.to_args();
@@ -292,6 +296,7 @@ mod tests {
             set: vec!["hidden=[64,64]".into()],
             options: vec![],
             tensorboard: false,
+            device: crate::device::ComputeDevice::Cpu,
         };
         let jobs = jobs(&spec, Path::new("sw")).unwrap();
         assert_eq!(jobs.len(), 3 * 2 * 2);
@@ -317,6 +322,10 @@ mod tests {
         for job in &logged {
             let train = TrainArgs::parse_from(&job.args).unwrap();
             assert_eq!(train.tensorboard, Some(Path::new("sw/tensorboard").join(&job.name)));
+        }
+        // With --device, each job trains there.
+        for job in jobs_of(&SweepSpec { device: crate::device::ComputeDevice::Cuda(0), ..spec.clone() }) {
+            assert_eq!(TrainArgs::parse_from(&job.args).unwrap().device, crate::device::ComputeDevice::Cuda(0));
         }
     }
 

@@ -435,6 +435,7 @@ mod tests {
             set: vec![],
             options: vec![],
             tensorboard: false,
+            device: crate::device::ComputeDevice::Cpu,
         };
         let jobs = super::super::jobs(&spec, Path::new("/s/sw")).unwrap();
         let opts = SlurmOptions {
