@@ -12,6 +12,7 @@ from locobench._core import env_names_ as _env_names
 from locobench._core import episode_seed
 from locobench.envs import ENV_IDS, LocobenchEnv, register_envs
 from locobench.evaluation import evaluate
+from locobench.sb3 import import_sb3
 from locobench.policies import Controller, TrainedPolicy, load_policy
 from locobench.vector import LocobenchVectorEnv
 
@@ -25,6 +26,7 @@ __all__ = [
     "load_policy",
     "env_names",
     "evaluate",
+    "import_sb3",
     "register_envs",
 ]
 

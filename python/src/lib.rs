@@ -597,6 +597,25 @@ impl PyRenderer {
     }
 }
 
+/// Writes an exported policy from actor tensors by locobench's names (`locobench.import_sb3`):
+/// each tensor as (name, shape, values); checked against the agent `config` builds.
+#[pyfunction]
+fn import_policy(
+    out: PathBuf,
+    tensors: Vec<(String, Vec<usize>, Vec<f64>)>,
+    config: String,
+    source: String,
+) -> PyResult<String> {
+    let mut map = std::collections::HashMap::new();
+    for (name, shape, values) in tensors {
+        let t = candle_core::Tensor::from_vec(values, shape, &candle_core::Device::Cpu)
+            .map_err(|e| value_error(format!("tensor {name}: {e}")))?;
+        map.insert(name, t);
+    }
+    let path = locobench::train::import_policy(&out, map, &config, &source).map_err(runtime_error)?;
+    Ok(path.display().to_string())
+}
+
 #[pymodule]
 fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     locobench::runtime::configure_process();
@@ -608,5 +627,6 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyRenderer>()?;
     m.add_function(wrap_pyfunction!(env_names_, m)?)?;
     m.add_function(wrap_pyfunction!(evaluate, m)?)?;
+    m.add_function(wrap_pyfunction!(import_policy, m)?)?;
     Ok(())
 }

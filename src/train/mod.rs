@@ -45,7 +45,8 @@ use seeds::{init_rng, train_episode_seed, training_rng, RngState};
 pub use policy_ref::{resolve_policy, PolicyRef};
 pub use run_config::{read_run_config, RunConfig};
 pub use run_dir::{
-    budget_policy_steps, export_policy, has_policy, load_budget_policy, load_policy, run_progress, RunProgress,
+    budget_policy_steps, export_policy, has_policy, import_policy, load_budget_policy, load_policy, run_progress,
+    RunProgress,
 };
 
 /// The step budgets results are reported at (Henderson et al. 2018 and the TD3/SAC papers report

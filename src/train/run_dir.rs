@@ -89,6 +89,50 @@ pub fn export_policy(policy: &Path, budget: Option<u64>, out: &Path) -> Result<P
     Ok(out.join(checkpoint::POLICY_FILE))
 }
 
+/// Writes a policy trained elsewhere (`locobench.import_sb3`) as an exported policy in `out`:
+/// `policy.safetensors` from `tensors` (the actor's, by locobench's names), `config.toml` from
+/// `config` (a run config naming the env and the agent's shape) and `source.toml` from `source`.
+/// Every tensor is checked against the agent the config builds, by name and shape, before
+/// anything is written; `out` must not hold a policy already.
+pub fn import_policy(
+    out: &Path,
+    tensors: std::collections::HashMap<String, candle_core::Tensor>,
+    config: &str,
+    source: &str,
+) -> Result<PathBuf> {
+    let run = RunConfig::parse(config, &out.join("config.toml"))?;
+    if has_policy(out) {
+        bail!("{} already holds a policy; import into another directory", out.display());
+    }
+    let env = make(&run.env)?;
+    let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
+    let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
+    let actor: Vec<(String, candle_core::Var)> =
+        agent.parameters().into_iter().filter(|(n, _)| n.starts_with("actor.")).collect();
+    for (name, var) in &actor {
+        let t = tensors.get(name).with_context(|| format!("the imported policy lacks the tensor {name}"))?;
+        if t.dims() != var.dims() {
+            bail!(
+                "the imported tensor {name} has shape {:?}, but a {} policy for {} ({obs_dim} observations, {act_dim} \
+                 actions) needs {:?}",
+                t.dims(),
+                run.train.algo.name(),
+                run.env.name,
+                var.dims()
+            );
+        }
+        var.set(&t.to_dtype(var.dtype())?)?;
+    }
+    if let Some(extra) = tensors.keys().find(|k| !actor.iter().any(|(n, _)| n == *k)) {
+        bail!("the imported policy has a tensor {extra} that a {} actor does not have", run.train.algo.name());
+    }
+    std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+    checkpoint::save_actor(&out.join(checkpoint::POLICY_FILE), agent.as_ref())?;
+    write_bytes_atomic(&out.join("config.toml"), run.to_toml()?.as_bytes())?;
+    write_bytes_atomic(&out.join("source.toml"), source.as_bytes())?;
+    Ok(out.join(checkpoint::POLICY_FILE))
+}
+
 fn same_dir(a: &Path, b: &Path) -> bool {
     matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
 }
