@@ -1,7 +1,13 @@
-//! Every hyperparameter of a training run, with each algorithm's published defaults.
+//! Every hyperparameter of a training run: the settings all algorithms share, and the
+//! `TrainConfig` that carries one algorithm's own section. Each algorithm's section, its
+//! published defaults and their checks sit beside the algorithm (`dpg.rs`, `sac.rs`, ...).
 use serde::{Deserialize, Serialize};
 
-use super::noise::NoiseKind;
+pub use super::crossq::CrossqConfig;
+pub use super::dpg::DpgConfig;
+pub use super::dqn::DqnConfig;
+pub use super::ppo::PpoConfig;
+pub use super::sac::SacConfig;
 pub use crate::numeric::squashed::TanhCorrection;
 
 /// A learning algorithm, as named in `--algo` and `config.toml`.
@@ -129,210 +135,6 @@ pub struct TrainConfig {
     pub crossq: Option<CrossqConfig>,
 }
 
-/// TD3's and DDPG's own settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DpgConfig {
-    /// Exploration noise std in units of the action half-range (OU: its starting std).
-    pub exploration_noise: f64,
-    /// Gaussian or Ornstein-Uhlenbeck exploration noise.
-    pub noise: NoiseKind,
-    /// OU mean-reversion rate.
-    pub ou_theta: f64,
-    /// OU's final std, reached after `ou_decay_steps`.
-    pub ou_sigma_min: f64,
-    /// Steps over which the OU std decays linearly to `ou_sigma_min`.
-    pub ou_decay_steps: u64,
-    /// OU time step.
-    pub ou_dt: f64,
-    /// Target policy smoothing noise std and clip (TD3), in units of the action half-range.
-    pub policy_noise: f64,
-    /// Clip of the target policy smoothing noise (TD3).
-    pub noise_clip: f64,
-    /// Actor and target updates happen every this many critic updates.
-    pub policy_delay: u32,
-    /// Two critics and the smaller of their targets (TD3), or one (DDPG).
-    pub twin_critics: bool,
-}
-
-impl DpgConfig {
-    pub(crate) const KEYS: &'static [&'static str] = &[
-        "exploration_noise",
-        "noise",
-        "ou_theta",
-        "ou_sigma_min",
-        "ou_decay_steps",
-        "ou_dt",
-        "policy_noise",
-        "noise_clip",
-        "policy_delay",
-        "twin_critics",
-    ];
-}
-
-/// SAC's own settings.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct SacConfig {
-    /// Which SAC variant to train.
-    pub sac_version: SacVersion,
-    /// Learn the temperature against `target_entropy`; otherwise keep `initial_alpha`.
-    pub autotune_alpha: bool,
-    /// Temperature at the start (and throughout when not tuned).
-    pub initial_alpha: f64,
-    /// Adam learning rate of the log-temperature.
-    pub alpha_lr: f64,
-    /// Target entropy for the temperature; absent means -dim(A).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub target_entropy: Option<f64>,
-    /// SAC v1's value network.
-    pub value_lr: f64,
-    /// How the log-probability is corrected for the tanh squashing.
-    pub tanh_correction: TanhCorrection,
-}
-
-impl SacConfig {
-    pub(crate) const KEYS: &'static [&'static str] = &[
-        "sac_version",
-        "autotune_alpha",
-        "initial_alpha",
-        "alpha_lr",
-        "target_entropy",
-        "value_lr",
-        "tanh_correction",
-    ];
-}
-
-/// PPO's own settings; the defaults are CleanRL's `ppo_continuous_action.py`. PPO reads these
-/// shared settings too: `total_steps`, `hidden`, `gamma`, `actor_lr` and `critic_lr` (its one
-/// learning rate, for the policy and the value network), `normalize_observations` (running
-/// statistics, updated at every step), `reward_scale`, `eval_every`, `eval_episodes` and
-/// `checkpoint_every`; the replay and target-network settings do not apply.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct PpoConfig {
-    /// Environment copies stepped together.
-    pub num_envs: usize,
-    /// Steps per copy in each rollout.
-    pub num_steps: usize,
-    /// Minibatches each rollout is split into.
-    pub num_minibatches: usize,
-    /// Passes over each rollout.
-    pub update_epochs: usize,
-    /// GAE's lambda.
-    pub gae_lambda: f64,
-    /// The surrogate objective's clip range (and the value clip's).
-    pub clip_coef: f64,
-    /// Clip the value loss around the collected values.
-    pub clip_vloss: bool,
-    /// Normalise advantages per minibatch.
-    pub norm_adv: bool,
-    /// Weight of the entropy bonus.
-    pub ent_coef: f64,
-    /// Weight of the value loss.
-    pub vf_coef: f64,
-    /// Global gradient-norm limit.
-    pub max_grad_norm: f64,
-    /// Decay the learning rates linearly to 0 over the run.
-    pub anneal_lr: bool,
-    /// Divide rewards by the running std of the discounted return (gymnasium's `NormalizeReward`).
-    pub normalize_rewards: bool,
-    /// Normalised observations are clipped to this magnitude.
-    pub clip_observations: f64,
-    /// Normalised rewards are clipped to this magnitude.
-    pub clip_rewards: f64,
-    /// Stop a rollout's epochs once the approximate KL exceeds this; absent means never.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub target_kl: Option<f64>,
-    /// Adam's epsilon.
-    pub adam_eps: f64,
-}
-
-impl PpoConfig {
-    pub(crate) const KEYS: &'static [&'static str] = &[
-        "num_envs",
-        "num_steps",
-        "num_minibatches",
-        "update_epochs",
-        "gae_lambda",
-        "clip_coef",
-        "clip_vloss",
-        "norm_adv",
-        "ent_coef",
-        "vf_coef",
-        "max_grad_norm",
-        "anneal_lr",
-        "normalize_rewards",
-        "clip_observations",
-        "clip_rewards",
-        "target_kl",
-        "adam_eps",
-    ];
-
-    /// Transitions per rollout.
-    pub fn rollout_size(&self) -> usize {
-        self.num_envs * self.num_steps
-    }
-}
-
-/// The action-branching DQN's own settings. It reads the shared `critic_lr` (its one network's
-/// learning rate), `tau` (the target network's Polyak coefficient), `batch_size`, the buffer and
-/// `learning_starts`; `warmup_steps` must be 0 (epsilon-greedy exploration starts at random).
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct DqnConfig {
-    /// Evenly spaced values each action dimension is discretised into, bounds included.
-    pub levels: usize,
-    /// Exploration rate at the start.
-    pub epsilon_start: f64,
-    /// Exploration rate after `exploration_steps`, and from then on.
-    pub epsilon_end: f64,
-    /// Exploratory steps over which epsilon decays linearly.
-    pub exploration_steps: u64,
-}
-
-impl DqnConfig {
-    pub(crate) const KEYS: &'static [&'static str] = &["levels", "epsilon_start", "epsilon_end", "exploration_steps"];
-}
-
-/// CrossQ's own settings; the defaults are the paper's and sbx's. It reads the shared `hidden`
-/// (the actor's layers), `actor_lr` and `critic_lr`, `batch_size`, `gamma`, the buffer,
-/// `warmup_steps` and `learning_starts`; it has no target networks, so `tau` does not apply.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct CrossqConfig {
-    /// The critics' hidden layers (the paper's 2048-2048; 256-512 wide is what 2 cores afford).
-    pub critic_hidden: Vec<usize>,
-    /// Actor and temperature updates happen every this many critic updates.
-    pub policy_delay: u32,
-    /// Adam's beta1 for every optimiser.
-    pub adam_beta1: f64,
-    /// Temperature at the start.
-    pub initial_alpha: f64,
-    /// Adam learning rate of the log-temperature.
-    pub alpha_lr: f64,
-    /// Target entropy for the temperature; absent means -dim(A).
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub target_entropy: Option<f64>,
-    /// Weight of the old value in the running statistics' moving average.
-    pub batch_norm_momentum: f64,
-    /// Training passes of plain batch normalisation before the renormalisation's corrections start.
-    pub renorm_warmup_steps: u64,
-}
-
-impl CrossqConfig {
-    pub(crate) const KEYS: &'static [&'static str] = &[
-        "critic_hidden",
-        "policy_delay",
-        "adam_beta1",
-        "initial_alpha",
-        "alpha_lr",
-        "target_entropy",
-        "batch_norm_momentum",
-        "renorm_warmup_steps",
-    ];
-}
-
 /// How [`TrainConfig::from_table`] treats a key of another algorithm's section.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum OtherAlgorithmKeys {
@@ -442,7 +244,7 @@ impl TrainConfig {
     }
 
     /// The settings all three algorithms share, at TD3's published values (Fujimoto et al. 2018).
-    fn shared_defaults(algo: Algo) -> TrainConfig {
+    pub(crate) fn shared_defaults(algo: Algo) -> TrainConfig {
         TrainConfig {
             algo,
             total_steps: 1_000_000,
@@ -471,137 +273,8 @@ impl TrainConfig {
         }
     }
 
-    /// TD3's published settings (Fujimoto et al. 2018).
-    pub(crate) fn td3_defaults() -> TrainConfig {
-        TrainConfig {
-            td3: Some(DpgConfig {
-                exploration_noise: 0.1,
-                noise: NoiseKind::Gaussian,
-                ou_theta: 0.15,
-                ou_sigma_min: 0.05,
-                ou_decay_steps: 500_000,
-                ou_dt: 1e-2,
-                policy_noise: 0.2,
-                noise_clip: 0.5,
-                policy_delay: 2,
-                twin_critics: true,
-            }),
-            ..TrainConfig::shared_defaults(Algo::Td3)
-        }
-    }
-
-    /// "Our DDPG" of the TD3 paper: TD3's settings without its three changes.
-    pub(crate) fn ddpg_defaults() -> TrainConfig {
-        let td3 = TrainConfig::td3_defaults().td3.expect("TD3's section");
-        TrainConfig {
-            ddpg: Some(DpgConfig { policy_noise: 0.0, noise_clip: 0.0, policy_delay: 1, twin_critics: false, ..td3 }),
-            ..TrainConfig::shared_defaults(Algo::Ddpg)
-        }
-    }
-
-    /// SAC v2's (Haarnoja et al. 2018b): 256-256, Adam 3e-4, batch 256.
-    pub(crate) fn sac_defaults() -> TrainConfig {
-        TrainConfig {
-            batch_size: 256,
-            hidden: vec![256, 256],
-            actor_lr: 3e-4,
-            critic_lr: 3e-4,
-            sac: Some(SacConfig {
-                sac_version: SacVersion::V2,
-                autotune_alpha: true,
-                initial_alpha: 1.0,
-                alpha_lr: 3e-4,
-                target_entropy: None,
-                value_lr: 3e-4,
-                tanh_correction: TanhCorrection::Exact,
-            }),
-            ..TrainConfig::shared_defaults(Algo::Sac)
-        }
-    }
-
-    /// CleanRL's `ppo_continuous_action.py` (vwxyzjn/cleanrl): 64-64 tanh networks, Adam 3e-4
-    /// (eps 1e-5) annealed, one copy, 2048-step rollouts in 32 minibatches for 10 epochs.
-    pub(crate) fn ppo_defaults() -> TrainConfig {
-        TrainConfig {
-            warmup_steps: 0,
-            learning_starts: 0,
-            batch_size: 64,
-            buffer_capacity: 1,
-            hidden: vec![64, 64],
-            normalize_observations: true,
-            weight_init: WeightInit::Orthogonal,
-            actor_lr: 3e-4,
-            critic_lr: 3e-4,
-            eval_every: 10_000,
-            ppo: Some(PpoConfig {
-                num_envs: 1,
-                num_steps: 2048,
-                num_minibatches: 32,
-                update_epochs: 10,
-                gae_lambda: 0.95,
-                clip_coef: 0.2,
-                clip_vloss: true,
-                norm_adv: true,
-                ent_coef: 0.0,
-                vf_coef: 0.5,
-                max_grad_norm: 0.5,
-                anneal_lr: true,
-                normalize_rewards: true,
-                clip_observations: 10.0,
-                clip_rewards: 10.0,
-                target_kl: None,
-                adam_eps: 1e-5,
-            }),
-            ..TrainConfig::shared_defaults(Algo::Ppo)
-        }
-    }
-
-    /// Tavakoli et al. (2018)'s branching DQN: Adam 1e-4, batch 64, 512-256 shared torso, three
-    /// levels per joint (the Minitaur study this project grew from used three), epsilon-greedy
-    /// from 1 to 0.05 over 50k steps.
-    pub(crate) fn dqn_defaults() -> TrainConfig {
-        TrainConfig {
-            warmup_steps: 0,
-            batch_size: 64,
-            hidden: vec![512, 256],
-            actor_lr: 1e-4,
-            critic_lr: 1e-4,
-            dqn: Some(DqnConfig { levels: 3, epsilon_start: 1.0, epsilon_end: 0.05, exploration_steps: 50_000 }),
-            ..TrainConfig::shared_defaults(Algo::Dqn)
-        }
-    }
-
-    /// CrossQ's (Bhatt et al. 2024; sbx's `CrossQ`): actor 256-256, critics 2048-2048, Adam 1e-3
-    /// with beta1 0.5, batch 256, 5000 random steps, policy delay 3, batch-norm momentum 0.99 and
-    /// 100k renormalisation warm-up passes.
-    pub(crate) fn crossq_defaults() -> TrainConfig {
-        TrainConfig {
-            warmup_steps: 5000,
-            learning_starts: 5000,
-            batch_size: 256,
-            hidden: vec![256, 256],
-            actor_lr: 1e-3,
-            critic_lr: 1e-3,
-            crossq: Some(CrossqConfig {
-                critic_hidden: vec![2048, 2048],
-                policy_delay: 3,
-                adam_beta1: 0.5,
-                initial_alpha: 1.0,
-                alpha_lr: 1e-3,
-                target_entropy: None,
-                batch_norm_momentum: 0.99,
-                renorm_warmup_steps: 100_000,
-            }),
-            ..TrainConfig::shared_defaults(Algo::Crossq)
-        }
-    }
-
     /// Checks every setting's range and that exactly the algorithm's own section is present.
     pub fn validate(&self) -> anyhow::Result<()> {
-        let positive = |name: &str, v: f64| -> anyhow::Result<()> {
-            anyhow::ensure!(v.is_finite() && v > 0.0, "{name} must be a finite number > 0, got {v}");
-            Ok(())
-        };
         let sections = [
             ("td3", self.td3.is_some()),
             ("ddpg", self.ddpg.is_some()),
@@ -644,72 +317,30 @@ impl TrainConfig {
             "eval_every and eval_episodes must be at least 1"
         );
         anyhow::ensure!(self.checkpoint_every > 0, "checkpoint_every must be at least 1");
+        // each algorithm's own section, checked where it is defined
         if let Some(d) = self.td3.as_ref().or(self.ddpg.as_ref()) {
-            anyhow::ensure!(d.policy_delay >= 1, "policy_delay must be at least 1");
-            anyhow::ensure!(
-                d.exploration_noise >= 0.0 && d.policy_noise >= 0.0 && d.noise_clip >= 0.0,
-                "noise scales must be >= 0"
-            );
+            d.validate()?;
         }
         if let Some(s) = &self.sac {
-            positive("alpha_lr", s.alpha_lr)?;
-            positive("value_lr", s.value_lr)?;
-            positive("initial_alpha", s.initial_alpha)?;
+            s.validate()?;
         }
         if let Some(c) = &self.crossq {
-            anyhow::ensure!(
-                !c.critic_hidden.is_empty() && c.critic_hidden.iter().all(|&h| h > 0),
-                "critic_hidden needs at least one layer size > 0"
-            );
-            anyhow::ensure!(c.policy_delay >= 1, "policy_delay must be at least 1");
-            anyhow::ensure!((0.0..1.0).contains(&c.adam_beta1), "adam_beta1 must lie in [0, 1)");
-            anyhow::ensure!((0.0..1.0).contains(&c.batch_norm_momentum), "batch_norm_momentum must lie in [0, 1)");
-            positive("initial_alpha", c.initial_alpha)?;
-            positive("alpha_lr", c.alpha_lr)?;
-            anyhow::ensure!(
-                self.batch_size >= 2,
-                "batch normalisation needs at least 2 transitions per batch, got batch_size {}",
-                self.batch_size
-            );
+            c.validate(self)?;
         }
         if let Some(d) = &self.dqn {
-            anyhow::ensure!(d.levels >= 2, "levels must be at least 2 (the two bounds), got {}", d.levels);
-            anyhow::ensure!(
-                (0.0..=1.0).contains(&d.epsilon_start) && (0.0..=1.0).contains(&d.epsilon_end),
-                "epsilon_start and epsilon_end must lie in [0, 1]"
-            );
-            anyhow::ensure!(
-                self.warmup_steps == 0,
-                "dqn explores with epsilon-greedy levels from the start: warmup_steps must be 0 (the warm-up's \
-                 uniform continuous actions are not levels), got {}",
-                self.warmup_steps
-            );
+            d.validate(self)?;
         }
         if let Some(p) = &self.ppo {
-            anyhow::ensure!(
-                p.num_envs >= 1 && p.num_steps >= 1 && p.update_epochs >= 1 && p.num_minibatches >= 1,
-                "num_envs, num_steps, num_minibatches and update_epochs must be at least 1"
-            );
-            anyhow::ensure!(
-                p.num_minibatches <= p.rollout_size(),
-                "num_minibatches ({}) is more than a rollout holds (num_envs x num_steps = {}): a minibatch would \
-                 be empty",
-                p.num_minibatches,
-                p.rollout_size()
-            );
-            anyhow::ensure!((0.0..=1.0).contains(&p.gae_lambda), "gae_lambda must lie in [0, 1]");
-            positive("clip_coef", p.clip_coef)?;
-            positive("max_grad_norm", p.max_grad_norm)?;
-            positive("clip_observations", p.clip_observations)?;
-            positive("clip_rewards", p.clip_rewards)?;
-            positive("adam_eps", p.adam_eps)?;
-            anyhow::ensure!(p.ent_coef >= 0.0 && p.vf_coef >= 0.0, "ent_coef and vf_coef must be >= 0");
-            if let Some(kl) = p.target_kl {
-                positive("target_kl", kl)?;
-            }
+            p.validate()?;
         }
         Ok(())
     }
+}
+
+/// That a setting is a finite number above zero.
+pub(crate) fn positive(name: &str, v: f64) -> anyhow::Result<()> {
+    anyhow::ensure!(v.is_finite() && v > 0.0, "{name} must be a finite number > 0, got {v}");
+    Ok(())
 }
 
 /// The keys of an algorithm's own section, from its registry entry.

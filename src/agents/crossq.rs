@@ -6,11 +6,13 @@
 //! are normalised with the same statistics, and the target is computed from that same pass
 //! (held constant). Adam with beta1 = 0.5, learning rate 1e-3, the actor and temperature updated
 //! every third critic update.
+use serde::{Deserialize, Serialize};
+
 use candle_core::{DType, Device, Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 
 use super::buffer::Batch;
-use super::config::{Algo, TanhCorrection, TrainConfig};
+use super::config::{positive, Algo, TanhCorrection, TrainConfig};
 use super::nets::{batch_tensor, scalar_var, DenseStack, Mlp, Output};
 use super::sac::{sample_squashed, squashed_mean, temperature, temperature_loss};
 use super::{layer_sizes, Agent, Losses};
@@ -289,6 +291,90 @@ impl Agent for CrossqAgent {
             "actor_passes" => self.actor_passes = value,
             "critic_passes" => self.critic_passes = value,
             _ => {}
+        }
+    }
+}
+
+/// CrossQ's own settings; the defaults are the paper's and sbx's. It reads the shared `hidden`
+/// (the actor's layers), `actor_lr` and `critic_lr`, `batch_size`, `gamma`, the buffer,
+/// `warmup_steps` and `learning_starts`; it has no target networks, so `tau` does not apply.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CrossqConfig {
+    /// The critics' hidden layers (the paper's 2048-2048; 256-512 wide is what 2 cores afford).
+    pub critic_hidden: Vec<usize>,
+    /// Actor and temperature updates happen every this many critic updates.
+    pub policy_delay: u32,
+    /// Adam's beta1 for every optimiser.
+    pub adam_beta1: f64,
+    /// Temperature at the start.
+    pub initial_alpha: f64,
+    /// Adam learning rate of the log-temperature.
+    pub alpha_lr: f64,
+    /// Target entropy for the temperature; absent means -dim(A).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_entropy: Option<f64>,
+    /// Weight of the old value in the running statistics' moving average.
+    pub batch_norm_momentum: f64,
+    /// Training passes of plain batch normalisation before the renormalisation's corrections start.
+    pub renorm_warmup_steps: u64,
+}
+
+impl CrossqConfig {
+    pub(crate) const KEYS: &'static [&'static str] = &[
+        "critic_hidden",
+        "policy_delay",
+        "adam_beta1",
+        "initial_alpha",
+        "alpha_lr",
+        "target_entropy",
+        "batch_norm_momentum",
+        "renorm_warmup_steps",
+    ];
+
+    /// Checks this section's settings (with the shared ones they depend on).
+    pub(crate) fn validate(&self, train: &TrainConfig) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            !self.critic_hidden.is_empty() && self.critic_hidden.iter().all(|&h| h > 0),
+            "critic_hidden needs at least one layer size > 0"
+        );
+        anyhow::ensure!(self.policy_delay >= 1, "policy_delay must be at least 1");
+        anyhow::ensure!((0.0..1.0).contains(&self.adam_beta1), "adam_beta1 must lie in [0, 1)");
+        anyhow::ensure!((0.0..1.0).contains(&self.batch_norm_momentum), "batch_norm_momentum must lie in [0, 1)");
+        positive("initial_alpha", self.initial_alpha)?;
+        positive("alpha_lr", self.alpha_lr)?;
+        anyhow::ensure!(
+            train.batch_size >= 2,
+            "batch normalisation needs at least 2 transitions per batch, got batch_size {}",
+            train.batch_size
+        );
+        Ok(())
+    }
+}
+
+impl TrainConfig {
+    /// CrossQ's (Bhatt et al. 2024; sbx's `CrossQ`): actor 256-256, critics 2048-2048, Adam 1e-3
+    /// with beta1 0.5, batch 256, 5000 random steps, policy delay 3, batch-norm momentum 0.99 and
+    /// 100k renormalisation warm-up passes.
+    pub(crate) fn crossq_defaults() -> TrainConfig {
+        TrainConfig {
+            warmup_steps: 5000,
+            learning_starts: 5000,
+            batch_size: 256,
+            hidden: vec![256, 256],
+            actor_lr: 1e-3,
+            critic_lr: 1e-3,
+            crossq: Some(CrossqConfig {
+                critic_hidden: vec![2048, 2048],
+                policy_delay: 3,
+                adam_beta1: 0.5,
+                initial_alpha: 1.0,
+                alpha_lr: 1e-3,
+                target_entropy: None,
+                batch_norm_momentum: 0.99,
+                renorm_warmup_steps: 100_000,
+            }),
+            ..TrainConfig::shared_defaults(Algo::Crossq)
         }
     }
 }

@@ -1,6 +1,8 @@
 //! Deterministic policy gradient agents. TD3 (Fujimoto et al. 2018): twin critics with clipped
 //! double Q, target policy smoothing, delayed actor and target updates. DDPG is the same
 //! machinery with one critic, no smoothing and no delay (the TD3 paper's "our DDPG").
+use serde::{Deserialize, Serialize};
+
 use candle_core::{Device, Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, Normal};
@@ -177,6 +179,87 @@ impl Agent for DeterministicAgent {
             "updates" => self.updates = value,
             "noise_steps" => self.noise.set_steps(value),
             _ => {}
+        }
+    }
+}
+
+/// TD3's and DDPG's own settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DpgConfig {
+    /// Exploration noise std in units of the action half-range (OU: its starting std).
+    pub exploration_noise: f64,
+    /// Gaussian or Ornstein-Uhlenbeck exploration noise.
+    pub noise: NoiseKind,
+    /// OU mean-reversion rate.
+    pub ou_theta: f64,
+    /// OU's final std, reached after `ou_decay_steps`.
+    pub ou_sigma_min: f64,
+    /// Steps over which the OU std decays linearly to `ou_sigma_min`.
+    pub ou_decay_steps: u64,
+    /// OU time step.
+    pub ou_dt: f64,
+    /// Target policy smoothing noise std and clip (TD3), in units of the action half-range.
+    pub policy_noise: f64,
+    /// Clip of the target policy smoothing noise (TD3).
+    pub noise_clip: f64,
+    /// Actor and target updates happen every this many critic updates.
+    pub policy_delay: u32,
+    /// Two critics and the smaller of their targets (TD3), or one (DDPG).
+    pub twin_critics: bool,
+}
+
+impl DpgConfig {
+    pub(crate) const KEYS: &'static [&'static str] = &[
+        "exploration_noise",
+        "noise",
+        "ou_theta",
+        "ou_sigma_min",
+        "ou_decay_steps",
+        "ou_dt",
+        "policy_noise",
+        "noise_clip",
+        "policy_delay",
+        "twin_critics",
+    ];
+
+    /// Checks this section's settings.
+    pub(crate) fn validate(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(self.policy_delay >= 1, "policy_delay must be at least 1");
+        anyhow::ensure!(
+            self.exploration_noise >= 0.0 && self.policy_noise >= 0.0 && self.noise_clip >= 0.0,
+            "noise scales must be >= 0"
+        );
+        Ok(())
+    }
+}
+
+impl TrainConfig {
+    /// TD3's published settings (Fujimoto et al. 2018).
+    pub(crate) fn td3_defaults() -> TrainConfig {
+        TrainConfig {
+            td3: Some(DpgConfig {
+                exploration_noise: 0.1,
+                noise: NoiseKind::Gaussian,
+                ou_theta: 0.15,
+                ou_sigma_min: 0.05,
+                ou_decay_steps: 500_000,
+                ou_dt: 1e-2,
+                policy_noise: 0.2,
+                noise_clip: 0.5,
+                policy_delay: 2,
+                twin_critics: true,
+            }),
+            ..TrainConfig::shared_defaults(Algo::Td3)
+        }
+    }
+
+    /// "Our DDPG" of the TD3 paper: TD3's settings without its three changes.
+    pub(crate) fn ddpg_defaults() -> TrainConfig {
+        let td3 = TrainConfig::td3_defaults().td3.expect("TD3's section");
+        TrainConfig {
+            ddpg: Some(DpgConfig { policy_noise: 0.0, noise_clip: 0.0, policy_delay: 1, twin_critics: false, ..td3 }),
+            ..TrainConfig::shared_defaults(Algo::Ddpg)
         }
     }
 }

@@ -11,6 +11,8 @@
 //! -1 + 2k/(L-1) in the normalised action space [-1, 1], which the trainer maps onto the
 //! environment's bounds like every agent's actions, and the replay buffer stores those values;
 //! updates read the level back from them.
+use serde::{Deserialize, Serialize};
+
 use candle_core::{Device, Result, Tensor, Var, D};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
@@ -186,6 +188,59 @@ impl Agent for BranchingDqnAgent {
             "updates" => self.updates = value,
             "explore_steps" => self.explore_steps = value,
             _ => {}
+        }
+    }
+}
+
+/// The action-branching DQN's own settings. It reads the shared `critic_lr` (its one network's
+/// learning rate), `tau` (the target network's Polyak coefficient), `batch_size`, the buffer and
+/// `learning_starts`; `warmup_steps` must be 0 (epsilon-greedy exploration starts at random).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct DqnConfig {
+    /// Evenly spaced values each action dimension is discretised into, bounds included.
+    pub levels: usize,
+    /// Exploration rate at the start.
+    pub epsilon_start: f64,
+    /// Exploration rate after `exploration_steps`, and from then on.
+    pub epsilon_end: f64,
+    /// Exploratory steps over which epsilon decays linearly.
+    pub exploration_steps: u64,
+}
+
+impl DqnConfig {
+    pub(crate) const KEYS: &'static [&'static str] = &["levels", "epsilon_start", "epsilon_end", "exploration_steps"];
+
+    /// Checks this section's settings (with the shared ones they depend on).
+    pub(crate) fn validate(&self, train: &TrainConfig) -> anyhow::Result<()> {
+        anyhow::ensure!(self.levels >= 2, "levels must be at least 2 (the two bounds), got {}", self.levels);
+        anyhow::ensure!(
+            (0.0..=1.0).contains(&self.epsilon_start) && (0.0..=1.0).contains(&self.epsilon_end),
+            "epsilon_start and epsilon_end must lie in [0, 1]"
+        );
+        anyhow::ensure!(
+            train.warmup_steps == 0,
+            "dqn explores with epsilon-greedy levels from the start: warmup_steps must be 0 (the warm-up's \
+             uniform continuous actions are not levels), got {}",
+            train.warmup_steps
+        );
+        Ok(())
+    }
+}
+
+impl TrainConfig {
+    /// Tavakoli et al. (2018)'s branching DQN: Adam 1e-4, batch 64, 512-256 shared torso, three
+    /// levels per joint (the Minitaur study this project grew from used three), epsilon-greedy
+    /// from 1 to 0.05 over 50k steps.
+    pub(crate) fn dqn_defaults() -> TrainConfig {
+        TrainConfig {
+            warmup_steps: 0,
+            batch_size: 64,
+            hidden: vec![512, 256],
+            actor_lr: 1e-4,
+            critic_lr: 1e-4,
+            dqn: Some(DqnConfig { levels: 3, epsilon_start: 1.0, epsilon_end: 0.05, exploration_steps: 50_000 }),
+            ..TrainConfig::shared_defaults(Algo::Dqn)
         }
     }
 }

@@ -10,13 +10,15 @@
 //! the networks and one minibatch update. Actions live in [-1, 1]^n like every agent's: a sample
 //! is clipped to it before it reaches the environment, and its log-probability is that of the
 //! unclipped sample, as in CleanRL.
+use serde::{Deserialize, Serialize};
+
 use candle_core::{DType, Device, Result, Tensor, Var, D};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 use super::buffer::Batch;
-use super::config::{Algo, PpoConfig, TrainConfig};
+use super::config::{positive, Algo, TrainConfig, WeightInit};
 use super::nets::{batch_tensor, orthogonal, DenseStack};
 use super::{layer_sizes, Agent, Losses};
 use crate::numeric::dense::dense;
@@ -383,6 +385,143 @@ impl Agent for PpoAgent {
     }
 
     fn set_counter(&mut self, _name: &str, _value: u64) {}
+}
+
+/// PPO's own settings; the defaults are CleanRL's `ppo_continuous_action.py`. PPO reads these
+/// shared settings too: `total_steps`, `hidden`, `gamma`, `actor_lr` and `critic_lr` (its one
+/// learning rate, for the policy and the value network), `normalize_observations` (running
+/// statistics, updated at every step), `reward_scale`, `eval_every`, `eval_episodes` and
+/// `checkpoint_every`; the replay and target-network settings do not apply.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PpoConfig {
+    /// Environment copies stepped together.
+    pub num_envs: usize,
+    /// Steps per copy in each rollout.
+    pub num_steps: usize,
+    /// Minibatches each rollout is split into.
+    pub num_minibatches: usize,
+    /// Passes over each rollout.
+    pub update_epochs: usize,
+    /// GAE's lambda.
+    pub gae_lambda: f64,
+    /// The surrogate objective's clip range (and the value clip's).
+    pub clip_coef: f64,
+    /// Clip the value loss around the collected values.
+    pub clip_vloss: bool,
+    /// Normalise advantages per minibatch.
+    pub norm_adv: bool,
+    /// Weight of the entropy bonus.
+    pub ent_coef: f64,
+    /// Weight of the value loss.
+    pub vf_coef: f64,
+    /// Global gradient-norm limit.
+    pub max_grad_norm: f64,
+    /// Decay the learning rates linearly to 0 over the run.
+    pub anneal_lr: bool,
+    /// Divide rewards by the running std of the discounted return (gymnasium's `NormalizeReward`).
+    pub normalize_rewards: bool,
+    /// Normalised observations are clipped to this magnitude.
+    pub clip_observations: f64,
+    /// Normalised rewards are clipped to this magnitude.
+    pub clip_rewards: f64,
+    /// Stop a rollout's epochs once the approximate KL exceeds this; absent means never.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_kl: Option<f64>,
+    /// Adam's epsilon.
+    pub adam_eps: f64,
+}
+
+impl PpoConfig {
+    pub(crate) const KEYS: &'static [&'static str] = &[
+        "num_envs",
+        "num_steps",
+        "num_minibatches",
+        "update_epochs",
+        "gae_lambda",
+        "clip_coef",
+        "clip_vloss",
+        "norm_adv",
+        "ent_coef",
+        "vf_coef",
+        "max_grad_norm",
+        "anneal_lr",
+        "normalize_rewards",
+        "clip_observations",
+        "clip_rewards",
+        "target_kl",
+        "adam_eps",
+    ];
+
+    /// Transitions per rollout.
+    pub fn rollout_size(&self) -> usize {
+        self.num_envs * self.num_steps
+    }
+
+    /// Checks this section's settings.
+    pub(crate) fn validate(&self) -> anyhow::Result<()> {
+        anyhow::ensure!(
+            self.num_envs >= 1 && self.num_steps >= 1 && self.update_epochs >= 1 && self.num_minibatches >= 1,
+            "num_envs, num_steps, num_minibatches and update_epochs must be at least 1"
+        );
+        anyhow::ensure!(
+            self.num_minibatches <= self.rollout_size(),
+            "num_minibatches ({}) is more than a rollout holds (num_envs x num_steps = {}): a minibatch would \
+             be empty",
+            self.num_minibatches,
+            self.rollout_size()
+        );
+        anyhow::ensure!((0.0..=1.0).contains(&self.gae_lambda), "gae_lambda must lie in [0, 1]");
+        positive("clip_coef", self.clip_coef)?;
+        positive("max_grad_norm", self.max_grad_norm)?;
+        positive("clip_observations", self.clip_observations)?;
+        positive("clip_rewards", self.clip_rewards)?;
+        positive("adam_eps", self.adam_eps)?;
+        anyhow::ensure!(self.ent_coef >= 0.0 && self.vf_coef >= 0.0, "ent_coef and vf_coef must be >= 0");
+        if let Some(kl) = self.target_kl {
+            positive("target_kl", kl)?;
+        }
+        Ok(())
+    }
+}
+
+impl TrainConfig {
+    /// CleanRL's `ppo_continuous_action.py` (vwxyzjn/cleanrl): 64-64 tanh networks, Adam 3e-4
+    /// (eps 1e-5) annealed, one copy, 2048-step rollouts in 32 minibatches for 10 epochs.
+    pub(crate) fn ppo_defaults() -> TrainConfig {
+        TrainConfig {
+            warmup_steps: 0,
+            learning_starts: 0,
+            batch_size: 64,
+            buffer_capacity: 1,
+            hidden: vec![64, 64],
+            normalize_observations: true,
+            weight_init: WeightInit::Orthogonal,
+            actor_lr: 3e-4,
+            critic_lr: 3e-4,
+            eval_every: 10_000,
+            ppo: Some(PpoConfig {
+                num_envs: 1,
+                num_steps: 2048,
+                num_minibatches: 32,
+                update_epochs: 10,
+                gae_lambda: 0.95,
+                clip_coef: 0.2,
+                clip_vloss: true,
+                norm_adv: true,
+                ent_coef: 0.0,
+                vf_coef: 0.5,
+                max_grad_norm: 0.5,
+                anneal_lr: true,
+                normalize_rewards: true,
+                clip_observations: 10.0,
+                clip_rewards: 10.0,
+                target_kl: None,
+                adam_eps: 1e-5,
+            }),
+            ..TrainConfig::shared_defaults(Algo::Ppo)
+        }
+    }
 }
 
 #[cfg(test)]

@@ -1,12 +1,14 @@
 //! Soft Actor-Critic. v2 (Haarnoja et al. 2018b, the default): tanh-squashed Gaussian policy,
 //! twin critics with target networks, automatic temperature towards entropy -dim(A). v1
 //! (2018a): a separate state-value network with its own target network and a fixed temperature.
+use serde::{Deserialize, Serialize};
+
 use candle_core::{Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal};
 
 use super::buffer::Batch;
-use super::config::{Algo, SacVersion, TanhCorrection, TrainConfig, WeightInit};
+use super::config::{positive, Algo, SacVersion, TanhCorrection, TrainConfig, WeightInit};
 use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
 use super::{layer_sizes, Agent, Losses};
@@ -238,6 +240,69 @@ impl Agent for SacAgent {
     fn set_counter(&mut self, name: &str, value: u64) {
         if name == "updates" {
             self.updates = value;
+        }
+    }
+}
+
+/// SAC's own settings.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SacConfig {
+    /// Which SAC variant to train.
+    pub sac_version: SacVersion,
+    /// Learn the temperature against `target_entropy`; otherwise keep `initial_alpha`.
+    pub autotune_alpha: bool,
+    /// Temperature at the start (and throughout when not tuned).
+    pub initial_alpha: f64,
+    /// Adam learning rate of the log-temperature.
+    pub alpha_lr: f64,
+    /// Target entropy for the temperature; absent means -dim(A).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub target_entropy: Option<f64>,
+    /// SAC v1's value network.
+    pub value_lr: f64,
+    /// How the log-probability is corrected for the tanh squashing.
+    pub tanh_correction: TanhCorrection,
+}
+
+impl SacConfig {
+    pub(crate) const KEYS: &'static [&'static str] = &[
+        "sac_version",
+        "autotune_alpha",
+        "initial_alpha",
+        "alpha_lr",
+        "target_entropy",
+        "value_lr",
+        "tanh_correction",
+    ];
+
+    /// Checks this section's settings.
+    pub(crate) fn validate(&self) -> anyhow::Result<()> {
+        positive("alpha_lr", self.alpha_lr)?;
+        positive("value_lr", self.value_lr)?;
+        positive("initial_alpha", self.initial_alpha)?;
+        Ok(())
+    }
+}
+
+impl TrainConfig {
+    /// SAC v2's (Haarnoja et al. 2018b): 256-256, Adam 3e-4, batch 256.
+    pub(crate) fn sac_defaults() -> TrainConfig {
+        TrainConfig {
+            batch_size: 256,
+            hidden: vec![256, 256],
+            actor_lr: 3e-4,
+            critic_lr: 3e-4,
+            sac: Some(SacConfig {
+                sac_version: SacVersion::V2,
+                autotune_alpha: true,
+                initial_alpha: 1.0,
+                alpha_lr: 3e-4,
+                target_entropy: None,
+                value_lr: 3e-4,
+                tanh_correction: TanhCorrection::Exact,
+            }),
+            ..TrainConfig::shared_defaults(Algo::Sac)
         }
     }
 }
