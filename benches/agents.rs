@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use locobench::agents::ppo::PpoBatch;
-use locobench::agents::{make_agent, Agent, Algo, Batch, PpoAgent, ReplayBuffer, TrainConfig};
+use locobench::agents::{make_learner, Agent, Algo, Batch, PpoAgent, ReplayBuffer, TrainConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -60,7 +60,7 @@ fn bench(c: &mut Criterion) {
             c.critic_hidden = vec![width, width];
             label += &format!(", critics {width}-{width},");
         }
-        let mut agent = make_agent(&cfg, OBS, ACT, &mut rng).unwrap();
+        let mut agent = make_learner(&cfg, OBS, ACT, &mut rng).unwrap();
         let mut batch = Batch::new(batch_size, OBS, ACT);
         group.throughput(Throughput::Elements(1));
         for threads in [1, 2] {

@@ -11,7 +11,7 @@
 //! `cargo bench --bench memory` (under `cargo test` it fills a 10k buffer and measures one pair).
 
 use anyhow::{Context, Result};
-use locobench::agents::{make_agent, Algo, Batch, ReplayBuffer};
+use locobench::agents::{make_learner, Algo, Batch, ReplayBuffer};
 use locobench::envs::{env_names, make, EnvConfig};
 use locobench::train::checkpoint::{self, TrainState};
 use locobench::train::config::build_config;
@@ -34,7 +34,7 @@ fn child(env_name: &str, algo: Algo, capacity: usize) -> Result<()> {
     let env = make(&EnvConfig::new(env_name))?;
     let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
     let mut rng = ChaCha8Rng::seed_from_u64(0);
-    let mut agent = make_agent(&cfg, obs_dim, act_dim, &mut rng)?;
+    let mut agent = make_learner(&cfg, obs_dim, act_dim, &mut rng)?;
     let mut buf = ReplayBuffer::new(capacity, obs_dim, act_dim);
     let (mut obs, action) = (vec![0.5f32; obs_dim], vec![0.1f32; act_dim]);
     for t in 0..capacity {

@@ -16,7 +16,7 @@
 use std::time::Instant;
 
 use anyhow::{Context, Result};
-use locobench::agents::{make_agent, Algo, Batch, ReplayBuffer, TrainConfig};
+use locobench::agents::{make_learner, Algo, Batch, ReplayBuffer, TrainConfig};
 use locobench::envs::EnvConfig;
 use locobench::train::{metrics, train, RunControl};
 use rand::{Rng, SeedableRng};
@@ -83,7 +83,7 @@ fn updates_per_second(algo: Algo, updates: usize) -> Result<f64> {
         buf.add(&obs, &act, rng.random_range(-1.0..1.0), &next, false, t % 1000 == 999);
         obs = next;
     }
-    let mut agent = make_agent(&config(algo), OBS, ACT, &mut rng)?;
+    let mut agent = make_learner(&config(algo), OBS, ACT, &mut rng)?;
     let mut batch = Batch::new(BATCH, OBS, ACT);
     for _ in 0..10 {
         buf.sample_into(&mut batch, &mut rng);

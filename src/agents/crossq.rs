@@ -15,7 +15,7 @@ use super::buffer::Batch;
 use super::config::{positive, Algo, TanhCorrection, TrainConfig};
 use super::nets::{batch_tensor, scalar_var, DenseStack, Mlp, Output};
 use super::sac::{sample_squashed, squashed_mean, temperature, temperature_loss};
-use super::{layer_sizes, Agent, Losses};
+use super::{layer_sizes, Agent, Losses, OffPolicyAgent};
 use crate::numeric::batch_renorm::{batch_renorm, RenormLimits, RenormMode};
 use crate::numeric::dense::dense;
 use crate::numeric::inplace::Activation;
@@ -218,6 +218,37 @@ impl Agent for CrossqAgent {
         a.flatten_all()?.to_vec1::<f32>()
     }
 
+    fn parameters(&self) -> Vec<(String, Var)> {
+        let mut out = self.actor.named_vars("actor");
+        out.extend(self.critics[0].named_vars("critic0"));
+        out.extend(self.critics[1].named_vars("critic1"));
+        out.push(("log_alpha".into(), self.log_alpha.clone()));
+        out
+    }
+
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
+        vec![
+            ("actor_opt", &mut self.actor_opt as &mut dyn Optimizer),
+            ("critic_opt", &mut self.critic_opt),
+            ("alpha_opt", &mut self.alpha_opt),
+        ]
+    }
+
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![("updates", self.updates), ("actor_passes", self.actor_passes), ("critic_passes", self.critic_passes)]
+    }
+
+    fn set_counter(&mut self, name: &str, value: u64) {
+        match name {
+            "updates" => self.updates = value,
+            "actor_passes" => self.actor_passes = value,
+            "critic_passes" => self.critic_passes = value,
+            _ => {}
+        }
+    }
+}
+
+impl OffPolicyAgent for CrossqAgent {
     fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
         let n = batch.size;
         let obs = batch_tensor(&batch.obs, n, self.obs_dim)?;
@@ -263,35 +294,6 @@ impl Agent for CrossqAgent {
         }
         losses.alpha = Some(self.alpha()?);
         Ok(losses)
-    }
-
-    fn parameters(&self) -> Vec<(String, Var)> {
-        let mut out = self.actor.named_vars("actor");
-        out.extend(self.critics[0].named_vars("critic0"));
-        out.extend(self.critics[1].named_vars("critic1"));
-        out.push(("log_alpha".into(), self.log_alpha.clone()));
-        out
-    }
-
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
-        vec![
-            ("actor_opt", &mut self.actor_opt as &mut dyn Optimizer),
-            ("critic_opt", &mut self.critic_opt),
-            ("alpha_opt", &mut self.alpha_opt),
-        ]
-    }
-
-    fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("updates", self.updates), ("actor_passes", self.actor_passes), ("critic_passes", self.critic_passes)]
-    }
-
-    fn set_counter(&mut self, name: &str, value: u64) {
-        match name {
-            "updates" => self.updates = value,
-            "actor_passes" => self.actor_passes = value,
-            "critic_passes" => self.critic_passes = value,
-            _ => {}
-        }
     }
 }
 

@@ -12,7 +12,7 @@ use super::config::{Algo, TrainConfig};
 use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, Mlp, Output};
 use super::noise::{Noise, NoiseKind};
-use super::{layer_sizes, Agent, Losses};
+use super::{layer_sizes, Agent, Losses, OffPolicyAgent};
 use crate::numeric::objectives::{critic_minimum, td_target};
 use crate::numeric::optim::{Adam, Optimizer};
 
@@ -134,30 +134,6 @@ impl Agent for DeterministicAgent {
         self.noise.reset();
     }
 
-    fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
-        let n = batch.size;
-        let obs = batch_tensor(&batch.obs, n, self.obs_dim)?;
-        let actions = batch_tensor(&batch.actions, n, self.act_dim)?;
-        let y = self.td_targets(batch, rng)?;
-
-        let critic_loss = self.critics.mse_sum(&Self::critic_input(&obs, &actions)?, &y)?;
-        let grads = critic_loss.backward()?;
-        self.critic_opt.step(&grads)?;
-        self.updates += 1;
-
-        let mut losses = Losses { critic: critic_loss.to_scalar::<f32>()? as f64, ..Default::default() };
-        if self.updates.is_multiple_of(self.policy_delay) {
-            let pi = self.actor.forward(&obs)?;
-            let actor_loss = self.critics.first_frozen(&Self::critic_input(&obs, &pi)?)?.mean_all()?.neg()?;
-            let grads = actor_loss.backward()?;
-            self.actor_opt.step(&grads)?;
-            polyak_update(&self.actor, &self.actor_target, self.tau)?;
-            polyak_update_critics(&self.critics, &self.critic_targets, self.tau)?;
-            losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
-        }
-        Ok(losses)
-    }
-
     fn parameters(&self) -> Vec<(String, Var)> {
         let mut out = self.actor.named_vars("actor");
         out.extend(self.actor_target.named_vars("actor_target"));
@@ -180,6 +156,32 @@ impl Agent for DeterministicAgent {
             "noise_steps" => self.noise.set_steps(value),
             _ => {}
         }
+    }
+}
+
+impl OffPolicyAgent for DeterministicAgent {
+    fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
+        let n = batch.size;
+        let obs = batch_tensor(&batch.obs, n, self.obs_dim)?;
+        let actions = batch_tensor(&batch.actions, n, self.act_dim)?;
+        let y = self.td_targets(batch, rng)?;
+
+        let critic_loss = self.critics.mse_sum(&Self::critic_input(&obs, &actions)?, &y)?;
+        let grads = critic_loss.backward()?;
+        self.critic_opt.step(&grads)?;
+        self.updates += 1;
+
+        let mut losses = Losses { critic: critic_loss.to_scalar::<f32>()? as f64, ..Default::default() };
+        if self.updates.is_multiple_of(self.policy_delay) {
+            let pi = self.actor.forward(&obs)?;
+            let actor_loss = self.critics.first_frozen(&Self::critic_input(&obs, &pi)?)?.mean_all()?.neg()?;
+            let grads = actor_loss.backward()?;
+            self.actor_opt.step(&grads)?;
+            polyak_update(&self.actor, &self.actor_target, self.tau)?;
+            polyak_update_critics(&self.critics, &self.critic_targets, self.tau)?;
+            losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
+        }
+        Ok(losses)
     }
 }
 

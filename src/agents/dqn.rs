@@ -20,7 +20,7 @@ use rand_chacha::ChaCha8Rng;
 use super::buffer::Batch;
 use super::config::{Algo, TrainConfig};
 use super::nets::{batch_tensor, polyak_update, Mlp, Output};
-use super::{layer_sizes, Agent, Losses};
+use super::{layer_sizes, Agent, Losses, OffPolicyAgent};
 use crate::numeric::optim::{Adam, Optimizer};
 
 /// Branching DQN: a dueling network with one advantage head per action dimension.
@@ -153,21 +153,6 @@ impl Agent for BranchingDqnAgent {
             .collect())
     }
 
-    fn update(&mut self, batch: &Batch, _rng: &mut ChaCha8Rng) -> Result<Losses> {
-        let n = batch.size;
-        let obs = batch_tensor(&batch.obs, n, self.obs_dim)?;
-        let levels: Vec<u32> = batch.actions.iter().map(|&a| value_level(a, self.levels) as u32).collect();
-        let taken = Tensor::from_vec(levels, (n, self.branches, 1), &Device::Cpu)?;
-        let y = self.td_targets(batch)?;
-        let q = self.q_values(&self.q, &obs)?.gather(&taken, D::Minus1)?.squeeze(D::Minus1)?;
-        let loss = q.broadcast_sub(&y)?.sqr()?.mean_all()?;
-        let grads = loss.backward()?;
-        self.opt.step(&grads)?;
-        polyak_update(&self.q, &self.target, self.tau)?;
-        self.updates += 1;
-        Ok(Losses { critic: loss.to_scalar::<f32>()? as f64, ..Default::default() })
-    }
-
     fn parameters(&self) -> Vec<(String, Var)> {
         // The Q-network is the policy: it is what an exported policy keeps.
         let mut out = self.q.named_vars("actor.q");
@@ -189,6 +174,23 @@ impl Agent for BranchingDqnAgent {
             "explore_steps" => self.explore_steps = value,
             _ => {}
         }
+    }
+}
+
+impl OffPolicyAgent for BranchingDqnAgent {
+    fn update(&mut self, batch: &Batch, _rng: &mut ChaCha8Rng) -> Result<Losses> {
+        let n = batch.size;
+        let obs = batch_tensor(&batch.obs, n, self.obs_dim)?;
+        let levels: Vec<u32> = batch.actions.iter().map(|&a| value_level(a, self.levels) as u32).collect();
+        let taken = Tensor::from_vec(levels, (n, self.branches, 1), &Device::Cpu)?;
+        let y = self.td_targets(batch)?;
+        let q = self.q_values(&self.q, &obs)?.gather(&taken, D::Minus1)?.squeeze(D::Minus1)?;
+        let loss = q.broadcast_sub(&y)?.sqr()?.mean_all()?;
+        let grads = loss.backward()?;
+        self.opt.step(&grads)?;
+        polyak_update(&self.q, &self.target, self.tau)?;
+        self.updates += 1;
+        Ok(Losses { critic: loss.to_scalar::<f32>()? as f64, ..Default::default() })
     }
 }
 

@@ -64,13 +64,6 @@ pub trait Agent: Send {
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>>;
     /// Called at the start of every training episode (resets OU noise).
     fn begin_episode(&mut self) {}
-    /// One gradient update from a minibatch; `rng` drives any sampling it needs.
-    fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses>;
-    /// Called once, when learning starts, with the warm-up transitions (observation
-    /// normalisation estimates its statistics here; other agents ignore it).
-    fn fit_observations(&mut self, _buffer: &ReplayBuffer) -> Result<()> {
-        Ok(())
-    }
     /// Every network parameter, targets included, by checkpoint name.
     fn parameters(&self) -> Vec<(String, Var)>;
     /// The Adam optimisers by checkpoint name, to save and restore their moments.
@@ -81,29 +74,58 @@ pub trait Agent: Send {
     fn set_counter(&mut self, name: &str, value: u64);
 }
 
-/// Builds the agent a config asks for, initialised from `rng`.
-pub fn make_agent(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
-    let agent = (registry::entry(cfg.algo).build)(cfg, obs_dim, act_dim, rng)?;
-    // PPO keeps running statistics of its own (`agents::ppo`).
-    let frozen_statistics = cfg.normalize_observations && !cfg.algo.is_on_policy();
-    Ok(if frozen_statistics { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
+/// An off-policy learner: it updates from replay minibatches (TD3, DDPG, SAC, CrossQ, the
+/// branching DQN). PPO learns from its own rollouts (`train::on_policy`) and is an [`Agent`] only.
+pub trait OffPolicyAgent: Agent {
+    /// One gradient update from a minibatch; `rng` drives any sampling it needs.
+    fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses>;
+    /// Called once, when learning starts, with the warm-up transitions (observation
+    /// normalisation estimates its statistics here; other agents ignore it).
+    fn fit_observations(&mut self, _buffer: &ReplayBuffer) -> Result<()> {
+        Ok(())
+    }
 }
 
-/// [`make_agent`] on `device`: the fused agent on the CPU, the device-generic one
+/// Builds the agent a config asks for, initialised from `rng`: any algorithm, to act with.
+pub fn make_agent(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
+    match registry::entry(cfg.algo).build {
+        registry::Build::OffPolicy(_) => Ok(make_learner(cfg, obs_dim, act_dim, rng)?),
+        registry::Build::OnPolicy(build) => build(cfg, obs_dim, act_dim, rng),
+    }
+}
+
+/// Builds the off-policy learner a config asks for, initialised from `rng` exactly as
+/// [`make_agent`] would; an on-policy algorithm is an error.
+pub fn make_learner(
+    cfg: &TrainConfig,
+    obs_dim: usize,
+    act_dim: usize,
+    rng: &mut ChaCha8Rng,
+) -> Result<Box<dyn OffPolicyAgent>> {
+    let registry::Build::OffPolicy(build) = registry::entry(cfg.algo).build else {
+        candle_core::bail!(
+            "{} learns from its own rollouts (train::on_policy), not from replay minibatches",
+            cfg.algo.name()
+        );
+    };
+    let agent = build(cfg, obs_dim, act_dim, rng)?;
+    Ok(if cfg.normalize_observations { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
+}
+
+/// [`make_learner`] on `device`: the fused agent on the CPU, the device-generic one
 /// ([`generic`]) elsewhere, from the same initial weights.
-pub fn make_agent_on(
+pub fn make_learner_on(
     cfg: &TrainConfig,
     obs_dim: usize,
     act_dim: usize,
     rng: &mut ChaCha8Rng,
     device: crate::device::ComputeDevice,
-) -> anyhow::Result<Box<dyn Agent>> {
+) -> anyhow::Result<Box<dyn OffPolicyAgent>> {
     if device == crate::device::ComputeDevice::Cpu {
-        return Ok(make_agent(cfg, obs_dim, act_dim, rng)?);
+        return Ok(make_learner(cfg, obs_dim, act_dim, rng)?);
     }
     let agent = generic::make_generic_agent(cfg, obs_dim, act_dim, rng, &device.open()?)?;
-    let frozen_statistics = cfg.normalize_observations && !cfg.algo.is_on_policy();
-    Ok(if frozen_statistics { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
+    Ok(if cfg.normalize_observations { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
 }
 
 /// Layer sizes `input, hidden..., output`.

@@ -14,7 +14,7 @@
 use candle_core::{DType, Device, Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 
-use super::{Agent, Algo, Batch, Losses, ReplayBuffer};
+use super::{Agent, Algo, Batch, Losses, OffPolicyAgent, ReplayBuffer};
 use crate::numeric::optim::Optimizer;
 
 /// VecNormalize's defaults (Stable-Baselines3 `vec_normalize.py`).
@@ -23,7 +23,7 @@ pub(crate) const EPSILON: f64 = 1e-8;
 
 /// Wraps an agent so its networks see standardised observations (frozen after warm-up).
 pub struct NormalizedAgent {
-    inner: Box<dyn Agent>,
+    inner: Box<dyn OffPolicyAgent>,
     mean: Var,
     inv_std: Var,
     scratch: Batch,
@@ -31,7 +31,7 @@ pub struct NormalizedAgent {
 
 impl NormalizedAgent {
     /// Wraps `inner` with the identity normalisation (mean 0, std 1) until `fit_observations`.
-    pub fn new(inner: Box<dyn Agent>, obs_dim: usize) -> Result<NormalizedAgent> {
+    pub fn new(inner: Box<dyn OffPolicyAgent>, obs_dim: usize) -> Result<NormalizedAgent> {
         let dev = Device::Cpu;
         Ok(NormalizedAgent {
             inner,
@@ -102,22 +102,6 @@ impl Agent for NormalizedAgent {
         self.inner.begin_episode()
     }
 
-    fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
-        let (mean, inv_std) = self.stats()?;
-        self.scratch.clone_from(batch);
-        normalize_rows(&mut self.scratch.obs, &mean, &inv_std);
-        normalize_rows(&mut self.scratch.next_obs, &mean, &inv_std);
-        self.inner.update(&self.scratch, rng)
-    }
-
-    fn fit_observations(&mut self, buffer: &ReplayBuffer) -> Result<()> {
-        let (mean, inv_std) = observation_stats(buffer);
-        let n = mean.len();
-        self.mean.set(&Tensor::from_vec(mean, n, &Device::Cpu)?)?;
-        self.inv_std.set(&Tensor::from_vec(inv_std, n, &Device::Cpu)?)?;
-        Ok(())
-    }
-
     fn parameters(&self) -> Vec<(String, Var)> {
         let mut out = self.inner.parameters();
         out.push(("actor.obs_mean".to_string(), self.mean.clone()));
@@ -135,6 +119,24 @@ impl Agent for NormalizedAgent {
 
     fn set_counter(&mut self, name: &str, value: u64) {
         self.inner.set_counter(name, value)
+    }
+}
+
+impl OffPolicyAgent for NormalizedAgent {
+    fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
+        let (mean, inv_std) = self.stats()?;
+        self.scratch.clone_from(batch);
+        normalize_rows(&mut self.scratch.obs, &mean, &inv_std);
+        normalize_rows(&mut self.scratch.next_obs, &mean, &inv_std);
+        self.inner.update(&self.scratch, rng)
+    }
+
+    fn fit_observations(&mut self, buffer: &ReplayBuffer) -> Result<()> {
+        let (mean, inv_std) = observation_stats(buffer);
+        let n = mean.len();
+        self.mean.set(&Tensor::from_vec(mean, n, &Device::Cpu)?)?;
+        self.inv_std.set(&Tensor::from_vec(inv_std, n, &Device::Cpu)?)?;
+        Ok(())
     }
 }
 

@@ -17,10 +17,9 @@ use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
-use super::buffer::Batch;
 use super::config::{positive, Algo, TrainConfig, WeightInit};
 use super::nets::{batch_tensor, orthogonal, DenseStack};
-use super::{layer_sizes, Agent, Losses};
+use super::{layer_sizes, Agent};
 use crate::numeric::dense::dense;
 use crate::numeric::inplace::Activation;
 use crate::numeric::optim::{Adam, Optimizer};
@@ -358,12 +357,6 @@ impl Agent for PpoAgent {
         let raw: Vec<f64> = obs.iter().map(|&v| v as f64).collect();
         let x = self.normalize(&[raw])?;
         Ok(self.policy_step(&x, rng)?.actions.into_iter().map(|a| a.clamp(-1.0, 1.0)).collect())
-    }
-
-    fn update(&mut self, _batch: &Batch, _rng: &mut ChaCha8Rng) -> Result<Losses> {
-        Err(candle_core::Error::Msg(
-            "PPO learns from its own rollouts (train::on_policy), not from replay minibatches".into(),
-        ))
     }
 
     fn parameters(&self) -> Vec<(String, Var)> {

@@ -5,8 +5,8 @@ use candle_core::Result;
 use rand_chacha::ChaCha8Rng;
 
 use super::{
-    Agent, Algo, BranchingDqnAgent, CrossqAgent, CrossqConfig, DeterministicAgent, DpgConfig, DqnConfig, PpoAgent,
-    PpoConfig, SacAgent, SacConfig, TrainConfig,
+    Agent, Algo, BranchingDqnAgent, CrossqAgent, CrossqConfig, DeterministicAgent, DpgConfig, DqnConfig,
+    OffPolicyAgent, PpoAgent, PpoConfig, SacAgent, SacConfig, TrainConfig,
 };
 
 /// A registered algorithm: its name, published defaults, settings and constructor.
@@ -20,11 +20,22 @@ pub struct AlgoEntry {
     /// The keys of its own `config.toml` section (`[train.<name>]`).
     pub settings: &'static [&'static str],
     /// Builds the agent for observation and action sizes, initialised from the RNG.
-    pub build: BuildAgent,
+    pub build: Build,
 }
 
-/// Builds an agent from its config, the observation and action sizes and the initialisation RNG.
-pub(crate) type BuildAgent = fn(&TrainConfig, usize, usize, &mut ChaCha8Rng) -> Result<Box<dyn Agent>>;
+/// How an algorithm's agent is built from its config, the observation and action sizes and the
+/// initialisation RNG: an off-policy learner, or an on-policy agent (which acts; its trainer
+/// builds the rest).
+#[derive(Clone, Copy)]
+pub enum Build {
+    /// Learns from replay minibatches.
+    OffPolicy(BuildFn<dyn OffPolicyAgent>),
+    /// Learns from its own rollouts.
+    OnPolicy(BuildFn<dyn Agent>),
+}
+
+/// A constructor: config, observation and action sizes, initialisation RNG.
+pub type BuildFn<A> = fn(&TrainConfig, usize, usize, &mut ChaCha8Rng) -> Result<Box<A>>;
 
 pub(crate) const ALGOS: &[AlgoEntry] = &[
     AlgoEntry {
@@ -32,42 +43,42 @@ pub(crate) const ALGOS: &[AlgoEntry] = &[
         name: "td3",
         defaults: TrainConfig::td3_defaults,
         settings: DpgConfig::KEYS,
-        build: deterministic,
+        build: Build::OffPolicy(deterministic),
     },
     AlgoEntry {
         algo: Algo::Sac,
         name: "sac",
         defaults: TrainConfig::sac_defaults,
         settings: SacConfig::KEYS,
-        build: sac,
+        build: Build::OffPolicy(sac),
     },
     AlgoEntry {
         algo: Algo::Ddpg,
         name: "ddpg",
         defaults: TrainConfig::ddpg_defaults,
         settings: DpgConfig::KEYS,
-        build: deterministic,
+        build: Build::OffPolicy(deterministic),
     },
     AlgoEntry {
         algo: Algo::Ppo,
         name: "ppo",
         defaults: TrainConfig::ppo_defaults,
         settings: PpoConfig::KEYS,
-        build: ppo,
+        build: Build::OnPolicy(ppo),
     },
     AlgoEntry {
         algo: Algo::Dqn,
         name: "dqn",
         defaults: TrainConfig::dqn_defaults,
         settings: DqnConfig::KEYS,
-        build: dqn,
+        build: Build::OffPolicy(dqn),
     },
     AlgoEntry {
         algo: Algo::Crossq,
         name: "crossq",
         defaults: TrainConfig::crossq_defaults,
         settings: CrossqConfig::KEYS,
-        build: crossq,
+        build: Build::OffPolicy(crossq),
     },
 ];
 
@@ -76,11 +87,11 @@ pub fn entry(algo: Algo) -> &'static AlgoEntry {
     ALGOS.iter().find(|e| e.algo == algo).expect("every Algo is registered")
 }
 
-fn deterministic(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
+fn deterministic(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn OffPolicyAgent>> {
     Ok(Box::new(DeterministicAgent::new(cfg, obs, act, rng)?))
 }
 
-fn sac(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
+fn sac(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn OffPolicyAgent>> {
     Ok(Box::new(SacAgent::new(cfg, obs, act, rng)?))
 }
 
@@ -88,11 +99,11 @@ fn ppo(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Resul
     Ok(Box::new(PpoAgent::new(cfg, obs, act, rng)?))
 }
 
-fn dqn(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
+fn dqn(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn OffPolicyAgent>> {
     Ok(Box::new(BranchingDqnAgent::new(cfg, obs, act, rng)?))
 }
 
-fn crossq(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
+fn crossq(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn OffPolicyAgent>> {
     Ok(Box::new(CrossqAgent::new(cfg, obs, act, rng)?))
 }
 

@@ -11,7 +11,7 @@ use super::buffer::Batch;
 use super::config::{positive, Algo, SacVersion, TanhCorrection, TrainConfig, WeightInit};
 use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
-use super::{layer_sizes, Agent, Losses};
+use super::{layer_sizes, Agent, Losses, OffPolicyAgent};
 use crate::numeric::objectives::{actor_objective, critic_input, soft_value, td_target};
 use crate::numeric::optim::{Adam, Optimizer};
 use crate::numeric::squashed::squashed_sample;
@@ -155,6 +155,42 @@ impl Agent for SacAgent {
         sample.narrow(1, 0, self.act_dim)?.flatten_all()?.to_vec1::<f32>()
     }
 
+    fn parameters(&self) -> Vec<(String, Var)> {
+        let mut out = self.actor.named_vars("actor");
+        out.extend(self.critics.named_vars("critics"));
+        out.extend(self.critic_targets.named_vars("critics_target"));
+        if let Some(v) = &self.value {
+            out.extend(v.net.named_vars("value"));
+            out.extend(v.target.named_vars("value_target"));
+        }
+        out.push(("log_alpha".into(), self.log_alpha.clone()));
+        out
+    }
+
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
+        let mut out: Vec<(&str, &mut dyn Optimizer)> =
+            vec![("actor_opt", &mut self.actor_opt), ("critic_opt", &mut self.critic_opt)];
+        if let Some(o) = &mut self.alpha_opt {
+            out.push(("alpha_opt", o));
+        }
+        if let Some(v) = &mut self.value {
+            out.push(("value_opt", &mut v.opt));
+        }
+        out
+    }
+
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![("updates", self.updates)]
+    }
+
+    fn set_counter(&mut self, name: &str, value: u64) {
+        if name == "updates" {
+            self.updates = value;
+        }
+    }
+}
+
+impl OffPolicyAgent for SacAgent {
     fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
         let n = batch.size;
         let obs = batch_tensor(&batch.obs, n, self.obs_dim)?;
@@ -207,40 +243,6 @@ impl Agent for SacAgent {
         }
         self.updates += 1;
         Ok(losses)
-    }
-
-    fn parameters(&self) -> Vec<(String, Var)> {
-        let mut out = self.actor.named_vars("actor");
-        out.extend(self.critics.named_vars("critics"));
-        out.extend(self.critic_targets.named_vars("critics_target"));
-        if let Some(v) = &self.value {
-            out.extend(v.net.named_vars("value"));
-            out.extend(v.target.named_vars("value_target"));
-        }
-        out.push(("log_alpha".into(), self.log_alpha.clone()));
-        out
-    }
-
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
-        let mut out: Vec<(&str, &mut dyn Optimizer)> =
-            vec![("actor_opt", &mut self.actor_opt), ("critic_opt", &mut self.critic_opt)];
-        if let Some(o) = &mut self.alpha_opt {
-            out.push(("alpha_opt", o));
-        }
-        if let Some(v) = &mut self.value {
-            out.push(("value_opt", &mut v.opt));
-        }
-        out
-    }
-
-    fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("updates", self.updates)]
-    }
-
-    fn set_counter(&mut self, name: &str, value: u64) {
-        if name == "updates" {
-            self.updates = value;
-        }
     }
 }
 

@@ -29,7 +29,7 @@ use indicatif::{ProgressBar, ProgressStyle};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 
-use crate::agents::{make_agent_on, Agent, Batch, Losses, ReplayBuffer, TrainConfig};
+use crate::agents::{make_learner_on, Agent, Batch, Losses, OffPolicyAgent, ReplayBuffer, TrainConfig};
 use crate::device::ComputeDevice;
 use crate::envs::{make, Env, EnvConfig};
 use crate::io::write_bytes_atomic;
@@ -424,7 +424,7 @@ struct Trainer {
     seed: u64,
     env: Box<dyn Env>,
     eval_env: Box<dyn Env>,
-    agent: Box<dyn Agent>,
+    agent: Box<dyn OffPolicyAgent>,
     buffer: ReplayBuffer,
     batch: Batch,
     rng: ChaCha8Rng,
@@ -446,7 +446,7 @@ impl Trainer {
         check_bounded_actions(&run.env.name, &env.spec().action_space, run.train.algo)?;
         let eval_env = make(&run.env)?;
         let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
-        let agent = make_agent_on(&run.train, obs_dim, act_dim, &mut init_rng(run.seed), device)?;
+        let agent = make_learner_on(&run.train, obs_dim, act_dim, &mut init_rng(run.seed), device)?;
         Ok(Trainer {
             run_dir: run_dir.to_path_buf(),
             env_config: run.env.clone(),

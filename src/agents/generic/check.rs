@@ -8,7 +8,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::make_generic_agent;
-use crate::agents::{make_agent, Algo, Batch, Losses, TrainConfig};
+use crate::agents::{make_learner, Algo, Batch, Losses, TrainConfig};
 
 /// The comparison's observation and action sizes.
 pub const OBS: usize = 7;
@@ -68,7 +68,7 @@ pub struct Gap {
 /// Runs both paths through `updates` updates; `device` hosts the generic one.
 pub fn compare(algo: Algo, device: &Device, updates: usize) -> Gap {
     let cfg = config(algo);
-    let mut fused = make_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11)).unwrap();
+    let mut fused = make_learner(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11)).unwrap();
     let mut generic = make_generic_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11), device).unwrap();
     let (mut rng_f, mut rng_g) = (ChaCha8Rng::seed_from_u64(5), ChaCha8Rng::seed_from_u64(5));
     let mut data = ChaCha8Rng::seed_from_u64(3);

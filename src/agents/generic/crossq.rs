@@ -9,7 +9,7 @@ use super::{read_scalars, row, standard_normal, DeviceBatch};
 use crate::agents::buffer::Batch;
 use crate::agents::config::{Algo, TanhCorrection, TrainConfig};
 use crate::agents::crossq::{D_MAX, EPSILON, R_MAX};
-use crate::agents::{Agent, CrossqAgent, Losses};
+use crate::agents::{Agent, CrossqAgent, Losses, OffPolicyAgent};
 use crate::numeric::optim::Optimizer;
 
 /// Dense layers with batch renormalisation before each and ReLU between them.
@@ -139,6 +139,37 @@ impl Agent for GenericCrossq {
         a.flatten_all()?.to_vec1::<f32>()
     }
 
+    fn parameters(&self) -> Vec<(String, Var)> {
+        let mut out = self.actor.named_vars("actor");
+        out.extend(self.critics[0].named_vars("critic0"));
+        out.extend(self.critics[1].named_vars("critic1"));
+        out.push(("log_alpha".into(), self.log_alpha.clone()));
+        out
+    }
+
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
+        vec![
+            ("actor_opt", &mut self.actor_opt as &mut dyn Optimizer),
+            ("critic_opt", &mut self.critic_opt),
+            ("alpha_opt", &mut self.alpha_opt),
+        ]
+    }
+
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![("updates", self.updates), ("actor_passes", self.actor_passes), ("critic_passes", self.critic_passes)]
+    }
+
+    fn set_counter(&mut self, name: &str, value: u64) {
+        match name {
+            "updates" => self.updates = value,
+            "actor_passes" => self.actor_passes = value,
+            "critic_passes" => self.critic_passes = value,
+            _ => {}
+        }
+    }
+}
+
+impl OffPolicyAgent for GenericCrossq {
     fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
         let n = batch.size;
         let trains_actor = (self.updates + 1).is_multiple_of(self.policy_delay);
@@ -196,34 +227,5 @@ impl Agent for GenericCrossq {
             alpha: values.last().copied(),
             value: None,
         })
-    }
-
-    fn parameters(&self) -> Vec<(String, Var)> {
-        let mut out = self.actor.named_vars("actor");
-        out.extend(self.critics[0].named_vars("critic0"));
-        out.extend(self.critics[1].named_vars("critic1"));
-        out.push(("log_alpha".into(), self.log_alpha.clone()));
-        out
-    }
-
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
-        vec![
-            ("actor_opt", &mut self.actor_opt as &mut dyn Optimizer),
-            ("critic_opt", &mut self.critic_opt),
-            ("alpha_opt", &mut self.alpha_opt),
-        ]
-    }
-
-    fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("updates", self.updates), ("actor_passes", self.actor_passes), ("critic_passes", self.critic_passes)]
-    }
-
-    fn set_counter(&mut self, name: &str, value: u64) {
-        match name {
-            "updates" => self.updates = value,
-            "actor_passes" => self.actor_passes = value,
-            "critic_passes" => self.critic_passes = value,
-            _ => {}
-        }
     }
 }

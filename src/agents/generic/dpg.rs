@@ -10,7 +10,7 @@ use super::{read_scalars, row, DeviceBatch};
 use crate::agents::buffer::Batch;
 use crate::agents::config::{Algo, TrainConfig};
 use crate::agents::noise::{Noise, NoiseKind};
-use crate::agents::{Agent, DeterministicAgent, Losses};
+use crate::agents::{Agent, DeterministicAgent, Losses, OffPolicyAgent};
 use crate::numeric::optim::Optimizer;
 
 /// TD3 and DDPG: a deterministic actor, one or two critics, and target networks.
@@ -99,6 +99,32 @@ impl Agent for GenericDeterministic {
         self.noise.reset();
     }
 
+    fn parameters(&self) -> Vec<(String, Var)> {
+        let mut out = self.actor.named_vars("actor");
+        out.extend(self.actor_target.named_vars("actor_target"));
+        out.extend(self.critics.named_vars("critics"));
+        out.extend(self.critic_targets.named_vars("critics_target"));
+        out
+    }
+
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
+        vec![("actor_opt", &mut self.actor_opt as &mut dyn Optimizer), ("critic_opt", &mut self.critic_opt)]
+    }
+
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![("updates", self.updates), ("noise_steps", self.noise.steps())]
+    }
+
+    fn set_counter(&mut self, name: &str, value: u64) {
+        match name {
+            "updates" => self.updates = value,
+            "noise_steps" => self.noise.set_steps(value),
+            _ => {}
+        }
+    }
+}
+
+impl OffPolicyAgent for GenericDeterministic {
     fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
         let n = batch.size;
         let mut noise = Vec::new();
@@ -134,29 +160,5 @@ impl Agent for GenericDeterministic {
         }
         let values = read_scalars(&scalars.iter().collect::<Vec<_>>())?;
         Ok(Losses { critic: values[0], actor: values.get(1).copied(), ..Default::default() })
-    }
-
-    fn parameters(&self) -> Vec<(String, Var)> {
-        let mut out = self.actor.named_vars("actor");
-        out.extend(self.actor_target.named_vars("actor_target"));
-        out.extend(self.critics.named_vars("critics"));
-        out.extend(self.critic_targets.named_vars("critics_target"));
-        out
-    }
-
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
-        vec![("actor_opt", &mut self.actor_opt as &mut dyn Optimizer), ("critic_opt", &mut self.critic_opt)]
-    }
-
-    fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("updates", self.updates), ("noise_steps", self.noise.steps())]
-    }
-
-    fn set_counter(&mut self, name: &str, value: u64) {
-        match name {
-            "updates" => self.updates = value,
-            "noise_steps" => self.noise.set_steps(value),
-            _ => {}
-        }
     }
 }

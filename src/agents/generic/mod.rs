@@ -27,7 +27,7 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::buffer::Batch;
 use super::config::{Algo, TrainConfig};
-use super::Agent;
+use super::OffPolicyAgent;
 
 pub use crossq::GenericCrossq;
 pub use dpg::GenericDeterministic;
@@ -40,7 +40,7 @@ pub fn make_generic_agent(
     act_dim: usize,
     rng: &mut ChaCha8Rng,
     device: &Device,
-) -> anyhow::Result<Box<dyn Agent>> {
+) -> anyhow::Result<Box<dyn OffPolicyAgent>> {
     Ok(match cfg.algo {
         Algo::Td3 | Algo::Ddpg => Box::new(GenericDeterministic::new(cfg, obs_dim, act_dim, rng, device)?),
         Algo::Sac => Box::new(GenericSac::new(cfg, obs_dim, act_dim, rng, device)?),

@@ -7,7 +7,7 @@ use super::layers::{squashed_sample, DeviceStack};
 use super::{read_scalars, row, standard_normal, DeviceBatch};
 use crate::agents::buffer::Batch;
 use crate::agents::config::{Algo, SacVersion, TanhCorrection, TrainConfig};
-use crate::agents::{Agent, Losses, SacAgent};
+use crate::agents::{Agent, Losses, OffPolicyAgent, SacAgent};
 use crate::numeric::optim::Optimizer;
 
 /// Soft Actor-Critic v2 with twin critics, target critics and a tuned (or fixed) temperature.
@@ -84,6 +84,35 @@ impl Agent for GenericSac {
         a.flatten_all()?.to_vec1::<f32>()
     }
 
+    fn parameters(&self) -> Vec<(String, Var)> {
+        let mut out = self.actor.named_vars("actor");
+        out.extend(self.critics.named_vars("critics"));
+        out.extend(self.critic_targets.named_vars("critics_target"));
+        out.push(("log_alpha".into(), self.log_alpha.clone()));
+        out
+    }
+
+    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
+        let mut out: Vec<(&'static str, &mut dyn Optimizer)> =
+            vec![("actor_opt", &mut self.actor_opt), ("critic_opt", &mut self.critic_opt)];
+        if let Some(o) = &mut self.alpha_opt {
+            out.push(("alpha_opt", o));
+        }
+        out
+    }
+
+    fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![("updates", self.updates)]
+    }
+
+    fn set_counter(&mut self, name: &str, value: u64) {
+        if name == "updates" {
+            self.updates = value;
+        }
+    }
+}
+
+impl OffPolicyAgent for GenericSac {
     fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
         let n = batch.size;
         // the fused update's draws, in its order: the next state's sample, then the policy's
@@ -124,32 +153,5 @@ impl Agent for GenericSac {
             alpha: values.last().copied(),
             value: None,
         })
-    }
-
-    fn parameters(&self) -> Vec<(String, Var)> {
-        let mut out = self.actor.named_vars("actor");
-        out.extend(self.critics.named_vars("critics"));
-        out.extend(self.critic_targets.named_vars("critics_target"));
-        out.push(("log_alpha".into(), self.log_alpha.clone()));
-        out
-    }
-
-    fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
-        let mut out: Vec<(&'static str, &mut dyn Optimizer)> =
-            vec![("actor_opt", &mut self.actor_opt), ("critic_opt", &mut self.critic_opt)];
-        if let Some(o) = &mut self.alpha_opt {
-            out.push(("alpha_opt", o));
-        }
-        out
-    }
-
-    fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("updates", self.updates)]
-    }
-
-    fn set_counter(&mut self, name: &str, value: u64) {
-        if name == "updates" {
-            self.updates = value;
-        }
     }
 }

@@ -8,7 +8,7 @@ use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::{make_generic_agent, DeviceBatch};
-use crate::agents::{make_agent, Algo, Batch, TrainConfig};
+use crate::agents::{make_learner, Algo, Batch, TrainConfig};
 
 /// Which implementation to time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -56,7 +56,7 @@ pub fn measure(
 ) -> anyhow::Result<Speed> {
     let mut init = ChaCha8Rng::seed_from_u64(0);
     let mut agent = match path {
-        Path::Fused => make_agent(cfg, obs, act, &mut init)?,
+        Path::Fused => make_learner(cfg, obs, act, &mut init)?,
         Path::Generic => make_generic_agent(cfg, obs, act, &mut init, device)?,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(1);

@@ -5,7 +5,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::check::{compare, config, tolerance, ACT, OBS, UPDATES};
 use super::make_generic_agent;
-use crate::agents::{make_agent, Algo, TrainConfig};
+use crate::agents::{make_agent, make_learner, Algo, TrainConfig};
 
 fn check(algo: Algo) {
     let gap = compare(algo, &Device::Cpu, UPDATES);
@@ -76,7 +76,7 @@ fn a_fused_checkpoints_state_continues_on_the_generic_path() {
     // from the fused agent into the generic one, which then updates as the fused one does.
     for algo in [Algo::Td3, Algo::Sac, Algo::Crossq] {
         let cfg = config(algo);
-        let mut fused = make_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(21)).unwrap();
+        let mut fused = make_learner(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(21)).unwrap();
         // another seed: every weight must come from the fused agent's state
         let mut generic = make_generic_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(99), &Device::Cpu).unwrap();
         let mut data = ChaCha8Rng::seed_from_u64(3);
