@@ -6,7 +6,7 @@ use rand_chacha::ChaCha8Rng;
 
 use super::config::WeightInit;
 use super::nets::{DenseStack, Mlp, Output};
-use crate::numeric::objectives::critic_mse;
+use crate::agents::objectives::critic_mse;
 use crate::numeric::optim::Param;
 use crate::numeric::stack::relu_stack;
 

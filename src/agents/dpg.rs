@@ -13,7 +13,7 @@ use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, Mlp, Output};
 use super::noise::{Noise, NoiseKind};
 use super::{layer_sizes, Agent, Losses, OffPolicyAgent};
-use crate::numeric::objectives::{critic_minimum, td_target};
+use crate::agents::objectives::{critic_minimum, td_target};
 use crate::numeric::optim::{Adam, Optimizer};
 
 /// TD3 and DDPG: a deterministic actor, one or two critics, and target networks.

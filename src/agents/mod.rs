@@ -14,9 +14,11 @@ pub mod generic;
 pub(crate) mod nets;
 pub mod noise;
 pub mod normalize;
+pub mod objectives;
 pub mod ppo;
 pub mod registry;
 pub(crate) mod sac;
+pub mod squashed;
 
 use candle_core::{Result, Var};
 use rand_chacha::ChaCha8Rng;

@@ -12,9 +12,9 @@ use super::config::{positive, Algo, SacVersion, TanhCorrection, TrainConfig, Wei
 use super::critics::{polyak_update_critics, Critics};
 use super::nets::{batch_tensor, polyak_update, scalar_var, Mlp, Output};
 use super::{layer_sizes, Agent, Losses, OffPolicyAgent};
-use crate::numeric::objectives::{actor_objective, critic_input, soft_value, td_target};
+use crate::agents::objectives::{actor_objective, critic_input, soft_value, td_target};
+use crate::agents::squashed::squashed_sample;
 use crate::numeric::optim::{Adam, Optimizer};
-use crate::numeric::squashed::squashed_sample;
 
 /// The policy's log-std is clamped to this range (SAC's and CrossQ's).
 pub(crate) const LOG_STD_MIN: f64 = -20.0;
@@ -214,7 +214,7 @@ impl OffPolicyAgent for SacAgent {
         losses.critic = critic_loss.to_scalar::<f32>()? as f64;
 
         // the action and its log-density side by side, and the objective as two nodes
-        // (numeric::objectives: the graph's bits without its small nodes)
+        // (agents::objectives: the graph's bits without its small nodes)
         let pi = self.sample(&obs, rng)?;
         let logp = pi.narrow(1, self.act_dim, 1)?;
         let q = self.critics.forward_frozen(&critic_input(&obs, &pi)?)?;

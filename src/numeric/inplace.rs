@@ -24,7 +24,7 @@ fn contiguous_mut<'a>(storage: &'a mut CpuStorage, layout: &Layout, what: &str) 
     }
 }
 
-pub(super) fn contiguous<'a>(storage: &'a CpuStorage, layout: &Layout, what: &str) -> Result<&'a [f32]> {
+pub(crate) fn contiguous<'a>(storage: &'a CpuStorage, layout: &Layout, what: &str) -> Result<&'a [f32]> {
     let Some((start, end)) = layout.contiguous_offsets() else { bail!("{what}: source tensor is not contiguous") };
     match storage {
         CpuStorage::F32(data) => Ok(&data[start..end]),

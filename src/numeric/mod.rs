@@ -1,6 +1,5 @@
 //! The numeric engine under the agents: the dense layer, the fused stack of dense layers the
-//! off-policy agents train through, SAC's policy head as one node ([`squashed`]) and its actor
-//! objective as two ([`actor_objective`]), the matrix-multiply kernels they run on, glibc's
+//! off-policy agents train through, the matrix-multiply kernels they run on, glibc's
 //! `expf`, `logf` and `tanhf` in vectorised form ([`glibc_math`]), the in-place optimiser and
 //! target-network steps, and the settings every network computation runs under (flush-to-zero,
 //! the helper thread, the allocator).
@@ -19,10 +18,8 @@ pub mod glibc_math;
 pub(crate) mod inplace;
 pub mod kernel_path;
 pub mod matmul;
-pub mod objectives;
 pub mod optim;
 pub mod second_core;
-pub mod squashed;
 pub mod stack;
 pub(crate) mod wide;
 

@@ -183,7 +183,7 @@ impl DeviceRenorm {
 
 /// A reparameterised sample of the tanh-squashed Gaussian whose mean and raw log-std are the
 /// halves of `out` (`[n, 2a]`), with standard normal noise `eps` (`[n, a]`): the action `[n, a]`
-/// and its log-density `[n, 1]` (`numeric::squashed`'s function).
+/// and its log-density `[n, 1]` (`agents::squashed`'s function).
 pub(crate) fn squashed_sample(out: &Tensor, eps: &Tensor, correction: TanhCorrection) -> Result<(Tensor, Tensor)> {
     let a = out.dim(1)? / 2;
     let mean = out.narrow(1, 0, a)?;

@@ -30,11 +30,11 @@ use std::sync::Mutex;
 use candle_core::{bail, CpuStorage, CustomOp1, Layout, Result, Shape, Tensor};
 use serde::{Deserialize, Serialize};
 
-use super::glibc_math;
-use super::inplace::contiguous;
-use super::kernel_path::{self, KernelPath};
-use super::second_core;
-use super::wide::wide;
+use crate::numeric::glibc_math;
+use crate::numeric::inplace::contiguous;
+use crate::numeric::kernel_path::{self, KernelPath};
+use crate::numeric::second_core;
+use crate::numeric::wide::wide;
 
 /// How SAC's log-density accounts for the tanh squashing, log(1 - tanh(u)^2).
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

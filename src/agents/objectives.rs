@@ -24,7 +24,7 @@
 
 use candle_core::{bail, CpuStorage, CustomOp2, Device, Layout, Result, Shape, Tensor};
 
-use super::inplace::contiguous;
+use crate::numeric::inplace::contiguous;
 
 struct CriticInput {
     obs_dim: usize,
