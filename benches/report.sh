@@ -43,5 +43,11 @@ existing=()
 for d in "${runs[@]}"; do
   if [ -d "$d" ]; then existing+=("$d"); else echo "not committed (yet): $d" >&2; fi
 done
+# Peers evaluated outside locobench (locobench.evaluate(out=...)): Stable-Baselines3's PPO on
+# Minitaur with rl-baselines3-zoo's settings (benches/sb3_peer.py), one row per seed.
+external=()
+for d in $r/minitaur/sb3-ppo-seed*-1m/external; do
+  [ -d "$d" ] && external+=(--external "$d")
+done
 rm -rf "$out"  # no chart of an earlier layout left behind
-"$bin" report --runs "${existing[@]}" --out "$out" "${videos[@]}" "${@:2}"
+"$bin" report --runs "${existing[@]}" "${external[@]}" --out "$out" "${videos[@]}" "${@:2}"

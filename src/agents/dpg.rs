@@ -47,17 +47,7 @@ impl DeterministicAgent {
         let critic_targets = critics.deep_copy()?;
         let actor_opt = Adam::new(actor.params(), cfg.actor_lr);
         let critic_opt = Adam::new(critics.params(), cfg.critic_lr);
-        let noise = match dpg.noise {
-            NoiseKind::Gaussian => Noise::Gaussian { sigma: dpg.exploration_noise },
-            NoiseKind::OrnsteinUhlenbeck => Noise::ornstein_uhlenbeck(
-                act_dim,
-                dpg.ou_theta,
-                dpg.exploration_noise,
-                dpg.ou_sigma_min,
-                dpg.ou_decay_steps,
-                dpg.ou_dt,
-            ),
-        };
+        let noise = Noise::for_config(dpg, act_dim);
         Ok(DeterministicAgent {
             algo: cfg.algo,
             act_dim,

@@ -41,6 +41,21 @@ impl Noise {
         Noise::OrnsteinUhlenbeck { theta, sigma_max, sigma_min, decay_steps, dt, state: vec![0.0; dim], steps: 0 }
     }
 
+    /// The exploration noise a TD3 or DDPG section asks for, for `dim` actions.
+    pub(crate) fn for_config(dpg: &super::DpgConfig, dim: usize) -> Noise {
+        match dpg.noise {
+            NoiseKind::Gaussian => Noise::Gaussian { sigma: dpg.exploration_noise },
+            NoiseKind::OrnsteinUhlenbeck => Noise::ornstein_uhlenbeck(
+                dim,
+                dpg.ou_theta,
+                dpg.exploration_noise,
+                dpg.ou_sigma_min,
+                dpg.ou_decay_steps,
+                dpg.ou_dt,
+            ),
+        }
+    }
+
     /// The current standard deviation of the driving noise.
     pub(crate) fn sigma(&self) -> f64 {
         match self {

@@ -17,12 +17,12 @@ mod recording;
 pub mod run_config;
 pub mod run_dir;
 pub(crate) mod run_lock;
+mod scaffold;
 pub mod seeds;
 pub mod stop;
 mod tensorboard;
 
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use indicatif::{ProgressBar, ProgressStyle};
@@ -40,6 +40,7 @@ use evaluate::{evaluate, Evaluation};
 use fault::Point;
 use metrics::MetricsRow;
 use recording::{TrainingClips, TrainingRecorder};
+use scaffold::Scaffold;
 use seeds::{init_rng, train_episode_seed, training_rng, RngState};
 
 pub use policy_ref::{resolve_policy, PolicyRef};
@@ -469,40 +470,22 @@ impl Trainer {
     }
 
     fn run(&mut self, control: &RunControl) -> Result<RunSummary> {
-        let _runtime = crate::runtime::Runtime::enter(control.threads);
         let cfg = self.cfg.clone();
-        let signals = stop::stop_signals();
-        let bar = progress_bar(control.show_progress, cfg.total_steps, self.step);
-        let started = Instant::now();
-        let start_step = self.step;
+        let recording = scaffold::open_recording(control)?;
+        let mut sc =
+            Scaffold::start(control, &self.run_dir, &self.env_config, cfg.total_steps, self.step, recording.as_ref())?;
         let act_dim = self.env.spec().action_space.dim();
-        let mut last_eval: Option<Evaluation> = None;
         let mut next_checkpoint = (self.step / cfg.checkpoint_every + 1) * cfg.checkpoint_every;
         let mut obs: Vec<f64> = Vec::new();
         let mut need_reset = true;
         let (mut ep_return, mut ep_len) = (0.0, 0u64);
-        let wall = |offset: f64| offset + started.elapsed().as_secs_f64();
-        let rate = |step: u64| (step - start_step) as f64 / started.elapsed().as_secs_f64().max(1e-9);
 
-        let recording = control.record.as_deref().map(Recording::create).transpose()?;
-        let mut recorder = match &recording {
-            Some(r) => Some(TrainingRecorder::new(r.stream(), &self.env_config)?),
-            None => None,
-        };
-        let mut clips =
-            control.video_every.map(|n| TrainingClips::new(&self.run_dir, &self.env_config, n)).transpose()?;
-        let mut events =
-            control.tensorboard.as_deref().map(|d| tensorboard::EventWriter::create(d, self.step)).transpose()?;
-
-        let mut hook_done = false;
         let outcome = loop {
-            let solved =
-                hook_done || control.target_return.is_some_and(|t| last_eval.as_ref().is_some_and(|e| e.mean() >= t));
-            if self.step >= cfg.total_steps || solved {
+            if self.step >= cfg.total_steps || sc.solved(control) {
                 break Outcome::Finished;
             }
-            let stop_at_boundary = signals.at_episode_end() || control.stop_after.is_some_and(|s| self.step >= s);
-            if signals.now() || (need_reset && stop_at_boundary) {
+            let stop_at_boundary = sc.signals.at_episode_end() || control.stop_after.is_some_and(|s| self.step >= s);
+            if sc.signals.now() || (need_reset && stop_at_boundary) {
                 break Outcome::Stopped;
             }
             if need_reset {
@@ -525,7 +508,7 @@ impl Trainer {
 
             if s.info.unstable {
                 // Not a real transition: drop it and start over.
-                bar.println(format!(
+                sc.bar.println(format!(
                     "warning: physics unstable at step {}; episode dropped ({:?})",
                     self.step, s.info.warnings
                 ));
@@ -544,14 +527,14 @@ impl Trainer {
                             "episode",
                             self.step,
                             self.losses,
-                            rate(self.step),
-                            wall(self.wall_offset),
+                            sc.rate(self.step),
+                            sc.wall(self.wall_offset),
                         )
                     });
-                    if let Some(r) = &recorder {
+                    if let Some(r) = &sc.recorder {
                         r.curves(self.metrics.last().unwrap())?;
                     }
-                    if let Some(e) = events.as_mut() {
+                    if let Some(e) = sc.events.as_mut() {
                         e.row(self.metrics.last().unwrap())?;
                     }
                     need_reset = true;
@@ -581,47 +564,29 @@ impl Trainer {
             }
 
             // Evaluate.
-            if self.step.is_multiple_of(cfg.eval_every) || self.step == cfg.total_steps {
+            if scaffold::crossed(self.step - 1, self.step, cfg.eval_every) || self.step == cfg.total_steps {
                 let e = evaluate(self.agent.as_ref(), self.eval_env.as_mut(), cfg.eval_episodes, self.seed)?;
                 self.best_eval = Some(self.best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
-                bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
-                let row = MetricsRow::progress("eval", self.step, self.losses, rate(self.step), wall(self.wall_offset));
-                hook_done = log_evaluation(
-                    &self.run_dir,
-                    &mut self.metrics,
-                    row,
-                    &e,
-                    recorder.as_mut(),
-                    clips.as_mut(),
-                    events.as_mut(),
-                    control,
-                    self.agent.as_ref(),
-                    self.seed,
-                )?;
-                last_eval = Some(e);
+                let row =
+                    MetricsRow::progress("eval", self.step, self.losses, sc.rate(self.step), sc.wall(self.wall_offset));
+                sc.evaluated(&self.run_dir, &mut self.metrics, row, e, control, self.agent.as_ref(), self.seed)?;
             }
-            bar.set_position(self.step);
+            sc.bar.set_position(self.step);
 
             // Checkpoint at the first episode boundary past each multiple of checkpoint_every.
             if need_reset && self.step >= next_checkpoint {
-                self.save(true, wall(self.wall_offset))?;
+                self.save(true, sc.wall(self.wall_offset))?;
                 next_checkpoint = (self.step / cfg.checkpoint_every + 1) * cfg.checkpoint_every;
             }
         };
-        bar.finish_and_clear();
-        if let Some(e) = events.as_mut() {
-            e.flush()?;
-        }
+        sc.end()?;
         // A run finished early (target_return, an evaluation hook) keeps its actor at the step
         // it reached, as the on-policy loop does; budgets and the full budget are saved above.
         if outcome == Outcome::Finished && !POLICY_BUDGETS.contains(&self.step) && self.step != cfg.total_steps {
             save_budget_policy(&self.run_dir, self.step, self.agent.as_ref())?;
         }
-        let checkpoint = self.save(need_reset, wall(self.wall_offset))?;
-        drop(recorder);
-        let run_dir = self.run_dir.clone();
-        let summary =
-            RunSummary { run_dir, outcome, steps: self.step, last_eval, best_eval_mean: self.best_eval, checkpoint };
+        let checkpoint = self.save(need_reset, sc.wall(self.wall_offset))?;
+        let summary = sc.summary(&self.run_dir, outcome, self.step, self.best_eval, checkpoint);
         finish_run(&self.metrics, recording, summary)
     }
 

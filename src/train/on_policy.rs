@@ -13,30 +13,23 @@
 //! `rollout.safetensors` beside the networks.
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::time::Instant;
 
 use anyhow::{Context, Result};
 use candle_core::{Device, Tensor};
-use indicatif::ProgressBar;
 use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
 use super::checkpoint::{self, TrainState};
-use super::evaluate::{evaluate, Evaluation};
+use super::evaluate::evaluate;
 use super::fault::{self, Point};
 use super::metrics::MetricsRow;
-use super::recording::{TrainingClips, TrainingRecorder};
+use super::scaffold::{self, Scaffold};
 use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
-use super::tensorboard::EventWriter;
-use super::{
-    finish_run, log_evaluation, progress_bar, save_budget_policy, Outcome, RunConfig, RunControl, RunSummary,
-    POLICY_BUDGETS,
-};
+use super::{finish_run, save_budget_policy, Outcome, RunConfig, RunControl, RunSummary, POLICY_BUDGETS};
 use crate::agents::ppo::{PpoBatch, PpoLosses, RunningMeanStd};
 use crate::agents::{Losses, PpoAgent, PpoConfig, TrainConfig};
 use crate::envs::{make, Env, VecEnv, VecEnvSnapshot};
 use crate::policy::to_space;
-use crate::record::Recording;
 
 pub(super) const ROLLOUT_FILE: &str = "rollout.safetensors";
 /// gymnasium's `NormalizeReward` epsilon.
@@ -157,40 +150,24 @@ impl OnPolicyTrainer {
     }
 
     fn run(&mut self, control: &RunControl) -> Result<RunSummary> {
-        let _runtime = crate::runtime::Runtime::enter(control.threads);
         let total = self.cfg().total_steps;
         let rollout = self.settings.rollout_size() as u64;
         let iterations = total.div_ceil(rollout).max(1);
-        let signals = super::stop::stop_signals();
-        let bar = progress_bar(control.show_progress, total, self.step);
-        let started = Instant::now();
-        let start_step = self.step;
-        let wall = |offset: f64| offset + started.elapsed().as_secs_f64();
-        let rate = |step: u64| (step - start_step) as f64 / started.elapsed().as_secs_f64().max(1e-9);
-        let recording = control.record.as_deref().map(Recording::create).transpose()?;
-        let mut recorder = match &recording {
-            Some(r) => Some(TrainingRecorder::new(r.stream(), &self.run.env)?),
-            None => None,
-        };
-        let mut clips = control.video_every.map(|n| TrainingClips::new(&self.run_dir, &self.run.env, n)).transpose()?;
-        let mut events = control.tensorboard.as_deref().map(|d| EventWriter::create(d, self.step)).transpose()?;
+        let recording = scaffold::open_recording(control)?;
+        let mut sc = Scaffold::start(control, &self.run_dir, &self.run.env, total, self.step, recording.as_ref())?;
         let mut losses: Option<Losses>;
-        let mut last_eval: Option<Evaluation> = None;
         let checkpoint_every = self.cfg().checkpoint_every;
         let eval_every = self.cfg().eval_every;
         let eval_episodes = self.cfg().eval_episodes;
         let mut next_checkpoint = (self.step / checkpoint_every + 1) * checkpoint_every;
 
-        let mut hook_done = false;
         let outcome = loop {
-            let solved =
-                hook_done || control.target_return.is_some_and(|t| last_eval.as_ref().is_some_and(|e| e.mean() >= t));
-            if self.step >= total || solved {
+            if self.step >= total || sc.solved(control) {
                 break Outcome::Finished;
             }
             // Rollouts are short (seconds), so every stop request waits for the next boundary,
             // where a checkpoint resumes exactly.
-            if signals.now() || signals.at_episode_end() || control.stop_after.is_some_and(|s| self.step >= s) {
+            if sc.signals.now() || sc.signals.at_episode_end() || control.stop_after.is_some_and(|s| self.step >= s) {
                 break Outcome::Stopped;
             }
             if self.settings.anneal_lr {
@@ -198,59 +175,34 @@ impl OnPolicyTrainer {
                 self.agent.anneal(1.0 - iteration as f64 / iterations as f64);
             }
             let before = self.step;
-            let data = self.collect(&bar, &rate, &wall, recorder.as_ref(), events.as_mut())?;
+            let data = self.collect(&mut sc)?;
             let l = self.update(&data)?;
             losses = Some(Losses { critic: l.value, actor: Some(l.policy), ..Losses::default() });
 
-            if before / eval_every != self.step / eval_every || self.step >= total {
+            if scaffold::crossed(before, self.step, eval_every) || self.step >= total {
                 let e = evaluate(&self.agent, self.eval_env.as_mut(), eval_episodes, self.run.seed)?;
                 self.best_eval = Some(self.best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
-                bar.set_message(format!("eval {:.1} ± {:.1}", e.mean(), e.std()));
-                let row = MetricsRow::progress("eval", self.step, losses, rate(self.step), wall(self.wall_offset));
-                hook_done = log_evaluation(
-                    &self.run_dir,
-                    &mut self.metrics,
-                    row,
-                    &e,
-                    recorder.as_mut(),
-                    clips.as_mut(),
-                    events.as_mut(),
-                    control,
-                    &self.agent,
-                    self.run.seed,
-                )?;
-                last_eval = Some(e);
+                let row =
+                    MetricsRow::progress("eval", self.step, losses, sc.rate(self.step), sc.wall(self.wall_offset));
+                sc.evaluated(&self.run_dir, &mut self.metrics, row, e, control, &self.agent, self.run.seed)?;
             }
-            bar.set_position(self.step);
+            sc.bar.set_position(self.step);
             if self.step >= next_checkpoint {
-                self.save(wall(self.wall_offset))?;
+                self.save(sc.wall(self.wall_offset))?;
                 next_checkpoint = (self.step / checkpoint_every + 1) * checkpoint_every;
             }
         };
-        bar.finish_and_clear();
-        if let Some(e) = events.as_mut() {
-            e.flush()?;
-        }
+        sc.end()?;
         if outcome == Outcome::Finished {
             save_budget_policy(&self.run_dir, self.step, &self.agent)?;
         }
-        let checkpoint = self.save(wall(self.wall_offset))?;
-        drop(recorder);
-        let run_dir = self.run_dir.clone();
-        let summary =
-            RunSummary { run_dir, outcome, steps: self.step, last_eval, best_eval_mean: self.best_eval, checkpoint };
+        let checkpoint = self.save(sc.wall(self.wall_offset))?;
+        let summary = sc.summary(&self.run_dir, outcome, self.step, self.best_eval, checkpoint);
         finish_run(&self.metrics, recording, summary)
     }
 
     /// Steps every copy `num_steps` times with the current policy.
-    fn collect(
-        &mut self,
-        bar: &ProgressBar,
-        rate: &dyn Fn(u64) -> f64,
-        wall: &dyn Fn(f64) -> f64,
-        recorder: Option<&TrainingRecorder>,
-        mut events: Option<&mut EventWriter>,
-    ) -> Result<Rollout> {
+    fn collect(&mut self, sc: &mut Scaffold) -> Result<Rollout> {
         let (n, steps) = (self.settings.num_envs, self.settings.num_steps);
         let gamma = self.cfg().gamma;
         let reward_scale = self.cfg().reward_scale;
@@ -322,7 +274,7 @@ impl OnPolicyTrainer {
 
             for i in 0..n {
                 if s.infos[i].unstable {
-                    bar.println(format!(
+                    sc.bar.println(format!(
                         "warning: physics unstable at step {} in copy {i}; episode dropped ({:?})",
                         self.step, s.infos[i].warnings
                     ));
@@ -338,12 +290,18 @@ impl OnPolicyTrainer {
                     self.metrics.push(MetricsRow {
                         episode_return: Some(self.episode_returns[i]),
                         episode_length: Some(self.episode_lengths[i]),
-                        ..MetricsRow::progress("episode", self.step, None, rate(self.step), wall(self.wall_offset))
+                        ..MetricsRow::progress(
+                            "episode",
+                            self.step,
+                            None,
+                            sc.rate(self.step),
+                            sc.wall(self.wall_offset),
+                        )
                     });
-                    if let Some(rec) = recorder {
+                    if let Some(rec) = &sc.recorder {
                         rec.curves(self.metrics.last().expect("just pushed"))?;
                     }
-                    if let Some(e) = events.as_deref_mut() {
+                    if let Some(e) = sc.events.as_mut() {
                         e.row(self.metrics.last().expect("just pushed"))?;
                     }
                     self.episode_returns[i] = 0.0;

@@ -9,7 +9,7 @@ use super::layers::DeviceStack;
 use super::{read_scalars, row, DeviceBatch};
 use crate::agents::buffer::Batch;
 use crate::agents::config::{Algo, TrainConfig};
-use crate::agents::noise::{Noise, NoiseKind};
+use crate::agents::noise::Noise;
 use crate::agents::{Agent, DeterministicAgent, Losses, OffPolicyAgent};
 use crate::numeric::optim::Optimizer;
 
@@ -47,17 +47,7 @@ impl GenericDeterministic {
         let stack = |prefix: &str| DeviceStack::from_named(&params, prefix, device);
         let (actor, critics) = (stack("actor")?, stack("critics")?);
         let dpg = cfg.dpg();
-        let noise = match dpg.noise {
-            NoiseKind::Gaussian => Noise::Gaussian { sigma: dpg.exploration_noise },
-            NoiseKind::OrnsteinUhlenbeck => Noise::ornstein_uhlenbeck(
-                act_dim,
-                dpg.ou_theta,
-                dpg.exploration_noise,
-                dpg.ou_sigma_min,
-                dpg.ou_decay_steps,
-                dpg.ou_dt,
-            ),
-        };
+        let noise = Noise::for_config(dpg, act_dim);
         Ok(GenericDeterministic {
             device: device.clone(),
             algo: cfg.algo,
