@@ -144,6 +144,31 @@ impl RenormMlp {
     }
 }
 
+/// CrossQ's counters, which checkpoints keep by name (the fused and the generic agent alike).
+#[derive(Debug, Default, Clone, Copy)]
+pub(crate) struct Passes {
+    /// Critic updates done.
+    pub updates: u64,
+    /// Training passes through the actor's and the critics' normalisation layers.
+    pub actor: u64,
+    pub critic: u64,
+}
+
+impl Passes {
+    pub fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![("updates", self.updates), ("actor_passes", self.actor), ("critic_passes", self.critic)]
+    }
+
+    pub fn set(&mut self, name: &str, value: u64) {
+        match name {
+            "updates" => self.updates = value,
+            "actor_passes" => self.actor = value,
+            "critic_passes" => self.critic = value,
+            _ => {}
+        }
+    }
+}
+
 /// CrossQ: SAC's policy and temperature with batch-renormalised twin critics and no targets.
 pub struct CrossqAgent {
     obs_dim: usize,
@@ -157,10 +182,7 @@ pub struct CrossqAgent {
     critic_opt: Adam,
     alpha_opt: Adam,
     policy_delay: u64,
-    updates: u64,
-    /// Training passes through the actor's and the critics' normalisation layers.
-    actor_passes: u64,
-    critic_passes: u64,
+    passes: Passes,
 }
 
 impl CrossqAgent {
@@ -188,9 +210,7 @@ impl CrossqAgent {
             log_alpha,
             target_entropy: s.target_entropy.unwrap_or(-(act_dim as f64)),
             policy_delay: s.policy_delay as u64,
-            updates: 0,
-            actor_passes: 0,
-            critic_passes: 0,
+            passes: Passes::default(),
         })
     }
 
@@ -200,7 +220,7 @@ impl CrossqAgent {
     }
 
     fn sample(&self, obs: &Tensor, train: bool, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
-        sample_squashed(&self.actor.forward(obs, train, self.actor_passes, false)?, TanhCorrection::Exact, rng)
+        sample_squashed(&self.actor.forward(obs, train, self.passes.actor, false)?, TanhCorrection::Exact, rng)
     }
 }
 
@@ -210,7 +230,7 @@ impl Agent for CrossqAgent {
     }
 
     fn act(&self, obs: &[f32]) -> Result<Vec<f32>> {
-        squashed_mean(&self.actor.forward(&batch_tensor(obs, 1, self.obs_dim)?, false, self.actor_passes, false)?)
+        squashed_mean(&self.actor.forward(&batch_tensor(obs, 1, self.obs_dim)?, false, self.passes.actor, false)?)
     }
 
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
@@ -235,16 +255,11 @@ impl Agent for CrossqAgent {
     }
 
     fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("updates", self.updates), ("actor_passes", self.actor_passes), ("critic_passes", self.critic_passes)]
+        self.passes.counters()
     }
 
     fn set_counter(&mut self, name: &str, value: u64) {
-        match name {
-            "updates" => self.updates = value,
-            "actor_passes" => self.actor_passes = value,
-            "critic_passes" => self.critic_passes = value,
-            _ => {}
-        }
+        self.passes.set(name, value)
     }
 }
 
@@ -263,8 +278,8 @@ impl OffPolicyAgent for CrossqAgent {
         let (next_a, next_logp) = self.sample(&next_obs, false, rng)?;
         let joint = Tensor::cat(&[Tensor::cat(&[&obs, &actions], 1)?, Tensor::cat(&[&next_obs, &next_a], 1)?], 0)?;
         let q: Vec<Tensor> =
-            self.critics.iter().map(|c| c.forward(&joint, true, self.critic_passes, false)).collect::<Result<_>>()?;
-        self.critic_passes += 1;
+            self.critics.iter().map(|c| c.forward(&joint, true, self.passes.critic, false)).collect::<Result<_>>()?;
+        self.passes.critic += 1;
         let q_next = q[0].narrow(0, n, n)?.minimum(&q[1].narrow(0, n, n)?)?.detach();
         let soft_next = (q_next - next_logp.detach().affine(alpha, 0.0)?)?;
         let y = (rewards + (not_done * soft_next)?.affine(self.gamma, 0.0)?)?.detach();
@@ -275,15 +290,15 @@ impl OffPolicyAgent for CrossqAgent {
         }
         self.critic_opt.step(&critic_loss.backward()?)?;
         losses.critic = critic_loss.to_scalar::<f32>()? as f64;
-        self.updates += 1;
+        self.passes.updates += 1;
 
-        if self.updates.is_multiple_of(self.policy_delay) {
+        if self.passes.updates.is_multiple_of(self.policy_delay) {
             let (pi_a, logp) = self.sample(&obs, true, rng)?;
-            self.actor_passes += 1;
+            self.passes.actor += 1;
             let x = Tensor::cat(&[&obs, &pi_a], 1)?;
             let q_pi = self.critics[0]
-                .forward(&x, false, self.critic_passes, true)?
-                .minimum(&self.critics[1].forward(&x, false, self.critic_passes, true)?)?;
+                .forward(&x, false, self.passes.critic, true)?
+                .minimum(&self.critics[1].forward(&x, false, self.passes.critic, true)?)?;
             let actor_loss = (logp.affine(alpha, 0.0)? - q_pi)?.mean_all()?;
             self.actor_opt.step(&actor_loss.backward()?)?;
             losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);

@@ -8,7 +8,7 @@ use super::layers::{squashed_sample, DeviceRenorm, DeviceStack, RenormConstants}
 use super::{read_scalars, row, standard_normal, DeviceBatch};
 use crate::agents::buffer::Batch;
 use crate::agents::config::{Algo, TanhCorrection, TrainConfig};
-use crate::agents::crossq::{D_MAX, EPSILON, R_MAX};
+use crate::agents::crossq::{Passes, D_MAX, EPSILON, R_MAX};
 use crate::agents::{Agent, CrossqAgent, Losses, OffPolicyAgent};
 use crate::numeric::optim::Optimizer;
 
@@ -67,9 +67,7 @@ pub struct GenericCrossq {
     critic_opt: DeviceAdam,
     alpha_opt: DeviceAdam,
     policy_delay: u64,
-    updates: u64,
-    actor_passes: u64,
-    critic_passes: u64,
+    passes: Passes,
 }
 
 impl GenericCrossq {
@@ -112,14 +110,12 @@ impl GenericCrossq {
             log_alpha,
             target_entropy: s.target_entropy.unwrap_or(-(act_dim as f64)),
             policy_delay: s.policy_delay as u64,
-            updates: 0,
-            actor_passes: 0,
-            critic_passes: 0,
+            passes: Passes::default(),
         })
     }
 
     fn policy(&self, obs: &Tensor, train: bool) -> Result<Tensor> {
-        self.actor.forward(obs, train, self.actor_passes, false, self.renorm)
+        self.actor.forward(obs, train, self.passes.actor, false, self.renorm)
     }
 }
 
@@ -156,23 +152,18 @@ impl Agent for GenericCrossq {
     }
 
     fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("updates", self.updates), ("actor_passes", self.actor_passes), ("critic_passes", self.critic_passes)]
+        self.passes.counters()
     }
 
     fn set_counter(&mut self, name: &str, value: u64) {
-        match name {
-            "updates" => self.updates = value,
-            "actor_passes" => self.actor_passes = value,
-            "critic_passes" => self.critic_passes = value,
-            _ => {}
-        }
+        self.passes.set(name, value)
     }
 }
 
 impl OffPolicyAgent for GenericCrossq {
     fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
         let n = batch.size;
-        let trains_actor = (self.updates + 1).is_multiple_of(self.policy_delay);
+        let trains_actor = (self.passes.updates + 1).is_multiple_of(self.policy_delay);
         // the fused update's draws, in its order: the next state's sample, then the policy's
         let mut noise = vec![standard_normal(n * self.act_dim, rng)];
         if trains_actor {
@@ -189,9 +180,9 @@ impl OffPolicyAgent for GenericCrossq {
         let q = self
             .critics
             .iter()
-            .map(|c| c.forward(&joint, true, self.critic_passes, false, self.renorm))
+            .map(|c| c.forward(&joint, true, self.passes.critic, false, self.renorm))
             .collect::<Result<Vec<_>>>()?;
-        self.critic_passes += 1;
+        self.passes.critic += 1;
         let q_next = q[0].narrow(0, n, n)?.minimum(&q[1].narrow(0, n, n)?)?.detach();
         let soft_next = (q_next - next_logp.detach().broadcast_mul(&alpha)?)?;
         let y = (&b.rewards + (&b.not_done * soft_next)?.affine(self.gamma, 0.0)?)?.detach();
@@ -201,14 +192,14 @@ impl OffPolicyAgent for GenericCrossq {
                 (critic_loss + qk.narrow(0, 0, n)?.broadcast_sub(&y)?.sqr()?.mean_all()?.affine(0.5, 0.0)?)?;
         }
         self.critic_opt.step(&critic_loss.backward()?)?;
-        self.updates += 1;
+        self.passes.updates += 1;
 
         let mut scalars = vec![critic_loss];
         if trains_actor {
             let (pi, logp) = squashed_sample(&self.policy(&b.obs, true)?, &b.noise[1], TanhCorrection::Exact)?;
-            self.actor_passes += 1;
+            self.passes.actor += 1;
             let x = Tensor::cat(&[&b.obs, &pi], 1)?;
-            let frozen = |c: &RenormNet| c.forward(&x, false, self.critic_passes, true, self.renorm);
+            let frozen = |c: &RenormNet| c.forward(&x, false, self.passes.critic, true, self.renorm);
             let q_pi = frozen(&self.critics[0])?.minimum(&frozen(&self.critics[1])?)?;
             let actor_loss = (logp.broadcast_mul(&alpha)? - q_pi)?.mean_all()?;
             self.actor_opt.step(&actor_loss.backward()?)?;
