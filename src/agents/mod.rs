@@ -126,7 +126,15 @@ pub fn make_learner_on(
     if device == crate::device::ComputeDevice::Cpu {
         return Ok(make_learner(cfg, obs_dim, act_dim, rng)?);
     }
-    let agent = generic::make_generic_agent(cfg, obs_dim, act_dim, rng, &device.open()?)?;
+    let what = generic::memory::describe(cfg, &device.to_string());
+    let agent =
+        generic::make_generic_agent(cfg, obs_dim, act_dim, rng, &device.open()?).map_err(|e| match e
+            .downcast::<candle_core::Error>()
+        {
+            Ok(e) => anyhow::Error::new(generic::memory::explain(e, &what)),
+            Err(e) => e,
+        })?;
+    let agent: Box<dyn OffPolicyAgent> = Box::new(generic::memory::Explained { inner: agent, what });
     Ok(if cfg.normalize_observations { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
 }
 

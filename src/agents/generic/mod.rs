@@ -16,6 +16,7 @@ pub mod check;
 mod crossq;
 mod dpg;
 mod layers;
+pub(crate) mod memory;
 mod sac;
 pub mod speed;
 #[cfg(test)]
