@@ -76,11 +76,6 @@ impl DeviceAdam {
         }
         Ok(())
     }
-
-    /// Updates done so far.
-    pub fn steps(&self) -> u64 {
-        self.step
-    }
 }
 
 impl Optimizer for DeviceAdam {

@@ -38,20 +38,17 @@ pub fn config(algo: Algo) -> TrainConfig {
     cfg
 }
 
-#[cfg(test)]
-pub(crate) fn batch_for_tests(rng: &mut ChaCha8Rng, n: usize) -> Batch {
-    batch(rng, n)
-}
-
-fn batch(rng: &mut ChaCha8Rng, n: usize) -> Batch {
+/// `n` random transitions of `obs` observations and `act` actions (every 13th terminal): the
+/// comparison's batches, and the speed measurement's.
+pub(crate) fn batch(rng: &mut ChaCha8Rng, n: usize, obs: usize, act: usize) -> Batch {
     let mut normal =
         |count: usize, scale: f32| -> Vec<f32> { (0..count).map(|_| rng.random_range(-1.0f32..1.0) * scale).collect() };
-    let obs = normal(n * OBS, 2.0);
-    let actions = normal(n * ACT, 1.0);
-    let next_obs = normal(n * OBS, 2.0);
+    let obs_now = normal(n * obs, 2.0);
+    let actions = normal(n * act, 1.0);
+    let next_obs = normal(n * obs, 2.0);
     let rewards = normal(n, 3.0);
     let terminated = (0..n).map(|i| if i % 13 == 0 { 1.0 } else { 0.0 }).collect();
-    Batch { size: n, obs, actions, rewards, next_obs, terminated }
+    Batch { size: n, obs: obs_now, actions, rewards, next_obs, terminated }
 }
 
 /// The largest differences seen: relative between losses, absolute between weights.
@@ -75,7 +72,7 @@ pub fn compare(algo: Algo, device: &Device, updates: usize) -> Gap {
     let mut gap = Gap::default();
     let relative = |a: f64, b: f64| (a - b).abs() / (1.0 + b.abs());
     for u in 0..updates {
-        let b = batch(&mut data, cfg.batch_size);
+        let b = batch(&mut data, cfg.batch_size, OBS, ACT);
         let lf: Losses = fused.update(&b, &mut rng_f).unwrap();
         let lg: Losses = generic.update(&b, &mut rng_g).unwrap();
         assert_eq!(lf.actor.is_some(), lg.actor.is_some(), "{algo:?} update {u}: the actor trained on one path only");

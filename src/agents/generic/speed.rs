@@ -4,7 +4,7 @@
 use std::time::Instant;
 
 use candle_core::{Device, Tensor};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::{make_generic_agent, DeviceBatch};
@@ -31,18 +31,6 @@ pub struct Speed {
     pub upload_us: f64,
 }
 
-fn random_batch(rng: &mut ChaCha8Rng, n: usize, obs: usize, act: usize) -> Batch {
-    let mut u = |count: usize| -> Vec<f32> { (0..count).map(|_| rng.random_range(-1.0f32..1.0)).collect() };
-    Batch {
-        size: n,
-        obs: u(n * obs),
-        actions: u(n * act),
-        rewards: u(n),
-        next_obs: u(n * obs),
-        terminated: (0..n).map(|i| if i % 50 == 0 { 1.0 } else { 0.0 }).collect(),
-    }
-}
-
 /// Times `cfg`'s updates for about `seconds` after `warmup` untimed ones, on HalfCheetah-sized
 /// inputs (`obs`, `act`).
 pub fn measure(
@@ -60,7 +48,7 @@ pub fn measure(
         Path::Generic => make_generic_agent(cfg, obs, act, &mut init, device)?,
     };
     let mut rng = ChaCha8Rng::seed_from_u64(1);
-    let batches: Vec<Batch> = (0..16).map(|_| random_batch(&mut rng, cfg.batch_size, obs, act)).collect();
+    let batches: Vec<Batch> = (0..16).map(|_| super::check::batch(&mut rng, cfg.batch_size, obs, act)).collect();
     for b in batches.iter().cycle().take(warmup) {
         agent.update(b, &mut rng)?;
     }

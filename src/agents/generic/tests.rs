@@ -82,7 +82,7 @@ fn a_fused_checkpoints_state_continues_on_the_generic_path() {
         let mut data = ChaCha8Rng::seed_from_u64(3);
         let mut rng = ChaCha8Rng::seed_from_u64(4);
         for _ in 0..7 {
-            fused.update(&super::check::batch_for_tests(&mut data, cfg.batch_size), &mut rng).unwrap();
+            fused.update(&super::check::batch(&mut data, cfg.batch_size, OBS, ACT), &mut rng).unwrap();
         }
         for ((name, theirs), (other, ours)) in fused.parameters().iter().zip(generic.parameters()) {
             assert_eq!(name, &other);
@@ -96,7 +96,7 @@ fn a_fused_checkpoints_state_continues_on_the_generic_path() {
         for (name, value) in fused.counters() {
             generic.set_counter(name, value);
         }
-        let b = super::check::batch_for_tests(&mut data, cfg.batch_size);
+        let b = super::check::batch(&mut data, cfg.batch_size, OBS, ACT);
         let (mut rf, mut rg) = (ChaCha8Rng::seed_from_u64(8), ChaCha8Rng::seed_from_u64(8));
         let (lf, lg) = (fused.update(&b, &mut rf).unwrap(), generic.update(&b, &mut rg).unwrap());
         assert!((lf.critic - lg.critic).abs() <= 1e-5 * (1.0 + lf.critic.abs()), "{algo:?}: {lf:?} vs {lg:?}");
