@@ -460,6 +460,37 @@ impl Model {
         // SAFETY: `geom_friction` has `3 * ngeom` entries and `&mut self` makes the slice the only access.
         unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().geom_friction, n) }
     }
+    /// Each body's centre of mass in its own frame (`body_ipos`), writable (a shifted payload).
+    pub fn body_ipos_mut(&mut self) -> &mut [f64] {
+        let n = 3 * self.nbody();
+        // SAFETY: `body_ipos` has `3 * nbody` entries and `&mut self` makes the slice the only access.
+        unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().body_ipos, n) }
+    }
+    /// Each body's principal moments of inertia (`body_inertia`), writable.
+    pub fn body_inertia_mut(&mut self) -> &mut [f64] {
+        let n = 3 * self.nbody();
+        // SAFETY: `body_inertia` has `3 * nbody` entries and `&mut self` makes the slice the only access.
+        unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().body_inertia, n) }
+    }
+    /// Sets the gravity vector (world coordinates, m/s^2).
+    pub fn set_gravity(&mut self, g: [f64; 3]) {
+        // SAFETY: `&mut self` makes this the only access to the model.
+        unsafe { self.ptr.as_mut().opt.gravity = g };
+    }
+    /// Heightfield `id`'s grid size (rows along y, columns along x) and its elevation samples in
+    /// [0, 1] (`hfield_data`, row-major), writable.
+    pub fn hfield_data_mut(&mut self, id: usize) -> (usize, usize, &mut [f32]) {
+        let r = self.raw();
+        assert!(id < r.nhfield as usize, "heightfield {id} out of range");
+        // SAFETY: MuJoCo allocates nrow/ncol/adr with one entry per heightfield; `id` is in range.
+        let (nrow, ncol, adr) = unsafe {
+            (*r.hfield_nrow.add(id) as usize, *r.hfield_ncol.add(id) as usize, *r.hfield_adr.add(id) as usize)
+        };
+        // SAFETY: heightfield `id`'s samples are `nrow * ncol` floats from `adr` in `hfield_data`;
+        // `&mut self` makes the slice the only access.
+        let data = unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().hfield_data.add(adr), nrow * ncol) };
+        (nrow, ncol, data)
+    }
     /// Sets the simulation time step in seconds.
     pub fn set_timestep(&mut self, dt: f64) {
         // SAFETY: `&mut self` makes this the only access to the model.

@@ -4,6 +4,7 @@
 //! distance * dx - energy * |tau . qdot| * dt - drift * |dy| - shake * |dz|, falls end episodes.
 pub mod leg_model;
 pub mod motor;
+pub(crate) mod perturb;
 
 use std::f64::consts::FRAC_PI_2;
 use std::sync::Arc;
@@ -67,6 +68,40 @@ pub struct MinitaurOptions {
     pub motor_kd: f64,
     /// Switch a motor off after 1 s above 2.45 N m, as the real robot does.
     pub overheat_protection: bool,
+    /// Multiplies the sliding friction of every geom, feet and ground (after randomisation).
+    pub friction_scale: f64,
+    /// Extra mass (kg) carried at the base's centre of mass.
+    pub payload_mass: f64,
+    /// Moves the base's centre of mass forward by this (m; negative: backward).
+    pub com_shift: f64,
+    /// Share of the motors' torque curve they deliver (1: all of it, up to 3.5 N m).
+    pub motor_strength: f64,
+    /// Battery voltage of every motor (V); 0 keeps PyBullet's: 16 V, or U(14.8, 16.8) when the
+    /// dynamics are randomised.
+    pub battery_voltage: f64,
+    /// Delay from an action to the motors acting on it (s), in whole physics steps of 0.002 s:
+    /// 0.004 is two sub-steps, 0.01 one control step.
+    pub latency: f64,
+    /// Each episode adds a latency drawn uniformly from 0 to this (s), in physics steps.
+    pub random_latency_max: f64,
+    /// Standard deviation of Gaussian noise on the observed motor angles (rad).
+    pub noise_angle: f64,
+    /// Standard deviation of Gaussian noise on the observed motor velocities (rad/s).
+    pub noise_velocity: f64,
+    /// The observed orientation is turned by a random rotation with this standard deviation
+    /// about each axis (rad).
+    pub noise_orientation: f64,
+    /// Rough terrain: 0.2 m square tiles each raised by U(0, this) m, drawn anew every episode
+    /// (flat around the start); 0 is flat ground.
+    pub terrain_step_height: f64,
+    /// Ground slope (degrees, positive uphill along +x), modelled by tilting gravity.
+    pub slope: f64,
+    /// Each episode adds a slope drawn uniformly from [-this, this] degrees.
+    pub random_slope_max: f64,
+    /// Random shoves as PyBullet's push randomiser gives them (from control step 100, every 200
+    /// steps, 10 steps long, any horizontal direction), each a velocity change U(0, this) m/s;
+    /// 0 is off.
+    pub random_push_max: f64,
 }
 
 impl Default for MinitaurOptions {
@@ -87,6 +122,20 @@ impl Default for MinitaurOptions {
             motor_kp: 1.0,
             motor_kd: 0.02,
             overheat_protection: true,
+            friction_scale: 1.0,
+            payload_mass: 0.0,
+            com_shift: 0.0,
+            motor_strength: 1.0,
+            battery_voltage: 0.0,
+            latency: 0.0,
+            random_latency_max: 0.0,
+            noise_angle: 0.0,
+            noise_velocity: 0.0,
+            noise_orientation: 0.0,
+            terrain_step_height: 0.0,
+            slope: 0.0,
+            random_slope_max: 0.0,
+            random_push_max: 0.0,
         }
     }
 }
@@ -106,7 +155,8 @@ impl MinitaurOptions {
         c.within("reset_noise_scale", self.reset_noise_scale, 0.0, 0.5)?;
         c.within("reset_hold_time", self.reset_hold_time, 0.0, 10.0)?;
         c.non_negative("motor_kp", self.motor_kp)?;
-        c.non_negative("motor_kd", self.motor_kd)
+        c.non_negative("motor_kd", self.motor_kd)?;
+        perturb::validate(self)
     }
 }
 
@@ -130,6 +180,11 @@ pub struct Minitaur {
     applied_torque: [f64; NUM_MOTORS],
     overheat_time: [f64; NUM_MOTORS],
     enabled: [bool; NUM_MOTORS],
+    /// This episode's perturbations: the commands in flight, the ground, the shoves.
+    delay: perturb::Delay<Command>,
+    terrain: perturb::Terrain,
+    pushes: perturb::RandomPushes,
+    control_step: usize,
 }
 
 /// Physics step of the Minitaur model (s).
@@ -139,7 +194,7 @@ impl Minitaur {
     /// Builds the environment; fails on an invalid option.
     pub fn new(opts: MinitaurOptions) -> Result<Self, EnvError> {
         opts.validate()?;
-        let base_model = Arc::new(Model::from_xml_str(MODEL_XML)?);
+        let base_model = Arc::new(Model::from_xml_str(&perturb::model_xml(MODEL_XML, &opts))?);
         let sim = Simulation::from_model(Arc::clone(&base_model))?;
         let m = &base_model;
         let trn = m.actuator_trnid();
@@ -155,8 +210,8 @@ impl Minitaur {
             ActionMode::MotorAngle => BoxSpace::uniform(NUM_MOTORS, 0.0, std::f64::consts::PI),
             ActionMode::Torque => BoxSpace::uniform(NUM_MOTORS, -MAX_TORQUE, MAX_TORQUE),
         };
-        let params = MotorParams { kp: opts.motor_kp, kd: opts.motor_kd, ..MotorParams::default() };
-        let speed = params.speed_limit();
+        let params = Self::nominal_motor(&opts);
+        let speed = MotorParams { kp: opts.motor_kp, kd: opts.motor_kd, ..MotorParams::default() }.speed_limit();
         let mut low = vec![-std::f64::consts::PI; 8];
         low.extend([-speed; 8]);
         low.extend([-OBSERVED_TORQUE_LIMIT; 8]);
@@ -171,6 +226,7 @@ impl Minitaur {
             reward_terms: vec!["distance", "energy", "drift", "shake"],
         };
         let base_body = m.body_id("base")?;
+        let repeat = opts.action_repeat;
         Ok(Minitaur {
             params: [params; NUM_MOTORS],
             opts,
@@ -183,7 +239,19 @@ impl Minitaur {
             applied_torque: [0.0; NUM_MOTORS],
             overheat_time: [0.0; NUM_MOTORS],
             enabled: [true; NUM_MOTORS],
+            delay: perturb::Delay::new(0, repeat),
+            terrain: perturb::Terrain::default(),
+            pushes: perturb::RandomPushes::default(),
+            control_step: 0,
         })
+    }
+
+    fn nominal_motor(o: &MinitaurOptions) -> MotorParams {
+        let mut p = MotorParams { kp: o.motor_kp, kd: o.motor_kd, strength: o.motor_strength, ..MotorParams::default() };
+        if o.battery_voltage > 0.0 {
+            p.voltage = o.battery_voltage;
+        }
+        p
     }
 
     /// The options it was built with.
@@ -217,16 +285,19 @@ impl Minitaur {
     }
 
     pub(crate) fn is_fallen(&self) -> bool {
-        self.base_up_z() < self.opts.fall_up_threshold || self.base_position()[2] < self.opts.fall_height
+        let p = self.base_position();
+        let ground = self.terrain.height_at(p[0], p[1]);
+        self.base_up_z() < self.opts.fall_up_threshold || p[2] - ground < self.opts.fall_height
     }
 
-    fn observation(&self) -> Vec<f64> {
+    fn observation(&mut self) -> Vec<f64> {
         let mut obs = Vec::with_capacity(28);
         obs.extend(self.motor_angles());
         obs.extend(self.motor_velocities());
         obs.extend(self.observed_torque);
         let q = &self.core.sim.data.xquat()[4 * self.base_body..4 * self.base_body + 4];
         obs.extend([q[1], q[2], q[3], q[0]]);
+        perturb::add_noise(&mut obs, &self.opts, self.core.rng.rng());
         obs
     }
 
@@ -261,25 +332,34 @@ impl Minitaur {
         Ok((unstable, power * SIM_DT))
     }
 
-    fn randomized_simulation(&mut self) -> Result<Simulation, EnvError> {
+    /// The model of one episode: PyBullet's randomised dynamics when asked for, then the
+    /// perturbations the options set. Draws from the episode's stream in that order.
+    fn episode_simulation(&mut self) -> Result<Simulation, EnvError> {
         let mut model = self.base_model.try_clone()?;
         let rng = self.core.rng.rng();
-        for m in model.body_mass_mut().iter_mut().skip(1) {
-            *m *= rng.random_range(0.8..1.2);
+        if self.opts.randomize_dynamics {
+            for m in model.body_mass_mut().iter_mut().skip(1) {
+                *m *= rng.random_range(0.8..1.2);
+            }
+            let friction = rng.random_range(0.8..1.5);
+            let friction_all = model.geom_friction_mut();
+            for &g in &self.foot_geoms {
+                friction_all[3 * g] = friction;
+            }
+            for p in self.params.iter_mut() {
+                p.voltage = rng.random_range(14.8..16.8);
+                p.viscous_damping = rng.random_range(0.0..0.01);
+                if self.opts.battery_voltage > 0.0 {
+                    p.voltage = self.opts.battery_voltage;
+                }
+            }
         }
-        let friction = rng.random_range(0.8..1.5);
-        let friction_all = model.geom_friction_mut();
-        for &g in &self.foot_geoms {
-            friction_all[3 * g] = friction;
-        }
-        for p in self.params.iter_mut() {
-            p.voltage = rng.random_range(14.8..16.8);
-            p.viscous_damping = rng.random_range(0.0..0.01);
-        }
+        self.terrain = perturb::edit_model(&mut model, &self.opts, self.base_body, rng)?;
         Simulation::from_model(Arc::new(model))
     }
 }
 
+#[derive(Debug, Clone)]
 enum Command {
     Angles([f64; NUM_MOTORS]),
     Torques([f64; NUM_MOTORS]),
@@ -292,13 +372,16 @@ impl Env for Minitaur {
 
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
         self.core.rng.reseed(seed);
-        let nominal = MotorParams { kp: self.opts.motor_kp, kd: self.opts.motor_kd, ..MotorParams::default() };
-        self.params = [nominal; NUM_MOTORS];
-        if self.opts.randomize_dynamics {
-            self.core.sim = self.randomized_simulation()?;
+        self.params = [Self::nominal_motor(&self.opts); NUM_MOTORS];
+        if self.opts.randomize_dynamics || perturb::edits_model(&self.opts) {
+            self.core.sim = self.episode_simulation()?;
         } else if !Arc::ptr_eq(&self.core.sim.model, &self.base_model) {
             self.core.sim = Simulation::from_model(Arc::clone(&self.base_model))?;
         }
+        let latency = perturb::latency_steps(&self.opts, self.core.rng.rng(), SIM_DT);
+        self.delay = perturb::Delay::new(latency, self.opts.action_repeat);
+        self.pushes = perturb::RandomPushes::default();
+        self.control_step = 0;
         self.enabled = [true; NUM_MOTORS];
         self.overheat_time = [0.0; NUM_MOTORS];
         self.observed_torque = [0.0; NUM_MOTORS];
@@ -342,7 +425,20 @@ impl Env for Minitaur {
         let before = self.base_position();
         let mut mechanical_energy = 0.0;
         let mut unstable = false;
-        for _ in 0..self.opts.action_repeat {
+        let step = self.control_step;
+        self.control_step += 1;
+        self.delay.send(step, command);
+        if self.opts.random_push_max > 0.0 {
+            let mass: f64 = self.core.sim.model.body_mass().iter().sum();
+            let f = self.pushes.force(step, &self.opts, mass, self.core.spec.dt, self.core.rng.rng());
+            let applied = self.core.sim.data.qfrc_applied_mut();
+            applied[0] = f[0];
+            applied[1] = f[1];
+        }
+        let hold = Command::Angles([FRAC_PI_2; NUM_MOTORS]);
+        for j in 0..self.opts.action_repeat {
+            // Until the first action reaches the motors they hold the reset pose.
+            let command = self.delay.acting(step * self.opts.action_repeat + j).unwrap_or(&hold).clone();
             let (bad, energy) = self.physics_step(&command)?;
             mechanical_energy += energy;
             if bad {
@@ -384,7 +480,8 @@ impl Env for Minitaur {
             warnings,
         };
         let terminated = self.is_fallen();
-        Ok(self.core.finish_step(self.observation(), terminated, info))
+        let observation = self.observation();
+        Ok(self.core.finish_step(observation, terminated, info))
     }
 
     fn data(&self) -> &Data {

@@ -13,6 +13,8 @@ pub(crate) struct MotorParams {
     pub(crate) resistance: f64,
     pub(crate) torque_constant: f64,
     pub(crate) viscous_damping: f64,
+    /// Share of the current-torque curve the motor delivers (a weakened motor).
+    pub(crate) strength: f64,
 }
 
 impl Default for MotorParams {
@@ -24,6 +26,7 @@ impl Default for MotorParams {
             resistance: 0.186,
             torque_constant: 0.0954,
             viscous_damping: 0.0,
+            strength: 1.0,
         }
     }
 }
@@ -63,6 +66,7 @@ impl MotorParams {
             .clamp(-VOLTAGE_CLIP, VOLTAGE_CLIP);
         let current = net_voltage / self.resistance;
         let applied = current.signum() * interpolate(current.abs(), &CURRENT_TABLE, &TORQUE_TABLE);
+        let applied = if self.strength == 1.0 { applied } else { self.strength * applied };
         (if current == 0.0 { 0.0 } else { applied }, observed)
     }
 }

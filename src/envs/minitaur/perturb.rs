@@ -1,0 +1,344 @@
+//! What the world does to Minitaur beyond PyBullet's default randomisation: ground friction,
+//! payload, motor strength and battery, control latency, sensor noise, rough terrain, slopes and
+//! random shoves. Each is an option of the env (so training and evaluation use the same code);
+//! all are off by default, and off they draw nothing from the episode's random stream, so a
+//! nominal env steps exactly as before.
+//!
+//! The random shoves follow PyBullet's push randomiser (bulletphysics/bullet3,
+//! `examples/pybullet/gym/pybullet_envs/minitaur/envs/env_randomizers/minitaur_push_randomizer.py`):
+//! from control step 100, every 200 steps, a horizontal force in a random direction for 10 steps.
+//! Its size is given here as the velocity change it would give the whole robot, as the
+//! evaluation's pushes are.
+use std::collections::VecDeque;
+use std::f64::consts::PI;
+
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
+
+use super::MinitaurOptions;
+use crate::envs::options::Check;
+use crate::envs::EnvError;
+use crate::mujoco::Model;
+
+/// Side of one terrain tile (m) and the heightfield's sample spacing (m).
+const TILE: f64 = 0.2;
+const SAMPLE: f64 = 0.05;
+/// The terrain spans x in [-2, 22] m and y in [-3, 3] m; the robot starts at the origin on a flat
+/// patch |x|, |y| < `FLAT` m.
+const TERRAIN_X: [f64; 2] = [-2.0, 22.0];
+const TERRAIN_HALF_Y: f64 = 3.0;
+const FLAT: f64 = 0.6;
+/// The highest terrain step the model represents (m): above this a foot (0.2 m below the
+/// motors when standing) cannot be placed on the next tile.
+pub(crate) const MAX_STEP_HEIGHT: f64 = 0.1;
+/// PyBullet's push randomiser schedule, in control steps.
+const PUSH_START: usize = 100;
+const PUSH_INTERVAL: usize = 200;
+const PUSH_DURATION: usize = 10;
+
+/// Checks the perturbation options; the error names the option.
+pub(crate) fn validate(o: &MinitaurOptions) -> Result<(), EnvError> {
+    let c = Check { env: "minitaur" };
+    c.within("friction_scale", o.friction_scale, 0.0, 10.0)?;
+    c.within("payload_mass", o.payload_mass, 0.0, 60.0)?;
+    c.within("com_shift", o.com_shift, -0.15, 0.15)?;
+    c.within("motor_strength", o.motor_strength, 0.0, 2.0)?;
+    if o.battery_voltage != 0.0 {
+        c.within("battery_voltage", o.battery_voltage, 1.0, 50.0)?;
+    }
+    c.within("latency", o.latency, 0.0, 0.5)?;
+    c.within("random_latency_max", o.random_latency_max, 0.0, 0.5)?;
+    c.within("noise_angle", o.noise_angle, 0.0, 1.0)?;
+    c.within("noise_velocity", o.noise_velocity, 0.0, 100.0)?;
+    c.within("noise_orientation", o.noise_orientation, 0.0, 1.0)?;
+    c.within("terrain_step_height", o.terrain_step_height, 0.0, MAX_STEP_HEIGHT)?;
+    c.within("slope", o.slope, -30.0, 30.0)?;
+    c.within("random_slope_max", o.random_slope_max, 0.0, 30.0)?;
+    c.within("random_push_max", o.random_push_max, 0.0, 5.0)
+}
+
+/// The model text with a heightfield over the floor when the terrain is rough.
+pub(crate) fn model_xml(base: &str, o: &MinitaurOptions) -> String {
+    if o.terrain_step_height <= 0.0 {
+        return base.to_string();
+    }
+    let (rx, ry) = (0.5 * (TERRAIN_X[1] - TERRAIN_X[0]), TERRAIN_HALF_Y);
+    let ncol = (2.0 * rx / SAMPLE).round() as usize + 1;
+    let nrow = (2.0 * ry / SAMPLE).round() as usize + 1;
+    let asset = format!(
+        "<asset>\n    <hfield name=\"terrain\" nrow=\"{nrow}\" ncol=\"{ncol}\" size=\"{rx} {ry} {h} 0.05\"/>",
+        h = o.terrain_step_height
+    );
+    let geom = format!(
+        "<geom name=\"terrain\" type=\"hfield\" hfield=\"terrain\" pos=\"{} 0 0\" material=\"floor\" contype=\"1\" \
+         conaffinity=\"1\" friction=\"0.1 0.005 0.0001\"/>\n    <body name=\"base\"",
+        0.5 * (TERRAIN_X[0] + TERRAIN_X[1])
+    );
+    base.replacen("<asset>", &asset, 1).replacen("<body name=\"base\"", &geom, 1)
+}
+
+/// The terrain of one episode: each tile's height as a fraction of the step height.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct Terrain {
+    heights: Vec<f64>,
+    columns: usize,
+    step_height: f64,
+}
+
+impl Terrain {
+    fn tiles() -> (usize, usize) {
+        let cols = ((TERRAIN_X[1] - TERRAIN_X[0]) / TILE).ceil() as usize;
+        let rows = (2.0 * TERRAIN_HALF_Y / TILE).ceil() as usize;
+        (rows, cols)
+    }
+
+    fn tile_of(x: f64, y: f64) -> Option<(usize, usize)> {
+        let (rows, cols) = Self::tiles();
+        let (c, r) = ((x - TERRAIN_X[0]) / TILE, (y + TERRAIN_HALF_Y) / TILE);
+        (c >= 0.0 && r >= 0.0 && (c as usize) < cols && (r as usize) < rows).then(|| (r as usize, c as usize))
+    }
+
+    /// Draws every tile's height, U(0, 1), flat near the start.
+    fn draw(rng: &mut ChaCha8Rng, step_height: f64) -> Terrain {
+        let (rows, cols) = Self::tiles();
+        let mut heights = vec![0.0; rows * cols];
+        for r in 0..rows {
+            for c in 0..cols {
+                let x = TERRAIN_X[0] + (c as f64 + 0.5) * TILE;
+                let y = -TERRAIN_HALF_Y + (r as f64 + 0.5) * TILE;
+                let u: f64 = rng.random();
+                let flat = x.abs() < FLAT && y.abs() < FLAT;
+                heights[r * cols + c] = if flat { 0.0 } else { u };
+            }
+        }
+        Terrain { heights, columns: cols, step_height }
+    }
+
+    /// Ground height (m) under (x, y); 0 off the terrain.
+    pub(crate) fn height_at(&self, x: f64, y: f64) -> f64 {
+        if self.heights.is_empty() {
+            return 0.0;
+        }
+        Self::tile_of(x, y).map_or(0.0, |(r, c)| self.step_height * self.heights[r * self.columns + c])
+    }
+
+    /// Writes the tiles into the model's heightfield samples.
+    fn write(&self, model: &mut Model) {
+        let (nrow, ncol, data) = model.hfield_data_mut(0);
+        let dx = (TERRAIN_X[1] - TERRAIN_X[0]) / (ncol - 1) as f64;
+        let dy = 2.0 * TERRAIN_HALF_Y / (nrow - 1) as f64;
+        for r in 0..nrow {
+            for c in 0..ncol {
+                let (x, y) = (TERRAIN_X[0] + c as f64 * dx, -TERRAIN_HALF_Y + r as f64 * dy);
+                // A sample on a tile edge takes the tile it starts, so each tile is a flat top.
+                let tile = Self::tile_of(x.min(TERRAIN_X[1] - 1e-9), y.min(TERRAIN_HALF_Y - 1e-9));
+                data[r * ncol + c] = tile.map_or(0.0, |(tr, tc)| self.heights[tr * self.columns + tc]) as f32;
+            }
+        }
+    }
+}
+
+/// Whether resets must rebuild the model (anything the model holds is perturbed).
+pub(crate) fn edits_model(o: &MinitaurOptions) -> bool {
+    o.friction_scale != 1.0
+        || o.payload_mass != 0.0
+        || o.com_shift != 0.0
+        || o.terrain_step_height > 0.0
+        || o.slope != 0.0
+        || o.random_slope_max > 0.0
+}
+
+/// Applies the model-side perturbations of one episode to a fresh copy of the model, drawing
+/// from `rng` only what the options randomise. Returns the episode's terrain.
+pub(crate) fn edit_model(
+    model: &mut Model,
+    o: &MinitaurOptions,
+    base_body: usize,
+    rng: &mut ChaCha8Rng,
+) -> Result<Terrain, EnvError> {
+    if o.friction_scale != 1.0 {
+        for f in model.geom_friction_mut().chunks_exact_mut(3) {
+            f[0] *= o.friction_scale;
+        }
+    }
+    if o.payload_mass != 0.0 {
+        let mass = model.body_mass()[base_body];
+        let ratio = (mass + o.payload_mass) / mass;
+        model.body_mass_mut()[base_body] += o.payload_mass;
+        // The payload is spread like the base itself: its inertia grows with its mass.
+        for i in &mut model.body_inertia_mut()[3 * base_body..3 * base_body + 3] {
+            *i *= ratio;
+        }
+    }
+    if o.com_shift != 0.0 {
+        model.body_ipos_mut()[3 * base_body] += o.com_shift;
+    }
+    let mut slope = o.slope;
+    if o.random_slope_max > 0.0 {
+        slope += rng.random_range(-o.random_slope_max..=o.random_slope_max);
+    }
+    if slope != 0.0 {
+        // A uniform slope up along +x is flat ground under gravity tilted back by the slope's angle.
+        let (g, theta) = (-model.gravity()[2], slope.to_radians());
+        model.set_gravity([-g * theta.sin(), 0.0, -g * theta.cos()]);
+    }
+    if o.terrain_step_height > 0.0 {
+        let terrain = Terrain::draw(rng, o.terrain_step_height);
+        terrain.write(model);
+        return Ok(terrain);
+    }
+    Ok(Terrain::default())
+}
+
+/// Physics steps of delay for one episode: the fixed latency plus its random part.
+pub(crate) fn latency_steps(o: &MinitaurOptions, rng: &mut ChaCha8Rng, sim_dt: f64) -> usize {
+    let fixed = (o.latency / sim_dt).round() as usize;
+    if o.random_latency_max > 0.0 {
+        fixed + rng.random_range(0..=(o.random_latency_max / sim_dt).round() as usize)
+    } else {
+        fixed
+    }
+}
+
+/// The commands sent at each control step, so that a physics step `d` steps later applies the
+/// one that had reached the motors by then.
+#[derive(Debug, Clone)]
+pub(crate) struct Delay<C> {
+    delay: usize,
+    repeat: usize,
+    first: usize,
+    sent: VecDeque<C>,
+}
+
+impl<C> Delay<C> {
+    pub fn new(delay: usize, repeat: usize) -> Delay<C> {
+        Delay { delay, repeat, first: 0, sent: VecDeque::new() }
+    }
+
+    /// Records the command of control step `step` (0, 1, 2, ... in order).
+    pub fn send(&mut self, step: usize, command: C) {
+        self.sent.push_back(command);
+        // Keep the commands a physics step of this control step or later can still need.
+        let oldest_needed = (step * self.repeat).saturating_sub(self.delay) / self.repeat;
+        while self.first < oldest_needed {
+            self.sent.pop_front();
+            self.first += 1;
+        }
+    }
+
+    /// The command acting at physics step `t` of the episode (counted from its first action);
+    /// None before the first command has arrived.
+    pub fn acting(&self, t: usize) -> Option<&C> {
+        let t = t.checked_sub(self.delay)?;
+        self.sent.get((t / self.repeat).checked_sub(self.first)?)
+    }
+}
+
+/// Gaussian noise on the observation: motor angles, velocities, and the orientation turned by a
+/// small random rotation.
+pub(crate) fn add_noise(obs: &mut [f64], o: &MinitaurOptions, rng: &mut ChaCha8Rng) {
+    let mut normal = |scale: f64| -> f64 {
+        let z: f64 = StandardNormal.sample(rng);
+        scale * z
+    };
+    if o.noise_angle > 0.0 {
+        obs[..8].iter_mut().for_each(|a| *a += normal(o.noise_angle));
+    }
+    if o.noise_velocity > 0.0 {
+        obs[8..16].iter_mut().for_each(|v| *v += normal(o.noise_velocity));
+    }
+    if o.noise_orientation > 0.0 {
+        let r = [normal(o.noise_orientation), normal(o.noise_orientation), normal(o.noise_orientation)];
+        let angle = (r[0] * r[0] + r[1] * r[1] + r[2] * r[2]).sqrt();
+        if angle > 0.0 {
+            let s = (0.5 * angle).sin() / angle;
+            let d = [r[0] * s, r[1] * s, r[2] * s, (0.5 * angle).cos()];
+            let q = [obs[24], obs[25], obs[26], obs[27]];
+            // d * q, both x-y-z-w.
+            let out = [
+                d[3] * q[0] + d[0] * q[3] + d[1] * q[2] - d[2] * q[1],
+                d[3] * q[1] - d[0] * q[2] + d[1] * q[3] + d[2] * q[0],
+                d[3] * q[2] + d[0] * q[1] - d[1] * q[0] + d[2] * q[3],
+                d[3] * q[3] - d[0] * q[0] - d[1] * q[1] - d[2] * q[2],
+            ];
+            obs[24..28].copy_from_slice(&out);
+        }
+    }
+}
+
+/// PyBullet's push randomiser: the horizontal force (N, world x and y) at control step `step`.
+#[derive(Debug, Clone, Default)]
+pub(crate) struct RandomPushes {
+    force: [f64; 2],
+}
+
+impl RandomPushes {
+    /// The force for control step `step`, drawing a new shove at the start of each interval.
+    pub fn force(&mut self, step: usize, o: &MinitaurOptions, mass: f64, dt: f64, rng: &mut ChaCha8Rng) -> [f64; 2] {
+        if step < PUSH_START {
+            return [0.0; 2];
+        }
+        let phase = (step - PUSH_START) % PUSH_INTERVAL;
+        if phase == 0 {
+            let dv = rng.random_range(0.0..=o.random_push_max);
+            let theta = rng.random_range(0.0..2.0 * PI);
+            let f = mass * dv / (PUSH_DURATION as f64 * dt);
+            self.force = [f * theta.cos(), f * theta.sin()];
+        }
+        if phase < PUSH_DURATION {
+            self.force
+        } else {
+            [0.0; 2]
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_delay_applies_each_command_the_given_physics_steps_late() {
+        // 5 physics steps per control step, 7 steps of delay: control step c's command acts
+        // from physics step 5c + 7 on.
+        let mut d = Delay::new(7, 5);
+        let mut acting = Vec::new();
+        for step in 0..4 {
+            d.send(step, step);
+            for j in 0..5 {
+                acting.push(d.acting(step * 5 + j).copied());
+            }
+        }
+        let expect: Vec<Option<usize>> =
+            (0..20).map(|t: usize| t.checked_sub(7).map(|u| u / 5)).collect();
+        assert_eq!(acting, expect);
+        let mut none = Delay::new(0, 5);
+        none.send(0, 'a');
+        assert_eq!(none.acting(0), Some(&'a'));
+    }
+
+    #[test]
+    fn tiles_are_flat_topped_and_the_start_is_flat() {
+        let mut rng = <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(1);
+        let t = Terrain::draw(&mut rng, 0.05);
+        assert_eq!(t.height_at(0.0, 0.0), 0.0);
+        assert_eq!(t.height_at(0.1, 0.05), t.height_at(0.15, 0.1));
+        let far = t.height_at(3.05, 0.3);
+        assert!(far > 0.0 && far <= 0.05, "{far}");
+        assert_eq!(t.height_at(3.05, 0.3), t.height_at(3.19, 0.39));
+        assert_eq!(t.height_at(100.0, 0.0), 0.0);
+    }
+
+    #[test]
+    fn orientation_noise_keeps_a_unit_quaternion() {
+        let o = MinitaurOptions { noise_orientation: 0.1, ..Default::default() };
+        let mut rng = <ChaCha8Rng as rand::SeedableRng>::seed_from_u64(2);
+        let mut obs = vec![0.0; 28];
+        obs[27] = 1.0;
+        add_noise(&mut obs, &o, &mut rng);
+        let norm: f64 = obs[24..28].iter().map(|v| v * v).sum();
+        assert!((norm - 1.0).abs() < 1e-12);
+        assert!(obs[27] < 1.0 && obs[..24].iter().all(|v| *v == 0.0));
+    }
+}
