@@ -70,12 +70,19 @@ pub(crate) fn model_xml(base: &str, o: &MinitaurOptions) -> String {
         "<asset>\n    <hfield name=\"terrain\" nrow=\"{nrow}\" ncol=\"{ncol}\" size=\"{rx} {ry} {h} 0.05\"/>",
         h = o.terrain_step_height
     );
+    // Only the feet touch the terrain (collision bit 2): a heightfield against every link of
+    // the legs costs several times a flat step, and a link that touches the ground before its
+    // foot does is a fall in all but name.
     let geom = format!(
-        "<geom name=\"terrain\" type=\"hfield\" hfield=\"terrain\" pos=\"{} 0 0\" material=\"floor\" contype=\"1\" \
-         conaffinity=\"1\" friction=\"0.1 0.005 0.0001\"/>\n    <body name=\"base\"",
+        "<geom name=\"terrain\" type=\"hfield\" hfield=\"terrain\" pos=\"{} 0 0\" material=\"floor\" contype=\"0\" \
+         conaffinity=\"2\" friction=\"0.1 0.005 0.0001\"/>\n    <body name=\"base\"",
         0.5 * (TERRAIN_X[0] + TERRAIN_X[1])
     );
-    base.replacen("<asset>", &asset, 1).replacen("<body name=\"base\"", &geom, 1)
+    let foot = "<default class=\"foot\">\n      <geom ";
+    assert!(base.contains(foot), "the Minitaur model has a foot class");
+    base.replacen("<asset>", &asset, 1)
+        .replacen("<body name=\"base\"", &geom, 1)
+        .replacen(foot, &format!("{foot}contype=\"3\" "), 1)
 }
 
 /// The terrain of one episode: each tile's height as a fraction of the step height.
