@@ -204,3 +204,164 @@ fn constant_actions_fall_or_stand_as_in_pybullet() {
     eprintln!("{}", report.join("\n"));
     assert!(ok, "differs from PyBullet (above)");
 }
+
+// ---- Perturbations: each option does what it says, and nothing when off ----
+
+fn fixed(opts: MinitaurOptions) -> Minitaur {
+    env(MinitaurOptions { randomize_dynamics: false, ..opts })
+}
+
+#[test]
+fn payload_friction_and_slope_change_the_episode_model() {
+    let mut plain = fixed(MinitaurOptions::default());
+    plain.reset(Some(1)).unwrap();
+    let m0 = plain.data().model().clone();
+    let mut e = fixed(MinitaurOptions { payload_mass: 2.5, friction_scale: 0.25, slope: 10.0, ..Default::default() });
+    e.reset(Some(1)).unwrap();
+    let m = e.data().model();
+    let total = |m: &locobench::mujoco::Model| m.body_mass().iter().sum::<f64>();
+    assert!((total(m) - total(&m0) - 2.5).abs() < 1e-12);
+    for (a, b) in m.geom_friction().chunks(3).zip(m0.geom_friction().chunks(3)) {
+        assert!((a[0] - 0.25 * b[0]).abs() < 1e-15 && a[1] == b[1]);
+    }
+    let g = m.gravity();
+    let theta = 10f64.to_radians();
+    assert!((g[0] + 10.0 * theta.sin()).abs() < 1e-12 && (g[2] + 10.0 * theta.cos()).abs() < 1e-12);
+    // Uphill the same gait covers less ground than on the flat.
+    let walk = |e: &mut Minitaur| {
+        for _ in 0..300 {
+            e.step(&[0.3, -0.3, -0.3, 0.3, 0.0, 0.0, 0.0, 0.0]).unwrap();
+        }
+        e.base_position()[0]
+    };
+    let up = walk(&mut fixed(MinitaurOptions { slope: 15.0, ..Default::default() }).tap_reset());
+    let flat = walk(&mut fixed(MinitaurOptions::default()).tap_reset());
+    assert!(up < flat, "uphill {up} vs flat {flat}");
+}
+
+trait TapReset {
+    fn tap_reset(self) -> Self;
+}
+impl TapReset for Minitaur {
+    fn tap_reset(mut self) -> Self {
+        self.reset(Some(4)).unwrap();
+        self
+    }
+}
+
+#[test]
+fn latency_delays_each_action_by_whole_physics_steps() {
+    // With one control step of latency, the first step still holds the reset pose: the leg
+    // model's action (0, .., 0.5, ..) is exactly that pose, so a delayed run matches an undelayed
+    // run that sent the pose first.
+    let hold = [0.0, 0.0, 0.0, 0.0, 0.5, 0.5, 0.5, 0.5];
+    let actions = [[0.3, -0.2, 0.1, 0.0, 0.2, -0.1, 0.0, 0.3], [-0.2, 0.1, 0.3, -0.3, 0.0, 0.2, 0.1, -0.1], hold];
+    let mut delayed = fixed(MinitaurOptions { latency: 0.01, ..Default::default() });
+    let mut prompt = fixed(MinitaurOptions::default());
+    delayed.reset(Some(2)).unwrap();
+    prompt.reset(Some(2)).unwrap();
+    for (sent, arrived) in actions.iter().zip([hold, actions[0], actions[1]]) {
+        let d = delayed.step(sent).unwrap();
+        let p = prompt.step(&arrived).unwrap();
+        assert_eq!(d.observation, p.observation);
+    }
+    // A sub-step delay (2 of the 5 physics steps) gives something in between.
+    let mut sub = fixed(MinitaurOptions { latency: 0.004, ..Default::default() });
+    sub.reset(Some(2)).unwrap();
+    let s = sub.step(&actions[0]).unwrap().observation;
+    let mut now = fixed(MinitaurOptions::default());
+    now.reset(Some(2)).unwrap();
+    assert_ne!(s, now.step(&actions[0]).unwrap().observation);
+}
+
+#[test]
+fn sensor_noise_is_seeded_and_leaves_the_physics_alone() {
+    let noisy = || fixed(MinitaurOptions { noise_angle: 0.05, noise_velocity: 1.0, noise_orientation: 0.05, ..Default::default() });
+    let (mut a, mut b, mut clean) = (noisy(), noisy(), fixed(MinitaurOptions::default()));
+    let (oa, _) = a.reset(Some(5)).unwrap();
+    let (ob, _) = b.reset(Some(5)).unwrap();
+    let (oc, _) = clean.reset(Some(5)).unwrap();
+    assert_eq!(oa, ob, "same seed, same noise");
+    assert_ne!(oa, oc);
+    let err: f64 = oa[..8].iter().zip(&oc[..8]).map(|(x, y)| (x - y).abs()).sum::<f64>() / 8.0;
+    assert!(err > 0.005 && err < 0.2, "mean angle error {err}");
+    a.step(&[0.1; 8]).unwrap();
+    clean.step(&[0.1; 8]).unwrap();
+    assert_eq!(a.base_position(), clean.base_position(), "noise is in the observation only");
+}
+
+#[test]
+fn terrain_is_new_each_episode_and_falls_are_measured_above_it() {
+    let mut e = fixed(MinitaurOptions { terrain_step_height: 0.05, ..Default::default() });
+    e.reset(Some(1)).unwrap();
+    assert_eq!(e.data().model().geom_type().iter().filter(|t| **t == 1).count(), 1, "one heightfield");
+    let ahead: Vec<f64> = (0..20).map(|i| e.ground_height(1.0 + 0.2 * i as f64, 0.1)).collect();
+    assert!(ahead.iter().all(|h| (0.0..=0.05).contains(h)) && ahead.iter().any(|h| *h > 0.01), "{ahead:?}");
+    assert_eq!(e.ground_height(0.0, 0.0), 0.0, "flat where it starts");
+    // Standing on the flat start patch works as on flat ground.
+    for _ in 0..200 {
+        assert!(!e.step(&[0.0; 8]).unwrap().terminated);
+    }
+    e.reset(Some(2)).unwrap();
+    let other: Vec<f64> = (0..20).map(|i| e.ground_height(1.0 + 0.2 * i as f64, 0.1)).collect();
+    assert_ne!(ahead, other, "each episode draws its own ground");
+    let mut flat = fixed(MinitaurOptions::default());
+    flat.reset(Some(1)).unwrap();
+    assert_eq!(flat.ground_height(1.0, 0.1), 0.0);
+}
+
+#[test]
+fn random_pushes_follow_pybullets_schedule() {
+    let mut e = fixed(MinitaurOptions { random_push_max: 1.0, ..Default::default() });
+    e.reset(Some(3)).unwrap();
+    let mut pushed = Vec::new();
+    for t in 0..320 {
+        let s = e.step(&[0.0; 8]).unwrap();
+        if s.terminated {
+            break;
+        }
+        let f = e.data().qfrc_applied();
+        if f[0] != 0.0 || f[1] != 0.0 {
+            pushed.push(t);
+        }
+    }
+    assert_eq!(pushed, (100..110).chain(300..310).filter(|t| *t < 320).collect::<Vec<_>>());
+}
+
+#[test]
+fn weak_motors_and_a_low_battery_hold_the_body_lower() {
+    let height = |opts: MinitaurOptions| {
+        let mut e = fixed(opts);
+        e.reset(Some(0)).unwrap();
+        // Its lowest point while standing (a robot too weak to stand sinks until it falls).
+        let mut low = f64::INFINITY;
+        for _ in 0..100 {
+            let s = e.step(&[0.0; 8]).unwrap();
+            low = low.min(e.base_position()[2]);
+            if s.terminated {
+                break;
+            }
+        }
+        low
+    };
+    let full = height(MinitaurOptions::default());
+    assert!(height(MinitaurOptions { motor_strength: 0.3, ..Default::default() }) < full - 0.005);
+    assert!(height(MinitaurOptions { battery_voltage: 4.0, ..Default::default() }) < full - 0.005);
+}
+
+#[test]
+fn perturbation_options_out_of_range_name_the_option() {
+    for (opts, name) in [
+        (MinitaurOptions { payload_mass: -1.0, ..Default::default() }, "payload_mass"),
+        (MinitaurOptions { friction_scale: -0.1, ..Default::default() }, "friction_scale"),
+        (MinitaurOptions { terrain_step_height: 0.5, ..Default::default() }, "terrain_step_height"),
+        (MinitaurOptions { slope: 45.0, ..Default::default() }, "slope"),
+        (MinitaurOptions { latency: f64::NAN, ..Default::default() }, "latency"),
+        (MinitaurOptions { noise_angle: -0.01, ..Default::default() }, "noise_angle"),
+        (MinitaurOptions { battery_voltage: 0.5, ..Default::default() }, "battery_voltage"),
+        (MinitaurOptions { random_push_max: 10.0, ..Default::default() }, "random_push_max"),
+    ] {
+        let e = Minitaur::new(opts).err().expect("refused").to_string();
+        assert!(e.contains(name), "{e}");
+    }
+}

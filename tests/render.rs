@@ -342,7 +342,7 @@ fn a_push_is_marked_in_the_frame_while_it_acts() {
     use locobench::render::clip::film_episode;
     let cfg = EnvConfig::new("minitaur").with_overrides(&[("max_episode_steps".into(), "700".into())]).unwrap();
     let settings = RenderSettings { width: W, height: H, camera: Camera::Follow };
-    let panel = film_episode(&cfg, &mut ZeroPolicy, &settings, 10.0, 7, None, Some(Push { delta_v: 0.5 })).unwrap();
+    let panel = film_episode(&cfg, &mut ZeroPolicy, &settings, 10.0, 7, None, Some(Push::lateral(0.5))).unwrap();
     let start = panel.push_time.expect("the push is seen");
     assert!((2.0..6.0).contains(&start), "the evaluation pushes 2-6 s in, not at {start}");
     let red = |f: &Frame| {

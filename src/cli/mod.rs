@@ -7,6 +7,7 @@ mod eval;
 mod export;
 mod record;
 mod report;
+mod robustness;
 mod rollout;
 mod sweep;
 mod train;
@@ -55,6 +56,11 @@ enum Command {
         after_help = "Example:\n  locobench report --runs models/policies/minitaur-td3 --out report --episodes 10"
     )]
     Report(report::ReportArgs),
+    /// The robustness suite: the controller and trained policies under the same perturbations.
+    #[command(
+        after_help = "Example:\n  locobench robustness --env minitaur --policy ppo=models/policies/minitaur-ppo --episodes 50 --seed 100 --out robustness/"
+    )]
+    Robustness(robustness::RobustnessArgs),
     /// Train a grid of reward weights x algorithms x seeds, each job a separate process.
     #[command(
         after_help = "Example:\n  locobench sweep --env inverted-pendulum --algo td3,ddpg --seeds 2 --jobs 2 --out sweeps/pendulum"
@@ -80,6 +86,7 @@ pub fn run() -> Result<()> {
         Command::Record(args) => record::run(args),
         Command::Report(args) => report::run(args),
         Command::Sweep(args) => sweep::run(args),
+        Command::Robustness(args) => robustness::run(args),
         Command::Docs(args) => docs::run(args),
         Command::Device(args) => device::run(args),
     }

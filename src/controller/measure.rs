@@ -14,8 +14,10 @@ pub struct GaitEpisode {
     pub episode_return: f64,
     /// Steps taken.
     pub length: usize,
-    /// The episode terminated because the robot fell.
+    /// The episode terminated because the robot fell, or the physics blew up.
     pub fell: bool,
+    /// The physics blew up (MuJoCo's instability), which ended the episode.
+    pub unstable: bool,
     /// Mean forward speed (m/s): distance travelled along the robot's heading over episode time.
     pub mean_speed: f64,
     /// Mean |forward velocity - set-point| over steps (m/s).
@@ -134,7 +136,8 @@ pub(crate) fn measure_episode(
 ) -> Result<GaitEpisode> {
     let dt = env.spec().dt;
     let mass: f64 = env.data().model().body_mass().iter().sum();
-    let gravity = -env.data().model().gravity()[2];
+    // |g|: on a slope (tilted gravity) the work against gravity is still m |g| distance per unit.
+    let gravity = env.data().model().gravity().iter().map(|g| g * g).sum::<f64>().sqrt();
     let mut obs = GaitObserver {
         profile,
         dt,
@@ -148,6 +151,7 @@ pub(crate) fn measure_episode(
     e.episode_return = summary.episode_return;
     e.length = summary.length;
     e.fell = summary.terminated || summary.unstable;
+    e.unstable = summary.unstable;
     e.reward_terms = summary.term_totals.clone();
     let time = summary.length as f64 * dt;
     let distance = obs.forward_distance;

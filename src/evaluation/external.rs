@@ -206,6 +206,7 @@ pub fn read(dir: &Path) -> Result<External> {
             episode_return: num(1)?,
             length: cells[2].parse().with_context(|| format!("{}: length '{}'", at(), cells[2]))?,
             fell,
+            unstable: false,
             mean_speed: num(4)?,
             speed_error: num(5)?,
             yaw_rate: num(6)?,

@@ -6,12 +6,13 @@ pub mod external;
 pub mod parallel;
 pub mod protocol;
 pub mod push;
+pub mod robustness;
 pub mod speed_grid;
 pub mod stats;
 pub mod summary;
 pub mod walking;
 
 pub use protocol::{Protocol, DEFAULT_EPISODES};
-pub use push::Push;
+pub use push::{Push, PushDirection};
 pub use speed_grid::{ControllerFamily, SpeedPoint};
 pub use walking::{HeldOutCheck, WalkingCheck};

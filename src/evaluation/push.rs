@@ -1,7 +1,7 @@
-//! Lateral pushes: the robustness axis of the evaluation. At a time drawn from each episode's
-//! reset seed, between 2 and 6 s in, the floating base gets a sideways shove that would change
-//! a free body's velocity by `delta_v` (impulse = total mass x delta_v, spread over 0.1 s), to
-//! the left or right by the same draw. Every policy meets the same pushes on the same episodes.
+//! Pushes: at a time drawn from each episode's reset seed, between 2 and 6 s in, the floating
+//! base gets a shove that would change a free body's velocity by `delta_v` (impulse = total mass
+//! x delta_v, spread over 0.1 s), sideways (left or right) or along the heading (forward or
+//! backward) by the same draw. Every policy meets the same pushes on the same episodes.
 use anyhow::{ensure, Result};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
@@ -12,11 +12,33 @@ use crate::mujoco::Data;
 /// Seconds the force acts for.
 pub(crate) const PUSH_DURATION: f64 = 0.1;
 
-/// One lateral push per episode, at a time drawn from the episode's own stream.
+/// Which way a push acts.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum PushDirection {
+    /// Along world y: sideways to a robot walking along x.
+    Lateral,
+    /// Along world x: with or against the walking direction.
+    Frontal,
+}
+
+/// One push per episode, at a time drawn from the episode's own stream.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Push {
     /// Velocity change (m/s) the impulse would give the whole robot as one free body.
     pub delta_v: f64,
+    /// Which way it acts.
+    pub direction: PushDirection,
+}
+
+impl Push {
+    /// A sideways push of `delta_v` m/s.
+    pub fn lateral(delta_v: f64) -> Push {
+        Push { delta_v, direction: PushDirection::Lateral }
+    }
+    /// A push along the walking direction of `delta_v` m/s, forward or backward.
+    pub fn frontal(delta_v: f64) -> Push {
+        Push { delta_v, direction: PushDirection::Frontal }
+    }
 }
 
 /// An environment whose base is pushed once per episode.
@@ -25,6 +47,7 @@ pub(crate) struct Pushed<'a> {
     /// Control steps the force acts for, and the force (N, along world y) while it does.
     steps: usize,
     force: f64,
+    dof: usize,
     start: usize,
     t: usize,
 }
@@ -42,7 +65,11 @@ impl<'a> Pushed<'a> {
         let dt = inner.spec().dt;
         let steps = ((PUSH_DURATION / dt).round() as usize).max(1);
         let force = mass * push.delta_v / (steps as f64 * dt);
-        Ok(Pushed { inner, steps, force, start: usize::MAX, t: 0 })
+        let dof = match push.direction {
+            PushDirection::Lateral => 1,
+            PushDirection::Frontal => 0,
+        };
+        Ok(Pushed { inner, steps, force, dof, start: usize::MAX, t: 0 })
     }
 
     /// The control step the push starts at and its sign, drawn from the reset seed.
@@ -70,8 +97,9 @@ impl Env for Pushed<'_> {
 
     fn step(&mut self, action: &[f64]) -> Result<Step, EnvError> {
         let pushing = self.t >= self.start && self.t < self.start + self.steps;
-        // The base's translational dofs are world-frame, so qfrc_applied[1] pushes along world y.
-        self.inner.data_mut().qfrc_applied_mut()[1] = if pushing { self.force } else { 0.0 };
+        // The base's translational dofs are world-frame: qfrc_applied[0] pushes along world x, [1]
+        // along world y.
+        self.inner.data_mut().qfrc_applied_mut()[self.dof] = if pushing { self.force } else { 0.0 };
         let out = self.inner.step(action);
         self.t += 1;
         out
@@ -102,7 +130,7 @@ mod tests {
         // Ant settled under zero torques: just before the push it does not move sideways; the
         // push gives it a lateral velocity of the order of delta_v (less, as feet drag).
         let mut env = make(&EnvConfig::new("ant")).unwrap();
-        let mut pushed = Pushed::new(env.as_mut(), Push { delta_v: 1.0 }).unwrap();
+        let mut pushed = Pushed::new(env.as_mut(), Push::lateral(1.0)).unwrap();
         assert_eq!(pushed.steps, 2, "Ant acts every 0.05 s: two steps of force");
         let (start, _) = Pushed::draw(3, 0.05);
         assert!((40..=120).contains(&start));
@@ -128,13 +156,13 @@ mod tests {
         let mut env = make(&EnvConfig::new("ant")).unwrap();
         let plain =
             run_episode(env.as_mut(), &mut ZeroPolicy, 0, Some(2), &mut |_: &crate::rollout::StepView| Ok(())).unwrap();
-        let mut pushed = Pushed::new(env.as_mut(), Push { delta_v: 0.0 }).unwrap();
+        let mut pushed = Pushed::new(env.as_mut(), Push::lateral(0.0)).unwrap();
         let zero =
             run_episode(&mut pushed, &mut ZeroPolicy, 0, Some(2), &mut |_: &crate::rollout::StepView| Ok(())).unwrap();
         assert_eq!(plain, zero);
-        assert!(Pushed::new(env.as_mut(), Push { delta_v: f64::NAN }).is_err());
+        assert!(Pushed::new(env.as_mut(), Push::lateral(f64::NAN)).is_err());
         let mut cheetah = make(&EnvConfig::new("half-cheetah")).unwrap();
-        let e = Pushed::new(cheetah.as_mut(), Push { delta_v: 1.0 }).err().unwrap().to_string();
+        let e = Pushed::new(cheetah.as_mut(), Push::lateral(1.0)).err().unwrap().to_string();
         assert!(e.contains("no floating base"), "{e}");
     }
 }

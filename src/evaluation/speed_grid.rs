@@ -66,7 +66,14 @@ fn round_speed(speed: f64) -> f64 {
 }
 
 fn key(speed: f64, push: Option<Push>) -> (i64, i64) {
-    ((round_speed(speed) * 1000.0).round() as i64, push.map_or(-1, |p| (p.delta_v * 1000.0).round() as i64))
+    let push = push.map_or(-1, |p| {
+        let size = (p.delta_v * 1000.0).round() as i64;
+        match p.direction {
+            super::push::PushDirection::Lateral => size,
+            super::push::PushDirection::Frontal => -2 - size,
+        }
+    });
+    ((round_speed(speed) * 1000.0).round() as i64, push)
 }
 
 impl ControllerFamily {

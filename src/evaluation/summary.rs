@@ -131,6 +131,6 @@ pub fn push_survival(
     delta_v: f64,
 ) -> Result<(usize, usize)> {
     let mut env = make(cfg)?;
-    let eps = protocol.run(env.as_mut(), policy, None, Some(Push { delta_v }))?;
+    let eps = protocol.run(env.as_mut(), policy, None, Some(Push::lateral(delta_v)))?;
     Ok((eps.iter().filter(|e| !e.fell).count(), eps.len()))
 }

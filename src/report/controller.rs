@@ -124,7 +124,7 @@ pub(crate) fn controller_section(
 pub(crate) fn controller_pushes(family: &mut ControllerFamily, speed: f64, label: String) -> Result<PushRow> {
     let mut survived = Vec::new();
     for &dv in &PUSH_LEVELS {
-        let p = family.at(speed, Some(Push { delta_v: dv }))?;
+        let p = family.at(speed, Some(Push::lateral(dv)))?;
         survived.push((p.episodes.len() - p.falls(), p.episodes.len()));
     }
     Ok(PushRow { policy: label, speed, survived })

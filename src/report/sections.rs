@@ -548,14 +548,14 @@ fn pushes(
     for speed in
         section.best.iter().map(|b| b.commanded).chain(pushed_rows.iter().filter_map(|(i, _, _)| matched_speed(*i)))
     {
-        controller_jobs.extend(PUSH_LEVELS.iter().map(|&dv| (speed, Some(Push { delta_v: dv }))));
+        controller_jobs.extend(PUSH_LEVELS.iter().map(|&dv| (speed, Some(Push::lateral(dv)))));
     }
     family.prefetch(&controller_jobs)?;
     let rl_jobs: Vec<(usize, f64)> =
         pushed_rows.iter().flat_map(|(i, _, _)| PUSH_LEVELS.iter().map(move |&dv| (*i, dv))).collect();
     let rl = map_in_order(&rl_jobs, opts.threads, |&(i, dv)| {
         let (_, g, rs) = pushed_rows.iter().find(|(j, _, _)| *j == i).unwrap();
-        evaluate_row(g, rs, rows[i].budget, &protocol, Some(Push { delta_v: dv })).map(|r| r.falls())
+        evaluate_row(g, rs, rows[i].budget, &protocol, Some(Push::lateral(dv))).map(|r| r.falls())
     })?;
     let mut out = Vec::new();
     if let Some(b) = &section.best {

@@ -175,7 +175,7 @@ pub fn plan(
                     "The same episode pushed sideways (Δv {FILMED_PUSH} m/s, marked by the red arrow and the caption)"
                 ),
                 panels,
-                push: Some(Push { delta_v: FILMED_PUSH }),
+                push: Some(Push::lateral(FILMED_PUSH)),
                 env: cfg,
             });
         }

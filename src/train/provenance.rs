@@ -80,6 +80,17 @@ pub(crate) fn cpu_model() -> String {
         .unwrap_or_else(|| "unknown".into())
 }
 
+/// The machine as a directory name for dated results: its CPU model's words in lower case and
+/// its SIMD level, e.g. `amd-epyc-7b13-avx2`.
+pub fn machine_slug() -> String {
+    let model = cpu_model().to_lowercase();
+    let words: Vec<&str> = model
+        .split(|c: char| !c.is_ascii_alphanumeric())
+        .filter(|w| !w.is_empty() && !matches!(*w, "processor" | "core" | "cpu" | "with" | "radeon" | "graphics"))
+        .collect();
+    format!("{}-{}", words.join("-"), simd_level())
+}
+
 /// avx512, avx2 or baseline: which of the exact kernel paths the CPU can run at its widest.
 pub(crate) fn simd_level() -> &'static str {
     match kernel_path::KernelPath::best_exact() {

@@ -284,9 +284,15 @@ impl Minitaur {
         self.core.sim.data.xmat()[9 * self.base_body + 8]
     }
 
+    /// The ground's height (m) under (x, y) this episode: the terrain's tile there, 0 on flat
+    /// ground.
+    pub fn ground_height(&self, x: f64, y: f64) -> f64 {
+        self.terrain.height_at(x, y)
+    }
+
     pub(crate) fn is_fallen(&self) -> bool {
         let p = self.base_position();
-        let ground = self.terrain.height_at(p[0], p[1]);
+        let ground = self.ground_height(p[0], p[1]);
         self.base_up_z() < self.opts.fall_up_threshold || p[2] - ground < self.opts.fall_height
     }
 

@@ -105,6 +105,12 @@ mod tests {
         // Back-EMF: at the speed limit a full PWM gives no current.
         let (applied, _) = p.torque(1.0, p.speed_limit());
         assert!(applied.abs() < 1e-9);
+        // A weakened motor gives its share of the curve; a lower battery less current.
+        let full = p.torque(pwm, 0.0).0;
+        let weak = MotorParams { strength: 0.4, ..p };
+        assert_eq!(weak.torque(pwm, 0.0).0, 0.4 * full);
+        let low = MotorParams { voltage: 8.0, ..p };
+        assert!(low.torque(pwm, 0.0).0 < full);
         // PD saturates at +-1.
         assert_eq!(p.pwm_for_angle(10.0, 0.0, 0.0), 1.0);
         assert!((p.pwm_for_angle(0.1, 0.0, 1.0) - (0.1 - 0.02)).abs() < 1e-12);

@@ -1,0 +1,98 @@
+//! `cargo bench --bench robustness`: the robustness suite (`locobench robustness`) for the
+//! shipped Minitaur policies beside the controller at its best speed and at each policy's speed,
+//! written with its wall time into `benches/results/<date>-<machine>/` (robustness.csv and
+//! robustness.toml), which the report and docs read.
+//!
+//! Knobs: LOCOBENCH_ROBUSTNESS_POLICIES (`label=reference[@budget]`, comma-separated, the same
+//! label once per seed of a row; default each walking algorithm's best row: PPO and the robust
+//! PPO at 1M over their 3 seeds, TD3 at 1M), LOCOBENCH_ROBUSTNESS_EPISODES (50), LOCOBENCH_ROBUSTNESS_SEED (100: episodes
+//! no run trained on and no report or policy choice used), LOCOBENCH_ROBUSTNESS_AXES (all),
+//! LOCOBENCH_ROBUSTNESS_CONTROLLER (best,matched), LOCOBENCH_ROBUSTNESS_THREADS (all cores),
+//! LOCOBENCH_ROBUSTNESS_OUT.
+//!
+//! Run without `--bench` (as `cargo test --all-targets` does), it plays one axis for one policy
+//! on two episodes into a temporary directory.
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use locobench::envs::EnvConfig;
+use locobench::evaluation::robustness::{output, select, ControllerChoice, Contender, Suite};
+use locobench::evaluation::Protocol;
+
+fn var(name: &str) -> Option<String> {
+    std::env::var(name).ok().filter(|v| !v.is_empty())
+}
+
+/// `<date>-<cpu>-<simd>`, e.g. `2026-11-27-amd-epyc-avx2`.
+fn results_dir() -> Result<PathBuf> {
+    let date = std::process::Command::new("date").args(["-u", "+%Y-%m-%d"]).output().context("running date")?;
+    let date = String::from_utf8_lossy(&date.stdout).trim().to_string();
+    let machine = locobench::train::provenance::machine_slug();
+    Ok(PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("benches/results").join(format!("{date}-{machine}")))
+}
+
+fn main() -> Result<()> {
+    let smoke = !std::env::args().any(|a| a == "--bench");
+    let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    // Each algorithm's best row on Minitaur that walks (survives 90% of its nominal episodes or
+    // nearly): PPO at 1M (3 seeds), the robust PPO at 1M (3 seeds), TD3 at 1M (the shipped seed).
+    let r = "benches/results/minitaur";
+    let mut rows: Vec<String> = (0..3).map(|s| format!("ppo 1M={r}/ppo-8envs-seed{s}-2m@1000000")).collect();
+    rows.extend((0..3).map(|s| format!("ppo-robust 1M={r}/ppo-robust-seed{s}-1m@1000000")));
+    rows.push("td3 1M=models/policies/minitaur-td3".into());
+    let default_policies = rows
+        .into_iter()
+        .filter(|p| root.join(p.split_once('=').unwrap().1.split('@').next().unwrap()).exists())
+        .collect::<Vec<_>>()
+        .join(",");
+    let policies = var("LOCOBENCH_ROBUSTNESS_POLICIES").unwrap_or(default_policies);
+    let items: Vec<String> = policies.split(',').filter(|p| !p.is_empty()).map(String::from).collect();
+    let mut agents = Contender::parse_agents(&items)?;
+    for agent in &mut agents {
+        if let Contender::Agent { seeds, .. } = agent {
+            for s in seeds.iter_mut().filter(|s| s.reference.is_relative()) {
+                s.reference = root.join(&s.reference);
+            }
+        }
+    }
+    let env = EnvConfig::new("minitaur");
+    let (axes, controller, episodes, out) = if smoke {
+        agents.truncate(1);
+        let out = tempfile::tempdir()?.keep();
+        (select("minitaur", &["payload".into()])?, vec![ControllerChoice::Speed(1.0)], 2, out)
+    } else {
+        let axes: Vec<String> =
+            var("LOCOBENCH_ROBUSTNESS_AXES").unwrap_or_else(|| "all".into()).split(',').map(String::from).collect();
+        let controller = var("LOCOBENCH_ROBUSTNESS_CONTROLLER")
+            .unwrap_or_else(|| "best,matched".into())
+            .split(',')
+            .map(str::parse)
+            .collect::<Result<Vec<ControllerChoice>>>()?;
+        let episodes = var("LOCOBENCH_ROBUSTNESS_EPISODES").map_or(Ok(50), |v| v.parse()).context("episodes")?;
+        let out = var("LOCOBENCH_ROBUSTNESS_OUT").map_or_else(results_dir, |v| Ok(PathBuf::from(v)))?;
+        (select("minitaur", &axes)?, controller, episodes, out)
+    };
+    let seed = var("LOCOBENCH_ROBUSTNESS_SEED").map_or(Ok(100), |v| v.parse()).context("seed")?;
+    let threads = var("LOCOBENCH_ROBUSTNESS_THREADS")
+        .map_or(Ok(locobench::evaluation::parallel::default_threads()), |v| v.parse())
+        .context("threads")?;
+    let suite = Suite { env, axes, protocol: Protocol { episodes, seed }, threads };
+    let command = format!(
+        "LOCOBENCH_ROBUSTNESS_POLICIES={policies} LOCOBENCH_ROBUSTNESS_EPISODES={episodes} \
+         LOCOBENCH_ROBUSTNESS_SEED={seed} cargo bench --bench robustness"
+    );
+    let (cells, meta) = output::run_to_dir(&suite, agents, &controller, &out, &command)?;
+    for note in &meta.notes {
+        println!("{note}");
+    }
+    let ctrl = cells.iter().find(|c| c.kind == "controller").map(|c| c.policy.clone());
+    for line in output::summary_lines(&cells, &suite.axes, ctrl.as_deref()) {
+        println!("{line}");
+    }
+    println!("{} cells in {:.0} s -> {}", cells.len(), meta.wall_seconds, out.display());
+    if smoke {
+        anyhow::ensure!(cells.len() == 2 * (1 + suite.axes[0].levels.len()), "one policy and one controller");
+        std::fs::remove_dir_all(&out)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,268 @@
+//! The robustness suite's axes: what each perturbs, its unit, and its levels from nominal to
+//! where every policy we measured fails. An axis is applied the same way to every policy: a
+//! push scenario, or env options set on the env every policy (and the controller) runs in.
+use anyhow::{bail, Result};
+
+use crate::envs::EnvConfig;
+use crate::evaluation::Push;
+
+/// How an axis's level reaches the episode.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Apply {
+    /// A push of `level` m/s, sideways or along the heading.
+    Push(crate::evaluation::PushDirection),
+    /// Env options set to `level` times each factor (one option, or a group such as sensor noise).
+    Options(&'static [(&'static str, f64)]),
+}
+
+/// One axis of the suite.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Axis {
+    /// Its name (`--axes`, the CSV's `axis` column).
+    pub name: &'static str,
+    /// What a reader sees on the chart's x axis.
+    pub label: &'static str,
+    /// The level's unit.
+    pub unit: &'static str,
+    /// The unperturbed level.
+    pub nominal: f64,
+    /// Levels beyond nominal, from mild to severe.
+    pub levels: &'static [f64],
+    /// How a level is applied.
+    pub apply: Apply,
+}
+
+use crate::evaluation::PushDirection::{Frontal, Lateral};
+
+/// Sensor noise at level 1: the standard deviations on motor angles (rad), motor velocities
+/// (rad/s) and orientation (rad about each axis).
+const NOISE: &[(&str, f64)] = &[("noise_angle", 0.05), ("noise_velocity", 1.0), ("noise_orientation", 0.05)];
+
+/// Minitaur's axes. Levels reach where every policy measured fails (or the model's limit).
+pub const MINITAUR_AXES: &[Axis] = &[
+    Axis {
+        name: "push_lateral",
+        label: "sideways push",
+        unit: "m/s",
+        nominal: 0.0,
+        levels: &[0.25, 0.5, 1.0, 1.5],
+        apply: Apply::Push(Lateral),
+    },
+    Axis {
+        name: "push_frontal",
+        label: "push along the heading",
+        unit: "m/s",
+        nominal: 0.0,
+        levels: &[0.5, 1.0, 1.5, 2.5],
+        apply: Apply::Push(Frontal),
+    },
+    Axis {
+        name: "friction_low",
+        label: "ground friction (scale, low)",
+        unit: "x",
+        nominal: 1.0,
+        levels: &[0.5, 0.25, 0.1, 0.05],
+        apply: Apply::Options(&[("friction_scale", 1.0)]),
+    },
+    Axis {
+        name: "friction_high",
+        label: "ground friction (scale, high)",
+        unit: "x",
+        nominal: 1.0,
+        levels: &[2.0, 4.0, 8.0],
+        apply: Apply::Options(&[("friction_scale", 1.0)]),
+    },
+    Axis {
+        name: "payload",
+        label: "payload on the base",
+        unit: "kg",
+        nominal: 0.0,
+        levels: &[1.0, 2.0, 4.0, 6.0],
+        apply: Apply::Options(&[("payload_mass", 1.0)]),
+    },
+    Axis {
+        name: "com_shift",
+        label: "base centre of mass moved forward",
+        unit: "m",
+        nominal: 0.0,
+        levels: &[0.03, 0.06, 0.1, 0.15],
+        apply: Apply::Options(&[("com_shift", 1.0)]),
+    },
+    Axis {
+        name: "motor_strength",
+        label: "motor strength (share of torque)",
+        unit: "x",
+        nominal: 1.0,
+        levels: &[0.8, 0.6, 0.45, 0.3],
+        apply: Apply::Options(&[("motor_strength", 1.0)]),
+    },
+    Axis {
+        name: "battery",
+        label: "battery voltage",
+        unit: "V",
+        nominal: 16.0,
+        levels: &[13.0, 10.0, 8.0, 6.0],
+        apply: Apply::Options(&[("battery_voltage", 1.0)]),
+    },
+    Axis {
+        name: "latency",
+        label: "control latency",
+        unit: "s",
+        nominal: 0.0,
+        levels: &[0.004, 0.01, 0.02, 0.04],
+        apply: Apply::Options(&[("latency", 1.0)]),
+    },
+    Axis {
+        name: "sensor_noise",
+        label: "sensor noise (x 0.05 rad, 1 rad/s, 0.05 rad)",
+        unit: "x",
+        nominal: 0.0,
+        levels: &[0.5, 1.0, 2.0, 4.0],
+        apply: Apply::Options(NOISE),
+    },
+    Axis {
+        name: "terrain",
+        label: "rough terrain: step height",
+        unit: "m",
+        nominal: 0.0,
+        levels: &[0.01, 0.02, 0.04, 0.07],
+        apply: Apply::Options(&[("terrain_step_height", 1.0)]),
+    },
+    Axis {
+        name: "slope_up",
+        label: "slope up",
+        unit: "deg",
+        nominal: 0.0,
+        levels: &[5.0, 10.0, 15.0, 22.0],
+        apply: Apply::Options(&[("slope", 1.0)]),
+    },
+    Axis {
+        name: "slope_down",
+        label: "slope down",
+        unit: "deg",
+        nominal: 0.0,
+        levels: &[5.0, 10.0, 15.0, 22.0],
+        apply: Apply::Options(&[("slope", -1.0)]),
+    },
+];
+
+/// Ant's axes: the pushes (its env has none of Minitaur's perturbation options).
+pub const ANT_AXES: &[Axis] = &[
+    Axis {
+        name: "push_lateral",
+        label: "sideways push",
+        unit: "m/s",
+        nominal: 0.0,
+        levels: &[0.5, 1.0, 2.0, 3.0],
+        apply: Apply::Push(Lateral),
+    },
+    Axis {
+        name: "push_frontal",
+        label: "push along the heading",
+        unit: "m/s",
+        nominal: 0.0,
+        levels: &[0.5, 1.0, 2.0, 3.0],
+        apply: Apply::Push(Frontal),
+    },
+];
+
+/// The axes of `env`'s suite; an error for an env without one.
+pub fn axes_of(env: &str) -> Result<&'static [Axis]> {
+    match env {
+        "minitaur" => Ok(MINITAUR_AXES),
+        "ant" => Ok(ANT_AXES),
+        other => bail!("the robustness suite covers minitaur and ant, not '{other}'"),
+    }
+}
+
+/// The axes named (all of them for `all`); an unknown name is an error listing the known ones.
+pub fn select(env: &str, names: &[String]) -> Result<Vec<Axis>> {
+    let all = axes_of(env)?;
+    if names.is_empty() || names.iter().any(|n| n == "all") {
+        return Ok(all.to_vec());
+    }
+    names
+        .iter()
+        .map(|n| {
+            all.iter().find(|a| a.name == n).copied().ok_or_else(|| {
+                anyhow::anyhow!(
+                    "unknown robustness axis '{n}' for {env} (its axes: {})",
+                    all.iter().map(|a| a.name).collect::<Vec<_>>().join(", ")
+                )
+            })
+        })
+        .collect()
+}
+
+impl Axis {
+    /// The env and push of one level: `base` with the axis's options set, or a push. The level
+    /// must be finite; whether the env can represent it is checked when the env is built, and
+    /// the error names the option.
+    pub fn at(&self, base: &EnvConfig, level: f64) -> Result<(EnvConfig, Option<Push>)> {
+        if !level.is_finite() {
+            bail!("level {level} of axis {} is not a finite number", self.name);
+        }
+        if level == self.nominal {
+            return Ok((base.clone(), None));
+        }
+        match self.apply {
+            Apply::Push(direction) => {
+                if level < 0.0 {
+                    bail!("axis {}: a push of {level} m/s is negative", self.name);
+                }
+                Ok((base.clone(), Some(Push { delta_v: level, direction })))
+            }
+            Apply::Options(options) => {
+                let mut cfg = base.clone();
+                for (key, factor) in options {
+                    cfg.options.insert(key.to_string(), toml::Value::Float(level * factor));
+                }
+                crate::envs::make(&cfg)
+                    .map_err(|e| anyhow::anyhow!("axis {} at level {level}: {e}", self.name))?;
+                Ok((cfg, None))
+            }
+        }
+    }
+
+    /// Every level, nominal first.
+    pub fn all_levels(&self) -> Vec<f64> {
+        std::iter::once(self.nominal).chain(self.levels.iter().copied()).collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_minitaur_level_builds_and_levels_grow_in_severity() {
+        let base = EnvConfig::new("minitaur");
+        for axis in MINITAUR_AXES {
+            let levels = axis.all_levels();
+            let distance: Vec<f64> = levels.iter().map(|l| (l - axis.nominal).abs()).collect();
+            assert!(distance.windows(2).all(|w| w[0] < w[1]), "{}: {levels:?}", axis.name);
+            for level in levels {
+                axis.at(&base, level).unwrap();
+            }
+        }
+    }
+
+    #[test]
+    fn bad_axes_and_levels_are_named() {
+        let e = select("minitaur", &["wind".into()]).unwrap_err().to_string();
+        assert!(e.contains("'wind'") && e.contains("push_lateral"), "{e}");
+        assert!(select("hopper", &[]).unwrap_err().to_string().contains("hopper"));
+        let base = EnvConfig::new("minitaur");
+        let payload = select("minitaur", &["payload".into()]).unwrap()[0];
+        let e = payload.at(&base, -1.0).unwrap_err().to_string();
+        assert!(e.contains("payload_mass"), "{e}");
+        let friction = select("minitaur", &["friction_low".into()]).unwrap()[0];
+        assert!(friction.at(&base, -0.1).unwrap_err().to_string().contains("friction_scale"));
+        let terrain = select("minitaur", &["terrain".into()]).unwrap()[0];
+        assert!(terrain.at(&base, 0.5).unwrap_err().to_string().contains("terrain_step_height"));
+        assert!(payload.at(&base, f64::NAN).is_err());
+        let push = select("minitaur", &["push_lateral".into()]).unwrap()[0];
+        assert!(push.at(&base, -1.0).is_err());
+        assert_eq!(select("ant", &["all".into()]).unwrap().len(), 2);
+    }
+}

@@ -1,0 +1,145 @@
+//! The suite's committed form: `robustness.csv` (one row per cell, each episode's outcome
+//! included so survival can be paired across policies) and `robustness.toml` (how it was run:
+//! command, machine, commit, protocol, wall time, and how the controller's speeds were chosen).
+//! Both are written atomically.
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::{Context, Result};
+use serde::{Deserialize, Serialize};
+
+use super::axes::Axis;
+use super::plan::{plan, ControllerChoice};
+use super::suite::{to_csv, Cell, Contender, Suite};
+use super::summary::{survives_where_controller_falls, threshold};
+use crate::io::write_atomic;
+
+/// The cells' file.
+pub const CSV_FILE: &str = "robustness.csv";
+/// How they were made.
+pub const META_FILE: &str = "robustness.toml";
+
+/// `robustness.toml`.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+pub struct SuiteMeta {
+    /// The command that wrote the files.
+    pub command: String,
+    /// CPU model and SIMD level of the machine.
+    pub machine: String,
+    /// The commit the binary was built from.
+    pub git_commit: String,
+    /// The env and its options.
+    pub env: crate::envs::EnvConfig,
+    /// Held-out episodes per cell and the protocol seed that picks them.
+    pub episodes: usize,
+    /// The protocol seed.
+    pub protocol_seed: u64,
+    /// Cells evaluated at once.
+    pub threads: usize,
+    /// Wall time of the whole suite, planning included (s).
+    pub wall_seconds: f64,
+    /// Every contender: label and what it is.
+    pub contenders: Vec<String>,
+    /// How the controller's speeds were chosen.
+    pub notes: Vec<String>,
+}
+
+/// Plans and plays the suite and writes both files into `dir`; returns the cells.
+pub fn run_to_dir(
+    suite: &Suite,
+    agents: Vec<Contender>,
+    choices: &[ControllerChoice],
+    dir: &Path,
+    command: &str,
+) -> Result<(Vec<Cell>, SuiteMeta)> {
+    let start = Instant::now();
+    let p = plan(suite, agents, choices)?;
+    let cells = suite.run(&p.contenders, &p.known)?;
+    let meta = SuiteMeta {
+        command: command.to_string(),
+        machine: format!("{} ({})", crate::train::provenance::cpu_model(), crate::train::provenance::simd_level()),
+        git_commit: crate::train::git_commit().unwrap_or_else(|| "unknown".into()),
+        env: suite.env.clone(),
+        episodes: suite.protocol.episodes,
+        protocol_seed: suite.protocol.seed,
+        threads: suite.threads,
+        wall_seconds: start.elapsed().as_secs_f64(),
+        contenders: p
+            .contenders
+            .iter()
+            .map(|c| match c {
+                Contender::Controller { label, speed } => format!("{label}: the controller commanded {speed} m/s"),
+                Contender::Agent { label, seeds } => format!(
+                    "{label}: {}",
+                    seeds
+                        .iter()
+                        .map(|s| format!(
+                            "{}{}",
+                            s.reference.display(),
+                            s.budget.map_or(String::new(), |b| format!(" at budget {b}"))
+                        ))
+                        .collect::<Vec<_>>()
+                        .join(", ")
+                ),
+            })
+            .collect(),
+        notes: p.notes,
+    };
+    write_atomic(&dir.join(CSV_FILE), |w| Ok(w.write_all(to_csv(&cells).as_bytes())?))?;
+    let text = toml::to_string_pretty(&meta).context("writing the suite's metadata")?;
+    write_atomic(&dir.join(META_FILE), |w| Ok(w.write_all(text.as_bytes())?))?;
+    Ok((cells, meta))
+}
+
+/// Reads a committed suite: its cells and metadata from `dir`.
+pub fn read_dir(dir: &Path) -> Result<(Vec<Cell>, SuiteMeta)> {
+    let csv = dir.join(CSV_FILE);
+    let text = std::fs::read_to_string(&csv).with_context(|| format!("reading {}", csv.display()))?;
+    let cells = super::suite::from_csv(&text, &csv.display().to_string())?;
+    let meta_path = dir.join(META_FILE);
+    let meta_text =
+        std::fs::read_to_string(&meta_path).with_context(|| format!("reading {}", meta_path.display()))?;
+    let meta = toml::from_str(&meta_text).with_context(|| format!("{}: not a suite's metadata", meta_path.display()))?;
+    Ok((cells, meta))
+}
+
+fn fmt_level(level: Option<f64>, axis: &Axis) -> String {
+    match level {
+        Some(l) if l == axis.nominal => format!("nominal only ({l} {})", axis.unit),
+        Some(l) => format!("{l} {}", axis.unit),
+        None => "below 90% even nominal".into(),
+    }
+}
+
+/// Per axis and contender: the largest level survived at 90% (with the survival interval there),
+/// and, for each policy, how often it survived where `controller` fell. As text lines.
+pub fn summary_lines(cells: &[Cell], axes: &[Axis], controller: Option<&str>) -> Vec<String> {
+    let mut policies: Vec<&str> = Vec::new();
+    for c in cells {
+        if !policies.contains(&c.policy.as_str()) {
+            policies.push(&c.policy);
+        }
+    }
+    let mut out = Vec::new();
+    for axis in axes {
+        out.push(format!("{} ({}):", axis.name, axis.unit));
+        for p in &policies {
+            let t = threshold(cells, p, axis);
+            let survival = t.survival.map_or(String::new(), |s| {
+                format!(", survival {:.2} [{:.2}, {:.2}]", s.estimate, s.low, s.high)
+            });
+            let beyond = if t.beyond_last { ", and beyond the last level" } else { "" };
+            let mut line = format!("  {p:<44} 90% up to {}{survival}{beyond}", fmt_level(t.level, axis));
+            if let Some(ctrl) = controller.filter(|c| c != p) {
+                if let Some((n, s)) = survives_where_controller_falls(cells, p, ctrl, axis) {
+                    line.push_str(&format!(
+                        "; survives {:.2} [{:.2}, {:.2}] of {n} episodes the controller fell in",
+                        s.estimate, s.low, s.high
+                    ));
+                }
+            }
+            out.push(line);
+        }
+    }
+    out
+}

@@ -1,0 +1,122 @@
+//! What the suite's cells say per axis: the largest level each contender survives at 90%, and
+//! how often a policy survives an episode the controller fell in.
+use super::axes::Axis;
+use super::suite::{Cell, Outcome, NOMINAL};
+use crate::evaluation::stats::{wilson, Interval};
+
+/// The survival rate a level must reach to count as survived.
+pub const SURVIVAL_BAR: f64 = 0.9;
+
+/// One contender's cells along one axis, nominal first, in order of severity.
+pub fn along<'a>(cells: &'a [Cell], policy: &str, axis: &Axis) -> Vec<&'a Cell> {
+    let mut out: Vec<&Cell> = cells.iter().filter(|c| c.policy == policy && c.axis == NOMINAL).take(1).collect();
+    for level in axis.levels {
+        out.extend(cells.iter().find(|c| c.policy == policy && c.axis == axis.name && c.level == *level));
+    }
+    out
+}
+
+/// The most severe level reached with survival >= 90% at it and at every milder level, with the
+/// survival interval there. Levels are the axis's own (nominal's is the axis's nominal). None
+/// when even the nominal cell is below the bar.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Threshold {
+    /// The level (None: not even nominal).
+    pub level: Option<f64>,
+    /// Survival at that level.
+    pub survival: Option<Interval>,
+    /// Whether the last level of the axis was survived too (the axis did not find its limit).
+    pub beyond_last: bool,
+}
+
+/// The 90% threshold of `policy` along `axis`.
+pub fn threshold(cells: &[Cell], policy: &str, axis: &Axis) -> Threshold {
+    let line = along(cells, policy, axis);
+    let levels: Vec<f64> = axis.all_levels();
+    let mut reached = None;
+    for (cell, level) in line.iter().zip(&levels) {
+        let s = cell.survival();
+        if s.estimate >= SURVIVAL_BAR {
+            reached = Some((*level, s));
+        } else {
+            break;
+        }
+    }
+    let beyond_last = line.len() == levels.len() && reached.is_some_and(|(l, _)| l == *levels.last().unwrap());
+    Threshold { level: reached.map(|r| r.0), survival: reached.map(|r| r.1), beyond_last }
+}
+
+/// P(policy survives | the controller fell), over the paired episodes (same level, same reset
+/// seed) of every level of `axis` where the controller fell; the count of such episodes and the
+/// Wilson interval. A row of several seeds plays each episode once per seed: every seed's
+/// episode pairs with the controller's. None when the controller never fell on the axis.
+pub fn survives_where_controller_falls(
+    cells: &[Cell],
+    policy: &str,
+    controller: &str,
+    axis: &Axis,
+) -> Option<(usize, Interval)> {
+    let (p, c) = (along(cells, policy, axis), along(cells, controller, axis));
+    let (mut n, mut k) = (0, 0);
+    for (pc, cc) in p.iter().zip(&c) {
+        let n_ctrl = cc.outcomes.len().max(1);
+        for (i, po) in pc.outcomes.iter().enumerate() {
+            let co = cc.outcomes.get(i % n_ctrl).copied().unwrap_or(Outcome::Unstable);
+            if co == Outcome::Fell && *po != Outcome::Unstable {
+                n += 1;
+                k += usize::from(*po == Outcome::Survived);
+            }
+        }
+    }
+    (n > 0).then(|| (n, wilson(k, n)))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::evaluation::robustness::axes::MINITAUR_AXES;
+
+    fn cell(policy: &str, axis: &str, level: f64, outcomes: &str) -> Cell {
+        Cell {
+            env: "minitaur".into(),
+            policy: policy.into(),
+            kind: "policy".into(),
+            commanded: f64::NAN,
+            axis: axis.into(),
+            level,
+            outcomes: outcomes.chars().map(|c| Outcome::from_letter(c).unwrap()).collect(),
+            ret: Interval::point(0.0),
+            speed: 0.0,
+            cost_of_transport: 0.0,
+        }
+    }
+
+    #[test]
+    fn thresholds_stop_at_the_first_level_below_the_bar() {
+        let payload = MINITAUR_AXES.iter().find(|a| a.name == "payload").unwrap();
+        let ten = |s: usize| "S".repeat(s) + &"F".repeat(10 - s);
+        let cells = vec![
+            cell("a", NOMINAL, 0.0, &ten(10)),
+            cell("a", "payload", 1.0, &ten(9)),
+            cell("a", "payload", 2.0, &ten(5)),
+            cell("a", "payload", 4.0, &ten(10)),
+            cell("a", "payload", 6.0, &ten(0)),
+            cell("c", NOMINAL, 0.0, &ten(10)),
+            cell("c", "payload", 1.0, &ten(4)),
+            cell("c", "payload", 2.0, &ten(0)),
+            cell("c", "payload", 4.0, &ten(0)),
+            cell("c", "payload", 6.0, &ten(0)),
+        ];
+        let t = threshold(&cells, "a", payload);
+        assert_eq!(t.level, Some(1.0));
+        assert_eq!(t.survival, Some(wilson(9, 10)));
+        assert!(!t.beyond_last);
+        assert_eq!(threshold(&cells, "c", payload).level, Some(0.0));
+        // The controller fell in its last 6 episodes at 1 kg ("a" survived 5 of those) and in
+        // all 10 at 2, 4 and 6 kg ("a" survived 5, 10 and 0).
+        let (n, p) = survives_where_controller_falls(&cells, "a", "c", payload).unwrap();
+        assert_eq!(n, 36);
+        assert_eq!(p, wilson(5 + 5 + 10, 36));
+        assert!(survives_where_controller_falls(&cells, "c", "a", payload).is_some());
+    }
+}
