@@ -34,6 +34,9 @@ runs=(
   # PPO with CleanRL's settings, 1M steps, with their policies; PPO and the branching DQN on Minitaur
   $r/{half-cheetah,walker2d}/ppo-seed{0,1,2}-1m $r/hopper/ppo-seed{0,1,2,3,4,5,6,7,8,9}-1m
   $r/minitaur/ppo-8envs-seed{0,1,2}-2m $r/minitaur/dqn-seed0-300k $r/inverted-pendulum/dqn-seed0
+  # PPO trained for robustness (random shoves, rough ground, latency, sensor noise, slopes),
+  # stopped at 1M steps of its 2M schedule; evaluated in the nominal env like every row
+  $r/minitaur/ppo-robust-seed{0,1,2}-2m
   # SAC on Minitaur with Freeman's reward (no energy cost; drift weights 0, 0.5 and 1), 500k; CrossQ
   # with 256-wide critics, policies at 100k and 300k
   $r/minitaur/sac-energy0-*500k
@@ -49,5 +52,10 @@ external=()
 for d in $r/minitaur/sb3-ppo-seed*-1m/external; do
   [ -d "$d" ] && external+=(--external "$d")
 done
+# The newest committed robustness suite (cargo bench --bench robustness) becomes each env's
+# robustness section.
+robustness=()
+suite=$(ls -d $r/20??-??-??-*/robustness.csv 2>/dev/null | sort | tail -1)
+[ -n "$suite" ] && robustness=(--robustness "$(dirname "$suite")")
 rm -rf "$out"  # no chart of an earlier layout left behind
-"$bin" report --runs "${existing[@]}" "${external[@]}" --out "$out" "${videos[@]}" "${@:2}"
+"$bin" report --runs "${existing[@]}" "${external[@]}" --out "$out" "${videos[@]}" "${robustness[@]}" "${@:2}"

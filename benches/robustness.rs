@@ -4,11 +4,12 @@
 //! robustness.toml), which the report and docs read.
 //!
 //! Knobs: LOCOBENCH_ROBUSTNESS_POLICIES (`label=reference[@budget]`, comma-separated, the same
-//! label once per seed of a row; default each walking algorithm's best row: PPO and the robust
-//! PPO at 1M over their 3 seeds, TD3 at 1M), LOCOBENCH_ROBUSTNESS_EPISODES (50), LOCOBENCH_ROBUSTNESS_SEED (100: episodes
+//! label once per seed of a row; default each walking algorithm's best row by its shipped policy:
+//! PPO, the robust PPO and TD3 at 1M), LOCOBENCH_ROBUSTNESS_EPISODES (50), LOCOBENCH_ROBUSTNESS_SEED (100: episodes
 //! no run trained on and no report or policy choice used), LOCOBENCH_ROBUSTNESS_AXES (all),
 //! LOCOBENCH_ROBUSTNESS_CONTROLLER (best,matched), LOCOBENCH_ROBUSTNESS_THREADS (all cores),
-//! LOCOBENCH_ROBUSTNESS_OUT.
+//! LOCOBENCH_ROBUSTNESS_OUT, LOCOBENCH_ROBUSTNESS_REUSE (an earlier suite's directory: its cells
+//! of the same contender, axis and level are kept instead of played again).
 //!
 //! Run without `--bench` (as `cargo test --all-targets` does), it plays one axis for one policy
 //! on two episodes into a temporary directory.
@@ -34,15 +35,17 @@ fn results_dir() -> Result<PathBuf> {
 fn main() -> Result<()> {
     let smoke = !std::env::args().any(|a| a == "--bench");
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
-    // Each algorithm's best row on Minitaur that walks (survives 90% of its nominal episodes or
-    // nearly): PPO at 1M (3 seeds), the robust PPO at 1M (3 seeds), TD3 at 1M (the shipped seed).
-    let r = "benches/results/minitaur";
-    let mut rows: Vec<String> = (0..3).map(|s| format!("ppo 1M={r}/ppo-8envs-seed{s}-2m@1000000")).collect();
-    rows.extend((0..3).map(|s| format!("ppo-robust 1M={r}/ppo-robust-seed{s}-1m@1000000")));
-    rows.push("td3 1M=models/policies/minitaur-td3".into());
+    // Each walking algorithm's best row on Minitaur, by its shipped seed: PPO at 1M (seed 0), the
+    // robust PPO at 1M, TD3 at 1M (seed 1). A row's other seeds can be added through
+    // LOCOBENCH_ROBUSTNESS_POLICIES (the same label once per seed).
+    let rows = [
+        "ppo 1M=models/policies/minitaur-ppo",
+        "ppo-robust 1M=models/policies/minitaur-ppo-robust",
+        "td3 1M=models/policies/minitaur-td3",
+    ];
     let default_policies = rows
         .into_iter()
-        .filter(|p| root.join(p.split_once('=').unwrap().1.split('@').next().unwrap()).exists())
+        .filter(|p| root.join(p.split_once('=').unwrap().1).exists())
         .collect::<Vec<_>>()
         .join(",");
     let policies = var("LOCOBENCH_ROBUSTNESS_POLICIES").unwrap_or(default_policies);
@@ -81,7 +84,19 @@ fn main() -> Result<()> {
         "LOCOBENCH_ROBUSTNESS_POLICIES={policies} LOCOBENCH_ROBUSTNESS_EPISODES={episodes} \
          LOCOBENCH_ROBUSTNESS_SEED={seed} cargo bench --bench robustness"
     );
-    let (cells, meta) = output::run_to_dir(&suite, agents, &controller, &out, &command)?;
+    // LOCOBENCH_ROBUSTNESS_REUSE: an earlier suite's directory whose matching cells are kept.
+    let (reuse, from) = match var("LOCOBENCH_ROBUSTNESS_REUSE") {
+        Some(dir) if !smoke => {
+            let (cells, meta) = output::reusable(std::path::Path::new(&dir), &suite)?;
+            (cells, Some((dir, meta.wall_seconds)))
+        }
+        _ => (Vec::new(), None),
+    };
+    let command = match var("LOCOBENCH_ROBUSTNESS_REUSE") {
+        Some(dir) if !smoke => format!("LOCOBENCH_ROBUSTNESS_REUSE={dir} {command}"),
+        _ => command,
+    };
+    let (cells, meta) = output::run_to_dir(&suite, agents, &controller, &out, &command, &reuse, from)?;
     for note in &meta.notes {
         println!("{note}");
     }

@@ -28,8 +28,9 @@ pub struct EvalArgs {
     /// metrics.csv's eval rows were measured on).
     #[arg(long)]
     pub training_seeds: bool,
-    /// Options over the run's own environment, e.g. `--reward drift=1,shake=1,energy=0.005` to
-    /// evaluate under other reward weights.
+    /// Options over the run's own environment (perturbations it trained under return to
+    /// nominal), e.g. `--reward drift=1,shake=1,energy=0.005` to evaluate under other reward
+    /// weights, `--option payload_mass=2` under a payload.
     #[command(flatten)]
     pub env_options: super::EnvOptionArgs,
 }
@@ -38,7 +39,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     super::deprecated_flag("--checkpoint", "--policy");
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
     let (run, agent) = resolve_policy(&args.policy, args.budget)?.load()?;
-    let env_cfg = args.env_options.apply(run.env.clone())?;
+    let env_cfg = args.env_options.apply(run.env.for_evaluation())?;
     let mut env = make(&env_cfg)?;
     let what = format!("{} {} on {}", args.policy.display(), run.train.algo.name(), run.env.name);
     if args.training_seeds {

@@ -106,7 +106,7 @@ pub fn run(args: RecordArgs) -> Result<()> {
             agent_holder = agent;
             let label =
                 format!("{} {}", run.train.algo.name(), path.file_name().unwrap_or(path.as_os_str()).to_string_lossy());
-            (run.env, Box::new(AgentPolicy { agent: agent_holder.as_ref(), label }) as Box<dyn Policy>)
+            (run.env.for_evaluation(), Box::new(AgentPolicy { agent: agent_holder.as_ref(), label }) as Box<dyn Policy>)
         }
     };
     let cfg = args.env_options.apply(cfg)?;
@@ -231,7 +231,7 @@ fn side_by_side(args: &RecordArgs, cfg: &locobench::envs::EnvConfig, policy: &mu
                 cfg.name
             );
             let mut other = AgentPolicy { agent: agent.as_ref(), label: spec.clone() };
-            let env = args.env_options.apply(run.env)?;
+            let env = args.env_options.apply(run.env.for_evaluation())?;
             let label = format!(
                 "{} {}",
                 run.train.algo.name(),

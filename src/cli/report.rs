@@ -37,6 +37,11 @@ pub struct ReportArgs {
     /// (--episodes, --seed) and env options.
     #[arg(long, num_args = 1.., value_name = "DIR")]
     pub external: Vec<PathBuf>,
+    /// Directories holding a robustness suite's robustness.csv and robustness.toml (`locobench
+    /// robustness`, `cargo bench --bench robustness`): each env's section gains the suite's
+    /// summary, goal check and one chart per axis.
+    #[arg(long, num_args = 1.., value_name = "DIR")]
+    pub robustness: Vec<PathBuf>,
     /// Protocol seed: picks the held-out reset seeds.
     #[command(flatten)]
     pub seed: super::SeedArg,
@@ -56,6 +61,7 @@ pub fn run(args: ReportArgs) -> Result<()> {
         threads: args.threads.unwrap_or_else(locobench::evaluation::parallel::default_threads),
         videos: args.videos,
         external: args.external.clone(),
+        robustness: args.robustness.clone(),
     };
     let report = write_report(&args.runs, &args.out, &opts)?;
     for (env, rows) in &report.rows {

@@ -34,6 +34,11 @@ pub struct RobustnessArgs {
     /// Directory for robustness.csv and robustness.toml.
     #[arg(long)]
     pub out: PathBuf,
+    /// An earlier suite's directory (same env, episodes and seed): its cells of the same
+    /// contender, axis and level are taken instead of played again (adding a policy to a
+    /// committed suite).
+    #[arg(long, value_name = "DIR")]
+    pub reuse: Option<PathBuf>,
 }
 
 pub fn run(args: RobustnessArgs) -> Result<()> {
@@ -46,7 +51,14 @@ pub fn run(args: RobustnessArgs) -> Result<()> {
         threads: args.threads.unwrap_or_else(locobench::evaluation::parallel::default_threads),
     };
     let command = std::env::args().collect::<Vec<_>>().join(" ");
-    let (cells, meta) = output::run_to_dir(&suite, agents, &args.controller, &args.out, &command)?;
+    let (reuse, from) = match &args.reuse {
+        Some(dir) => {
+            let (cells, meta) = output::reusable(dir, &suite)?;
+            (cells, Some((dir.display().to_string(), meta.wall_seconds)))
+        }
+        None => (Vec::new(), None),
+    };
+    let (cells, meta) = output::run_to_dir(&suite, agents, &args.controller, &args.out, &command, &reuse, from)?;
     for note in &meta.notes {
         println!("{note}");
     }

@@ -12,6 +12,7 @@ mod csv_rows;
 mod envs;
 mod gpu;
 mod results;
+mod robustness;
 mod runs;
 
 use std::path::Path;
@@ -80,6 +81,11 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
             )?,
         },
         Section { file: "docs/environments.md", name: "envs", text: envs::table()? },
+        Section {
+            file: "docs/robustness.md",
+            name: "robustness",
+            text: robustness::summary(&root.join(BENCH_RESULTS_DIR), root)?,
+        },
         Section {
             file: "docs/python.md",
             name: "python-speed",

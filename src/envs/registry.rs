@@ -151,6 +151,20 @@ impl EnvConfig {
         Ok(self)
     }
 
+    /// The env the held-out protocol evaluates a policy of this env in: the same env, reward and
+    /// options, except perturbations (friction, payload, latency, noise, terrain, slopes, random
+    /// shoves), which return to nominal. A policy trained under perturbations then meets the
+    /// world every other policy meets; `--option` puts a perturbation back.
+    pub fn for_evaluation(&self) -> EnvConfig {
+        let mut out = self.clone();
+        if self.name == "minitaur" {
+            for key in super::minitaur::perturb::OPTIONS {
+                out.options.remove(key);
+            }
+        }
+        out
+    }
+
     /// Every option with its effective value (defaults filled in), validated.
     pub fn resolved_options(&self) -> Result<toml::Table, EnvError> {
         (lookup(&self.name)?.resolve)(self)

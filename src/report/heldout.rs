@@ -242,10 +242,11 @@ pub(crate) fn evaluate_row(
             }
         };
         protocol.check_disjoint(cfg.seed, cfg.train.total_steps, cfg.train.eval_episodes)?;
-        let mut env = make(&cfg.env).with_context(|| format!("making the env of {}", run.dir.display()))?;
+        let env_config = cfg.env.for_evaluation();
+        let mut env = make(&env_config).with_context(|| format!("making the env of {}", run.dir.display()))?;
         let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.algo().to_string() };
         let episodes = protocol.run(env.as_mut(), &mut policy, None, push)?;
-        row.env_config.get_or_insert(cfg.env.clone());
+        row.env_config.get_or_insert(env_config);
         row.evaluated.push(SeedResult { run_dir: run.dir.clone(), seed: cfg.seed, episodes });
         machines.insert(machine_of(run, budget));
         if let Some(w) = run.metrics.iter().rfind(|m| m.step <= budget).map(|m| m.wall_time) {

@@ -12,6 +12,7 @@ pub mod format;
 pub mod heldout;
 pub mod plots;
 pub mod progress;
+pub mod robustness;
 pub mod runs;
 mod sections;
 pub mod videos;
@@ -56,6 +57,8 @@ pub struct ReportOptions {
     /// Directories of episodes evaluated outside locobench (`evaluation::external`), added as
     /// rows beside the runs'.
     pub external: Vec<PathBuf>,
+    /// Committed robustness suites (`evaluation::robustness`), one section each in its env.
+    pub robustness: Vec<PathBuf>,
 }
 
 impl Default for ReportOptions {
@@ -66,6 +69,7 @@ impl Default for ReportOptions {
             threads: crate::evaluation::parallel::default_threads(),
             videos: false,
             external: Vec::new(),
+            robustness: Vec::new(),
         }
     }
 }
@@ -141,6 +145,8 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
         envs.entry(g.env.clone()).or_default().push((g, rs));
     }
 
+    let suites =
+        opts.robustness.iter().map(|d| robustness::SuiteData::read(d)).collect::<Result<Vec<_>>>()?;
     if let Some(x) = externals.iter().find(|x| !envs.contains_key(&x.meta.env)) {
         anyhow::bail!("{}: its env, {}, has no runs in this report", x.dir.display(), x.meta.env);
     }
@@ -167,6 +173,9 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
             if let Some(c) = sections::controller(&mut doc, out, env, env_groups, &rows, opts)? {
                 report.controllers.insert(env.clone(), c);
             }
+        }
+        for suite in suites.iter().filter(|s| s.meta.env.name == *env) {
+            robustness::section(&mut doc, out, suite)?;
         }
         let section = report.controllers.get(env);
         let clips = if opts.videos {

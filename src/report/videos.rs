@@ -232,7 +232,7 @@ fn film_panel(
             let source = policy_at(run, *budget).map_err(|why| anyhow::anyhow!("{}: {why}", run_dir.display()))?;
             let (cfg, agent) = source.load(run_dir, *budget)?;
             let mut policy = AgentPolicy { agent: agent.as_ref(), label: label.clone() };
-            film_episode(&cfg.env, &mut policy, &settings, fps, episode_seed, Some(label), push)
+            film_episode(&cfg.env.for_evaluation(), &mut policy, &settings, fps, episode_seed, Some(label), push)
         }
         Actor::Controller { speed } => {
             // In the learned policy's env, switched to the controller's action mode, as the

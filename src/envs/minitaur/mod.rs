@@ -4,7 +4,7 @@
 //! distance * dx - energy * |tau . qdot| * dt - drift * |dy| - shake * |dz|, falls end episodes.
 pub mod leg_model;
 pub mod motor;
-pub(crate) mod perturb;
+pub mod perturb;
 
 use std::f64::consts::FRAC_PI_2;
 use std::sync::Arc;

@@ -53,7 +53,7 @@ pub const MINITAUR_AXES: &[Axis] = &[
         label: "push along the heading",
         unit: "m/s",
         nominal: 0.0,
-        levels: &[0.5, 1.0, 1.5, 2.5],
+        levels: &[0.5, 1.5, 2.5, 4.0],
         apply: Apply::Push(Frontal),
     },
     Axis {
@@ -61,7 +61,7 @@ pub const MINITAUR_AXES: &[Axis] = &[
         label: "ground friction (scale, low)",
         unit: "x",
         nominal: 1.0,
-        levels: &[0.5, 0.25, 0.1, 0.05],
+        levels: &[0.3, 0.1, 0.03, 0.01],
         apply: Apply::Options(&[("friction_scale", 1.0)]),
     },
     Axis {
@@ -69,7 +69,7 @@ pub const MINITAUR_AXES: &[Axis] = &[
         label: "ground friction (scale, high)",
         unit: "x",
         nominal: 1.0,
-        levels: &[2.0, 4.0, 8.0],
+        levels: &[1.5, 2.0, 4.0, 8.0],
         apply: Apply::Options(&[("friction_scale", 1.0)]),
     },
     Axis {
@@ -85,7 +85,7 @@ pub const MINITAUR_AXES: &[Axis] = &[
         label: "base centre of mass moved forward",
         unit: "m",
         nominal: 0.0,
-        levels: &[0.03, 0.06, 0.1, 0.15],
+        levels: &[0.03, 0.06, 0.12, 0.2],
         apply: Apply::Options(&[("com_shift", 1.0)]),
     },
     Axis {
@@ -101,7 +101,7 @@ pub const MINITAUR_AXES: &[Axis] = &[
         label: "battery voltage",
         unit: "V",
         nominal: 16.0,
-        levels: &[13.0, 10.0, 8.0, 6.0],
+        levels: &[12.0, 9.0, 6.0, 3.0],
         apply: Apply::Options(&[("battery_voltage", 1.0)]),
     },
     Axis {
@@ -109,7 +109,7 @@ pub const MINITAUR_AXES: &[Axis] = &[
         label: "control latency",
         unit: "s",
         nominal: 0.0,
-        levels: &[0.004, 0.01, 0.02, 0.04],
+        levels: &[0.002, 0.004, 0.01, 0.02],
         apply: Apply::Options(&[("latency", 1.0)]),
     },
     Axis {
@@ -117,7 +117,7 @@ pub const MINITAUR_AXES: &[Axis] = &[
         label: "sensor noise (x 0.05 rad, 1 rad/s, 0.05 rad)",
         unit: "x",
         nominal: 0.0,
-        levels: &[0.5, 1.0, 2.0, 4.0],
+        levels: &[0.25, 0.5, 1.0, 2.0, 4.0],
         apply: Apply::Options(NOISE),
     },
     Axis {
@@ -125,7 +125,7 @@ pub const MINITAUR_AXES: &[Axis] = &[
         label: "rough terrain: step height",
         unit: "m",
         nominal: 0.0,
-        levels: &[0.01, 0.02, 0.04, 0.07],
+        levels: &[0.005, 0.01, 0.02, 0.04, 0.07],
         apply: Apply::Options(&[("terrain_step_height", 1.0)]),
     },
     Axis {
@@ -141,7 +141,7 @@ pub const MINITAUR_AXES: &[Axis] = &[
         label: "slope down",
         unit: "deg",
         nominal: 0.0,
-        levels: &[5.0, 10.0, 15.0, 22.0],
+        levels: &[2.5, 5.0, 10.0, 15.0, 22.0],
         apply: Apply::Options(&[("slope", -1.0)]),
     },
 ];

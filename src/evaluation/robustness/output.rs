@@ -44,17 +44,31 @@ pub struct SuiteMeta {
     pub notes: Vec<String>,
 }
 
-/// Plans and plays the suite and writes both files into `dir`; returns the cells.
+/// Plans and plays the suite and writes both files into `dir`; returns the cells. Cells of
+/// `reuse` (an earlier suite's, read with [`reusable`]) with the same contender label, axis and
+/// level are taken instead of played again.
 pub fn run_to_dir(
     suite: &Suite,
     agents: Vec<Contender>,
     choices: &[ControllerChoice],
     dir: &Path,
     command: &str,
+    reuse: &[Cell],
+    reused_from: Option<(String, f64)>,
 ) -> Result<(Vec<Cell>, SuiteMeta)> {
     let start = Instant::now();
-    let p = plan(suite, agents, choices)?;
-    let cells = suite.run(&p.contenders, &p.known)?;
+    let p = plan(suite, agents, choices, reuse)?;
+    let mut known = p.known.clone();
+    known.extend(reuse.iter().cloned());
+    let cells = suite.run(&p.contenders, &known)?;
+    let mut notes = p.notes;
+    if let Some((dir, wall)) = reused_from {
+        let n = cells.iter().filter(|c| reuse.iter().any(|r| r.policy == c.policy && r.axis == c.axis && r.level == c.level)).count();
+        notes.push(format!(
+            "{n} of the {} cells were taken from the earlier suite in {dir}, which took {wall:.0} s; this run's wall time is the rest",
+            cells.len()
+        ));
+    }
     let meta = SuiteMeta {
         command: command.to_string(),
         machine: format!("{} ({})", crate::train::provenance::cpu_model(), crate::train::provenance::simd_level()),
@@ -83,7 +97,7 @@ pub fn run_to_dir(
                 ),
             })
             .collect(),
-        notes: p.notes,
+        notes,
     };
     write_atomic(&dir.join(CSV_FILE), |w| Ok(w.write_all(to_csv(&cells).as_bytes())?))?;
     let text = toml::to_string_pretty(&meta).context("writing the suite's metadata")?;
@@ -100,6 +114,26 @@ pub fn read_dir(dir: &Path) -> Result<(Vec<Cell>, SuiteMeta)> {
     let meta_text =
         std::fs::read_to_string(&meta_path).with_context(|| format!("reading {}", meta_path.display()))?;
     let meta = toml::from_str(&meta_text).with_context(|| format!("{}: not a suite's metadata", meta_path.display()))?;
+    Ok((cells, meta))
+}
+
+/// The cells of the suite in `dir`, to reuse in a suite with the same env, episodes and protocol
+/// seed (anything else is an error naming what differs). The cells are a function of those and
+/// of the contender, so a reused cell is the cell the new suite would play.
+pub fn reusable(dir: &Path, suite: &Suite) -> Result<(Vec<Cell>, SuiteMeta)> {
+    let (cells, meta) = read_dir(dir)?;
+    if meta.env != suite.env || meta.episodes != suite.protocol.episodes || meta.protocol_seed != suite.protocol.seed {
+        anyhow::bail!(
+            "{}: its suite ran {} with {} episodes at protocol seed {}, not {} with {} at seed {}: nothing to reuse",
+            dir.display(),
+            meta.env.name,
+            meta.episodes,
+            meta.protocol_seed,
+            suite.env.name,
+            suite.protocol.episodes,
+            suite.protocol.seed
+        );
+    }
     Ok((cells, meta))
 }
 
@@ -129,7 +163,10 @@ pub fn summary_lines(cells: &[Cell], axes: &[Axis], controller: Option<&str>) ->
                 format!(", survival {:.2} [{:.2}, {:.2}]", s.estimate, s.low, s.high)
             });
             let beyond = if t.beyond_last { ", and beyond the last level" } else { "" };
-            let mut line = format!("  {p:<44} 90% up to {}{survival}{beyond}", fmt_level(t.level, axis));
+            let below = t.first_below.map_or(String::new(), |(l, s)| {
+                format!("; {:.2} [{:.2}, {:.2}] at {l} {}", s.estimate, s.low, s.high, axis.unit)
+            });
+            let mut line = format!("  {p:<44} 90% up to {}{survival}{beyond}{below}", fmt_level(t.level, axis));
             if let Some(ctrl) = controller.filter(|c| c != p) {
                 if let Some((n, s)) = survives_where_controller_falls(cells, p, ctrl, axis) {
                     line.push_str(&format!(

@@ -48,8 +48,9 @@ fn controller(speed: f64, why: &str) -> Contender {
     Contender::Controller { label: format!("controller {speed:.3} m/s ({why})"), speed }
 }
 
-/// Plans the suite for `agents` and the controller `choices`.
-pub fn plan(suite: &Suite, agents: Vec<Contender>, choices: &[ControllerChoice]) -> Result<Plan> {
+/// Plans the suite for `agents` and the controller `choices`; a policy's nominal cell found in
+/// `reuse` is not played again.
+pub fn plan(suite: &Suite, agents: Vec<Contender>, choices: &[ControllerChoice], reuse: &[Cell]) -> Result<Plan> {
     let mut notes = Vec::new();
     let mut known = Vec::new();
     let mut controllers: Vec<Contender> = Vec::new();
@@ -80,7 +81,10 @@ pub fn plan(suite: &Suite, agents: Vec<Contender>, choices: &[ControllerChoice])
             }
             ControllerChoice::Matched => {
                 let nominal: Vec<Cell> = crate::evaluation::parallel::map_in_order(&agents, suite.threads, |a| {
-                    suite.cell(a, None, 0.0)
+                    match reuse.iter().find(|c| c.policy == a.label() && c.axis == super::suite::NOMINAL) {
+                        Some(c) => Ok(c.clone()),
+                        None => suite.cell(a, None, 0.0),
+                    }
                 })?;
                 for (agent, cell) in agents.iter().zip(nominal) {
                     match command_for(&grid, cell.speed) {

@@ -27,6 +27,8 @@ pub struct Threshold {
     pub survival: Option<Interval>,
     /// Whether the last level of the axis was survived too (the axis did not find its limit).
     pub beyond_last: bool,
+    /// The first level below the bar, with its survival: where the contender drops below 90%.
+    pub first_below: Option<(f64, Interval)>,
 }
 
 /// The 90% threshold of `policy` along `axis`.
@@ -34,16 +36,18 @@ pub fn threshold(cells: &[Cell], policy: &str, axis: &Axis) -> Threshold {
     let line = along(cells, policy, axis);
     let levels: Vec<f64> = axis.all_levels();
     let mut reached = None;
+    let mut first_below = None;
     for (cell, level) in line.iter().zip(&levels) {
         let s = cell.survival();
         if s.estimate >= SURVIVAL_BAR {
             reached = Some((*level, s));
         } else {
+            first_below = Some((*level, s));
             break;
         }
     }
     let beyond_last = line.len() == levels.len() && reached.is_some_and(|(l, _)| l == *levels.last().unwrap());
-    Threshold { level: reached.map(|r| r.0), survival: reached.map(|r| r.1), beyond_last }
+    Threshold { level: reached.map(|r| r.0), survival: reached.map(|r| r.1), beyond_last, first_below }
 }
 
 /// P(policy survives | the controller fell), over the paired episodes (same level, same reset
@@ -111,6 +115,7 @@ mod tests {
         assert_eq!(t.level, Some(1.0));
         assert_eq!(t.survival, Some(wilson(9, 10)));
         assert!(!t.beyond_last);
+        assert_eq!(t.first_below, Some((2.0, wilson(5, 10))), "drops below the bar at 2 kg");
         assert_eq!(threshold(&cells, "c", payload).level, Some(0.0));
         // The controller fell in its last 6 episodes at 1 kg ("a" survived 5 of those) and in
         // all 10 at 2, 4 and 6 kg ("a" survived 5, 10 and 0).

@@ -1,0 +1,32 @@
+//! docs/robustness.md's numbers, from the newest dated directory holding a robustness suite
+//! (`cargo bench --bench robustness`): how it was run, who survives the largest perturbation of
+//! each axis at 90%, and the goal check of each policy.
+use std::fmt::Write as _;
+use std::path::Path;
+
+use anyhow::Result;
+
+use super::benchmarks::newest;
+use crate::report::robustness::{goal_lines, provenance, summary_table, SuiteData};
+
+/// The suite's summary as Markdown.
+pub(crate) fn summary(results: &Path, root: &Path) -> Result<String> {
+    let csv = newest(results, crate::evaluation::robustness::output::CSV_FILE)?;
+    let dir = csv.parent().expect("a file in a directory");
+    let suite = SuiteData::read(dir)?;
+    let shown = dir.strip_prefix(root).unwrap_or(dir);
+    let mut out = format!("From `{}/`. {}\n\n", shown.display(), provenance(&suite));
+    let (header, rows) = summary_table(&suite);
+    let _ = writeln!(out, "| {} |\n|{}", header.join(" | "), "---|".repeat(header.len()));
+    for row in rows {
+        let _ = writeln!(out, "| {} |", row.join(" | "));
+    }
+    let goal = goal_lines(&suite);
+    if !goal.is_empty() {
+        out.push_str("\nThe goal (more return than the controller at its best speed, no more falls, at least its 90% level on every axis):\n\n");
+        for line in goal {
+            let _ = writeln!(out, "- {line}");
+        }
+    }
+    Ok(out)
+}

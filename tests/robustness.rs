@@ -1,0 +1,114 @@
+//! The robustness suite through the binary: the same episodes for every contender, a CSV that
+//! reads back, thread-count independence, clear errors, and the report's section from it.
+mod common;
+
+use common::locobench;
+use locobench::evaluation::robustness::output::read_dir;
+
+const PPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/models/policies/minitaur-ppo");
+
+fn suite(out: &std::path::Path, threads: &str) -> (bool, String, String) {
+    let policy = format!("ppo={PPO}");
+    locobench(&[
+        "robustness",
+        "--env",
+        "minitaur",
+        "--policy",
+        &policy,
+        "--controller",
+        "1.0",
+        "--axes",
+        "payload,latency",
+        "--episodes",
+        "2",
+        "--seed",
+        "100",
+        "--threads",
+        threads,
+        "--out",
+        out.to_str().unwrap(),
+    ])
+}
+
+#[test]
+fn a_small_suite_writes_every_cell_the_same_on_any_thread_count() {
+    let dir = tempfile::tempdir().unwrap();
+    let (a, b) = (dir.path().join("a"), dir.path().join("b"));
+    let (ok, out, err) = suite(&a, "1");
+    assert!(ok, "{err}");
+    assert!(out.contains("payload (kg):") && out.contains("90% up to"), "{out}");
+    let (cells, meta) = read_dir(&a).unwrap();
+    // Two contenders x (nominal + 4 payload levels + 4 latency levels).
+    assert_eq!(cells.len(), 2 * 9);
+    assert!(cells.iter().all(|c| c.outcomes.len() == 2));
+    assert_eq!(meta.episodes, 2);
+    assert_eq!(meta.protocol_seed, 100);
+    assert!(meta.command.contains("robustness") && meta.wall_seconds > 0.0);
+    // A heavier payload never helps the controller's survival on the same episodes.
+    let ctrl: Vec<_> = cells.iter().filter(|c| c.kind == "controller" && c.axis == "payload").collect();
+    assert_eq!(ctrl.len(), 4);
+    assert!(ctrl.last().unwrap().survived() <= ctrl.first().unwrap().survived());
+    assert!(suite(&b, "2").0);
+    // The same file, to the last digit (a policy's commanded speed is NaN, so compare text).
+    let text = |d: &std::path::Path| std::fs::read_to_string(d.join("robustness.csv")).unwrap();
+    assert!(text(&a) == text(&b), "thread count changes nothing");
+
+    // The report's section from it: summary, goal, a chart per axis.
+    let report = dir.path().join("report");
+    let (ok, _, err) = locobench(&[
+        "report",
+        "--runs",
+        PPO,
+        "--out",
+        report.to_str().unwrap(),
+        "--episodes",
+        "2",
+        "--push-episodes",
+        "0",
+        "--robustness",
+        a.to_str().unwrap(),
+    ]);
+    assert!(ok, "{err}");
+    let md = std::fs::read_to_string(report.join("README.md")).unwrap();
+    assert!(md.contains("## Robustness suite") && md.contains("furthest at 90%"), "{md}");
+    for axis in ["payload", "latency"] {
+        let svg = std::fs::read_to_string(report.join(format!("minitaur_robustness_{axis}.svg"))).unwrap();
+        assert!(svg.contains("survival") && svg.contains("ppo"));
+    }
+}
+
+#[test]
+fn bad_axes_policies_and_levels_are_clear_errors() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x");
+    let o = out.to_str().unwrap();
+    let (ok, _, err) = locobench(&["robustness", "--axes", "wind", "--out", o]);
+    assert!(!ok && err.contains("unknown robustness axis 'wind'") && err.contains("payload"), "{err}");
+    let (ok, _, err) = locobench(&["robustness", "--policy", PPO, "--out", o]);
+    assert!(!ok && err.contains("LABEL=REFERENCE"), "{err}");
+    let (ok, _, err) = locobench(&["robustness", "--controller", "fast", "--out", o]);
+    assert!(!ok && err.contains("best, matched or a speed"), "{err}");
+    let (ok, _, err) = locobench(&["robustness", "--env", "hopper", "--out", o]);
+    assert!(!ok && err.contains("hopper"), "{err}");
+    let (ok, _, err) = locobench(&["eval", "--policy", PPO, "--episodes", "1", "--option", "payload_mass=-2"]);
+    assert!(!ok && err.contains("payload_mass"), "{err}");
+    let (ok, _, err) = locobench(&["eval", "--policy", PPO, "--episodes", "1", "--option", "terrain_step_height=0.3"]);
+    assert!(!ok && err.contains("terrain_step_height"), "{err}");
+    assert!(!out.exists(), "no output from a refused suite");
+}
+
+#[test]
+fn the_protocol_evaluates_a_policy_trained_under_perturbations_in_the_nominal_world() {
+    use locobench::envs::EnvConfig;
+    let trained = EnvConfig::new("minitaur")
+        .with_overrides(&[
+            ("random_push_max".into(), "0.75".into()),
+            ("terrain_step_height".into(), "0.02".into()),
+            ("drift_weight".into(), "0.5".into()),
+        ])
+        .unwrap();
+    let eval = trained.for_evaluation();
+    assert!(!eval.options.contains_key("random_push_max") && !eval.options.contains_key("terrain_step_height"));
+    assert_eq!(eval.options.get("drift_weight"), trained.options.get("drift_weight"), "the reward stays the run's");
+    assert_eq!(EnvConfig::new("ant").for_evaluation(), EnvConfig::new("ant"));
+}
