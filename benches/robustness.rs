@@ -17,7 +17,7 @@ use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use locobench::envs::EnvConfig;
-use locobench::evaluation::robustness::{output, select, ControllerChoice, Contender, Suite};
+use locobench::evaluation::robustness::{output, select, Contender, ControllerChoice, Suite};
 use locobench::evaluation::Protocol;
 
 fn var(name: &str) -> Option<String> {
@@ -43,21 +43,13 @@ fn main() -> Result<()> {
         "ppo-robust 1M=models/policies/minitaur-ppo-robust",
         "td3 1M=models/policies/minitaur-td3",
     ];
-    let default_policies = rows
-        .into_iter()
-        .filter(|p| root.join(p.split_once('=').unwrap().1).exists())
-        .collect::<Vec<_>>()
-        .join(",");
+    let default_policies =
+        rows.into_iter().filter(|p| root.join(p.split_once('=').unwrap().1).exists()).collect::<Vec<_>>().join(",");
     let policies = var("LOCOBENCH_ROBUSTNESS_POLICIES").unwrap_or(default_policies);
     let items: Vec<String> = policies.split(',').filter(|p| !p.is_empty()).map(String::from).collect();
+    // References stay as given (relative to the crate root, where cargo runs benches), so the
+    // committed files name them the same on every machine.
     let mut agents = Contender::parse_agents(&items)?;
-    for agent in &mut agents {
-        if let Contender::Agent { seeds, .. } = agent {
-            for s in seeds.iter_mut().filter(|s| s.reference.is_relative()) {
-                s.reference = root.join(&s.reference);
-            }
-        }
-    }
     let env = EnvConfig::new("minitaur");
     let (axes, controller, episodes, out) = if smoke {
         agents.truncate(1);

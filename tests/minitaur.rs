@@ -276,7 +276,9 @@ fn latency_delays_each_action_by_whole_physics_steps() {
 
 #[test]
 fn sensor_noise_is_seeded_and_leaves_the_physics_alone() {
-    let noisy = || fixed(MinitaurOptions { noise_angle: 0.05, noise_velocity: 1.0, noise_orientation: 0.05, ..Default::default() });
+    let noisy = || {
+        fixed(MinitaurOptions { noise_angle: 0.05, noise_velocity: 1.0, noise_orientation: 0.05, ..Default::default() })
+    };
     let (mut a, mut b, mut clean) = (noisy(), noisy(), fixed(MinitaurOptions::default()));
     let (oa, _) = a.reset(Some(5)).unwrap();
     let (ob, _) = b.reset(Some(5)).unwrap();

@@ -58,6 +58,8 @@ def test_same_seed_same_trajectory():
         (lambda: gym.make("locobench/Minitaur-v0", no_such_option=1), "no_such_option"),
         (lambda: gym.make("locobench/Minitaur-v0", reward={"speed": 1.0}), "speed"),
         (lambda: gym.make("locobench/Minitaur-v0", max_episode_steps=-3), "max_episode_steps"),
+        (lambda: gym.make("locobench/Minitaur-v0", payload_mass=-1.0), "payload_mass"),
+        (lambda: gym.make("locobench/Minitaur-v0", terrain_step_height=0.5), "terrain_step_height"),
         (lambda: locobench.LocobenchEnv("no-such-env"), "no-such-env"),
         (lambda: locobench.LocobenchEnv("ant", render_mode="depth_array"), "render_mode='depth_array'"),
         (lambda: gym.make("locobench/Ant-v5", render_mode="rgb_array", camera="side"), "unknown camera 'side'"),
@@ -67,6 +69,20 @@ def test_bad_settings_raise_python_errors_naming_the_value(make, message):
     with pytest.raises((ValueError, TypeError, OverflowError)) as e:
         make()
     assert message in str(e.value)
+
+
+def test_perturbations_are_options_and_change_the_world():
+    # The robustness suite's perturbations reach Python envs as keywords: a heavier robot on
+    # slippery ground stands differently from the nominal one under the same actions.
+    def run(**options):
+        env = gym.make("locobench/Minitaur-v0", randomize_dynamics=False, **options)
+        env.reset(seed=3)
+        action = np.zeros(8)
+        return np.stack([env.step(action)[0] for _ in range(50)])
+
+    nominal = run()
+    assert np.array_equal(nominal, run())
+    assert not np.array_equal(nominal, run(payload_mass=2.0, friction_scale=0.3))
 
 
 def test_bad_actions_raise_and_leave_the_episode_intact():

@@ -2,7 +2,7 @@ use std::path::PathBuf;
 
 use anyhow::Result;
 use locobench::envs::EnvConfig;
-use locobench::evaluation::robustness::{output, select, ControllerChoice, Contender, Suite};
+use locobench::evaluation::robustness::{output, select, Contender, ControllerChoice, Suite};
 use locobench::evaluation::{Protocol, DEFAULT_EPISODES};
 
 #[derive(clap::Args, Debug)]

@@ -145,8 +145,7 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
         envs.entry(g.env.clone()).or_default().push((g, rs));
     }
 
-    let suites =
-        opts.robustness.iter().map(|d| robustness::SuiteData::read(d)).collect::<Result<Vec<_>>>()?;
+    let suites = opts.robustness.iter().map(|d| robustness::SuiteData::read(d)).collect::<Result<Vec<_>>>()?;
     if let Some(x) = externals.iter().find(|x| !envs.contains_key(&x.meta.env)) {
         anyhow::bail!("{}: its env, {}, has no runs in this report", x.dir.display(), x.meta.env);
     }

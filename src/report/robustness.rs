@@ -28,7 +28,8 @@ impl SuiteData {
     /// Reads `dir` (robustness.csv and robustness.toml).
     pub fn read(dir: &Path) -> Result<SuiteData> {
         let (cells, meta) = read_dir(dir)?;
-        let axes = axes_of(&meta.env.name)?.iter().filter(|a| cells.iter().any(|c| c.axis == a.name)).copied().collect();
+        let axes =
+            axes_of(&meta.env.name)?.iter().filter(|a| cells.iter().any(|c| c.axis == a.name)).copied().collect();
         Ok(SuiteData { cells, meta, axes })
     }
 
@@ -149,7 +150,11 @@ pub fn goal_lines(s: &SuiteData) -> Vec<String> {
                 ctrl.outcomes.len()
             ));
         }
-        for axis in &s.axes {
+        let below_nominal = s.axes.first().is_some_and(|a| reach(s, p, a) < 0);
+        if below_nominal {
+            misses.push("it survives less than 90% of the nominal episodes, so it is short of the controller on every axis".into());
+        }
+        for axis in s.axes.iter().filter(|_| !below_nominal) {
             let (mine, theirs) = (reach(s, p, axis), reach(s, best, axis));
             if mine < theirs {
                 let levels = axis.all_levels();

@@ -247,7 +247,8 @@ impl Minitaur {
     }
 
     fn nominal_motor(o: &MinitaurOptions) -> MotorParams {
-        let mut p = MotorParams { kp: o.motor_kp, kd: o.motor_kd, strength: o.motor_strength, ..MotorParams::default() };
+        let mut p =
+            MotorParams { kp: o.motor_kp, kd: o.motor_kd, strength: o.motor_strength, ..MotorParams::default() };
         if o.battery_voltage > 0.0 {
             p.voltage = o.battery_voltage;
         }

@@ -99,9 +99,11 @@ pub(crate) fn model_xml(base: &str, o: &MinitaurOptions) -> String {
     );
     let foot = "<default class=\"foot\">\n      <geom ";
     assert!(base.contains(foot), "the Minitaur model has a foot class");
-    base.replacen("<asset>", &asset, 1)
-        .replacen("<body name=\"base\"", &geom, 1)
-        .replacen(foot, &format!("{foot}contype=\"3\" "), 1)
+    base.replacen("<asset>", &asset, 1).replacen("<body name=\"base\"", &geom, 1).replacen(
+        foot,
+        &format!("{foot}contype=\"3\" "),
+        1,
+    )
 }
 
 /// The terrain of one episode: each tile's height as a fraction of the step height.
@@ -122,7 +124,7 @@ impl Terrain {
     fn tile_of(x: f64, y: f64) -> Option<(usize, usize)> {
         let (rows, cols) = Self::tiles();
         let (c, r) = ((x - TERRAIN_X[0]) / TILE, (y + TERRAIN_HALF_Y) / TILE);
-        (c >= 0.0 && r >= 0.0 && (c as usize) < cols && (r as usize) < rows).then(|| (r as usize, c as usize))
+        (c >= 0.0 && r >= 0.0 && (c as usize) < cols && (r as usize) < rows).then_some((r as usize, c as usize))
     }
 
     /// Draws every tile's height, U(0, 1), flat near the start.
@@ -336,8 +338,7 @@ mod tests {
                 acting.push(d.acting(step * 5 + j).copied());
             }
         }
-        let expect: Vec<Option<usize>> =
-            (0..20).map(|t: usize| t.checked_sub(7).map(|u| u / 5)).collect();
+        let expect: Vec<Option<usize>> = (0..20).map(|t: usize| t.checked_sub(7).map(|u| u / 5)).collect();
         assert_eq!(acting, expect);
         let mut none = Delay::new(0, 5);
         none.send(0, 'a');

@@ -217,8 +217,7 @@ impl Axis {
                 for (key, factor) in options {
                     cfg.options.insert(key.to_string(), toml::Value::Float(level * factor));
                 }
-                crate::envs::make(&cfg)
-                    .map_err(|e| anyhow::anyhow!("axis {} at level {level}: {e}", self.name))?;
+                crate::envs::make(&cfg).map_err(|e| anyhow::anyhow!("axis {} at level {level}: {e}", self.name))?;
                 Ok((cfg, None))
             }
         }

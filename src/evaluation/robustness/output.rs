@@ -63,7 +63,10 @@ pub fn run_to_dir(
     let cells = suite.run(&p.contenders, &known)?;
     let mut notes = p.notes;
     if let Some((dir, wall)) = reused_from {
-        let n = cells.iter().filter(|c| reuse.iter().any(|r| r.policy == c.policy && r.axis == c.axis && r.level == c.level)).count();
+        let n = cells
+            .iter()
+            .filter(|c| reuse.iter().any(|r| r.policy == c.policy && r.axis == c.axis && r.level == c.level))
+            .count();
         notes.push(format!(
             "{n} of the {} cells were taken from the earlier suite in {dir}, which took {wall:.0} s; this run's wall time is the rest",
             cells.len()
@@ -111,9 +114,9 @@ pub fn read_dir(dir: &Path) -> Result<(Vec<Cell>, SuiteMeta)> {
     let text = std::fs::read_to_string(&csv).with_context(|| format!("reading {}", csv.display()))?;
     let cells = super::suite::from_csv(&text, &csv.display().to_string())?;
     let meta_path = dir.join(META_FILE);
-    let meta_text =
-        std::fs::read_to_string(&meta_path).with_context(|| format!("reading {}", meta_path.display()))?;
-    let meta = toml::from_str(&meta_text).with_context(|| format!("{}: not a suite's metadata", meta_path.display()))?;
+    let meta_text = std::fs::read_to_string(&meta_path).with_context(|| format!("reading {}", meta_path.display()))?;
+    let meta =
+        toml::from_str(&meta_text).with_context(|| format!("{}: not a suite's metadata", meta_path.display()))?;
     Ok((cells, meta))
 }
 
@@ -159,9 +162,9 @@ pub fn summary_lines(cells: &[Cell], axes: &[Axis], controller: Option<&str>) ->
         out.push(format!("{} ({}):", axis.name, axis.unit));
         for p in &policies {
             let t = threshold(cells, p, axis);
-            let survival = t.survival.map_or(String::new(), |s| {
-                format!(", survival {:.2} [{:.2}, {:.2}]", s.estimate, s.low, s.high)
-            });
+            let survival = t
+                .survival
+                .map_or(String::new(), |s| format!(", survival {:.2} [{:.2}, {:.2}]", s.estimate, s.low, s.high));
             let beyond = if t.beyond_last { ", and beyond the last level" } else { "" };
             let below = t.first_below.map_or(String::new(), |(l, s)| {
                 format!("; {:.2} [{:.2}, {:.2}] at {l} {}", s.estimate, s.low, s.high, axis.unit)

@@ -377,7 +377,10 @@ mod tests {
         let a = |r: &str, b| PolicySource { reference: PathBuf::from(r), budget: b };
         assert_eq!(
             c[0],
-            Contender::Agent { label: "ppo".into(), seeds: vec![a("runs/a", Some(1_000_000)), a("runs/b", Some(1_000_000))] }
+            Contender::Agent {
+                label: "ppo".into(),
+                seeds: vec![a("runs/a", Some(1_000_000)), a("runs/b", Some(1_000_000))]
+            }
         );
         assert_eq!(c[1], Contender::Agent { label: "x".into(), seeds: vec![a("models/p", None)] });
         for bad in ["models/p", "=models/p", "a,b=models/p", "x=runs/a@ten"] {
@@ -387,12 +390,8 @@ mod tests {
 
     #[test]
     fn a_policy_from_another_env_is_refused() {
-        let suite = Suite {
-            env: EnvConfig::new("ant"),
-            axes: vec![],
-            protocol: Protocol { episodes: 1, seed: 0 },
-            threads: 1,
-        };
+        let suite =
+            Suite { env: EnvConfig::new("ant"), axes: vec![], protocol: Protocol { episodes: 1, seed: 0 }, threads: 1 };
         let policy = Contender::Agent {
             label: "ppo".into(),
             seeds: vec![PolicySource {
