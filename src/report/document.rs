@@ -23,6 +23,9 @@ pub enum Block {
     },
     /// Lines shown as a list.
     Lines(Vec<String>),
+    /// A chart written beside the page and shown from its file (`<img>`), so a page with many
+    /// charts stays light.
+    Image { file: String, caption: String },
     /// A video: the HTML page plays `video` (with `poster`, if any, shown before it plays); the
     /// Markdown page shows the GIF `gif` and links the video. `timing`: the episode's length (s)
     /// and the video's frames per second, kept on the page for checks.
@@ -71,6 +74,11 @@ impl Document {
         self.blocks.push(Block::Figure { file: file.into(), svg, caption: caption.into(), inline: true });
     }
 
+    /// A chart written beside the page, shown from its file rather than embedded.
+    pub(crate) fn image(&mut self, file: impl Into<String>, caption: impl Into<String>) {
+        self.blocks.push(Block::Image { file: file.into(), caption: caption.into() });
+    }
+
     /// A chart written beside the page and linked from it, not embedded.
     pub(crate) fn linked_figure(&mut self, file: impl Into<String>, caption: impl Into<String>) {
         self.blocks.push(Block::Figure {
@@ -108,7 +116,7 @@ impl Document {
                 Block::Paragraph(text) => {
                     let _ = writeln!(md, "{text}\n");
                 }
-                Block::Figure { file, caption, .. } => {
+                Block::Figure { file, caption, .. } | Block::Image { file, caption } => {
                     let _ = writeln!(md, "![{caption}]({file})\n");
                 }
                 Block::Table { header, rows } => {
@@ -144,6 +152,15 @@ impl Document {
                 }
                 Block::Figure { svg, caption, inline: true, .. } => {
                     let _ = writeln!(body, "<figure>{svg}<figcaption>{}</figcaption></figure>", escape(caption));
+                }
+                Block::Image { file, caption } => {
+                    let _ = writeln!(
+                        body,
+                        "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>",
+                        escape(file),
+                        escape(caption),
+                        escape(caption)
+                    );
                 }
                 Block::Figure { file, caption, inline: false, .. } => {
                     let _ = writeln!(body, "<p><a href=\"{}\">{}</a></p>", escape(file), escape(caption));

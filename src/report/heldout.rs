@@ -116,10 +116,13 @@ impl BudgetRow {
                 protocol.episodes,
                 protocol.seed
             );
-            if x.meta.options != ours {
-                let differs: Vec<String> = x
-                    .meta
-                    .options
+            // Resolved through today's registry: an options table written before an option
+            // existed means that option's default.
+            let theirs = EnvConfig { name: env.name.clone(), options: x.meta.options.clone() }
+                .resolved_options()
+                .with_context(|| format!("{}: its env options", x.dir.display()))?;
+            if theirs != ours {
+                let differs: Vec<String> = theirs
                     .iter()
                     .filter(|(k, v)| ours.get(*k) != Some(*v))
                     .map(|(k, v)| {

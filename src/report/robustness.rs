@@ -152,7 +152,10 @@ pub fn goal_lines(s: &SuiteData) -> Vec<String> {
         }
         let below_nominal = s.axes.first().is_some_and(|a| reach(s, p, a) < 0);
         if below_nominal {
-            misses.push("it survives less than 90% of the nominal episodes, so it is short of the controller on every axis".into());
+            misses.push(
+                "it survives less than 90% of the nominal episodes, so it is short of the controller on every axis"
+                    .into(),
+            );
         }
         for axis in s.axes.iter().filter(|_| !below_nominal) {
             let (mine, theirs) = (reach(s, p, axis), reach(s, best, axis));
@@ -280,7 +283,7 @@ pub(crate) fn section(doc: &mut Document, out: &Path, s: &SuiteData) -> Result<(
         let file = format!("{env}_robustness_{}.svg", axis.name);
         let svg = chart(s, axis)?;
         crate::io::write_bytes_atomic(&out.join(&file), svg.as_bytes())?;
-        doc.figure(file, svg, format!("Survival against {} with 95% Wilson bands.", axis.label));
+        doc.image(file, format!("Survival against {} with 95% Wilson bands.", axis.label));
         let (header, rows) = axis_table(s, axis);
         doc.table(&header.iter().map(String::as_str).collect::<Vec<_>>(), rows);
     }
