@@ -25,7 +25,10 @@ pub enum Block {
     Lines(Vec<String>),
     /// A chart written beside the page and shown from its file (`<img>`), so a page with many
     /// charts stays light.
-    Image { file: String, caption: String },
+    Image {
+        file: String,
+        caption: String,
+    },
     /// A video: the HTML page plays `video` (with `poster`, if any, shown before it plays); the
     /// Markdown page shows the GIF `gif` and links the video. `timing`: the episode's length (s)
     /// and the video's frames per second, kept on the page for checks.
