@@ -42,7 +42,7 @@ fn duration(ns: f64) -> String {
 
 /// How a generated section names its source: the newest file of that name in the dated result
 /// directories (the file's own comment line names machine and commit; docs carry no dates).
-fn source(path: &Path) -> String {
+pub(super) fn source(path: &Path) -> String {
     let file = path.file_name().map_or(String::new(), |f| f.to_string_lossy().to_string());
     format!("the newest benches/results/<date>-<machine>/{file}")
 }

@@ -84,7 +84,7 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
         Section {
             file: "docs/robustness.md",
             name: "robustness",
-            text: robustness::summary(&root.join(BENCH_RESULTS_DIR), root)?,
+            text: robustness::summary(&root.join(BENCH_RESULTS_DIR))?,
         },
         Section {
             file: "docs/python.md",

@@ -6,16 +6,14 @@ use std::path::Path;
 
 use anyhow::Result;
 
-use super::benchmarks::newest;
+use super::benchmarks::{newest, source};
 use crate::report::robustness::{goal_lines, provenance, summary_table, SuiteData};
 
 /// The suite's summary as Markdown.
-pub(crate) fn summary(results: &Path, root: &Path) -> Result<String> {
+pub(crate) fn summary(results: &Path) -> Result<String> {
     let csv = newest(results, crate::evaluation::robustness::output::CSV_FILE)?;
-    let dir = csv.parent().expect("a file in a directory");
-    let suite = SuiteData::read(dir)?;
-    let shown = dir.strip_prefix(root).unwrap_or(dir);
-    let mut out = format!("From `{}/`. {}\n\n", shown.display(), provenance(&suite));
+    let suite = SuiteData::read(csv.parent().expect("a file in a directory"))?;
+    let mut out = format!("From {}. {}\n\n", source(&csv), provenance(&suite));
     let (header, rows) = summary_table(&suite);
     let _ = writeln!(out, "| {} |\n|{}", header.join(" | "), "---|".repeat(header.len()));
     for row in rows {
