@@ -454,8 +454,8 @@ fn device_commands_compare_the_paths_and_refuse_what_they_cannot_do() {
     let (ok, out, err) = locobench(&["device", "check"]);
     assert!(ok, "{err}");
     let rows: Vec<&str> = out.lines().skip(1).collect();
-    assert_eq!(rows.len(), 4, "{out}");
-    for (row, algo) in rows.iter().zip(["td3", "ddpg", "sac", "crossq"]) {
+    assert_eq!(rows.len(), 6, "{out}");
+    for (row, algo) in rows.iter().zip(["td3", "ddpg", "sac", "crossq", "dqn", "ppo"]) {
         assert!(row.starts_with(&format!("{algo},cpu,100,")) && row.ends_with(",true"), "{row}");
     }
     let (ok, out, err) = locobench(&[
@@ -477,8 +477,10 @@ fn device_commands_compare_the_paths_and_refuse_what_they_cannot_do() {
 
     let (ok, _, err) = locobench(&["device", "speed", "--algo", "sac", "--path", "fused", "--device", "cuda"]);
     assert!(!ok && err.contains("fused path runs on the CPU only"), "{err}");
-    let (ok, _, err) = locobench(&["device", "speed", "--algo", "ppo", "--seconds", "0.1"]);
-    assert!(!ok && err.contains("no device-generic path"), "{err}");
+    let (ok, out, err) =
+        locobench(&["device", "speed", "--algo", "ppo", "--hidden", "8,8", "--batch", "512", "--seconds", "0.1"]);
+    assert!(ok, "{err}");
+    assert!(out.starts_with("ppo,cpu,generic,8-8,,512,") && out.trim_end().ends_with(",epochs"), "{out}");
     if !cfg!(feature = "cuda") {
         let dir = tempfile::tempdir().unwrap();
         let out_dir = dir.path().join("run");
@@ -497,5 +499,22 @@ fn device_commands_compare_the_paths_and_refuse_what_they_cannot_do() {
         assert!(!out_dir.exists(), "a refused run left {}", out_dir.display());
         let (ok, _, err) = locobench(&["train", "--env", "inverted-pendulum", "--algo", "td3", "--device", "tpu"]);
         assert!(!ok && err.contains("unknown device 'tpu'"), "{err}");
+        // the on-policy trainer refuses it the same way, before making the run directory
+        let (ok, _, err) = locobench(&[
+            "train",
+            "--env",
+            "inverted-pendulum",
+            "--algo",
+            "ppo",
+            "--device",
+            "cuda",
+            "--out",
+            out_dir.to_str().unwrap(),
+        ]);
+        assert!(!ok && err.contains("without the `cuda` feature"), "{err}");
+        assert!(!out_dir.exists(), "a refused run left {}", out_dir.display());
+        let (ok, _, err) =
+            locobench(&["eval", "--policy", "models/policies/minitaur-td3", "--episodes", "1", "--device", "cuda:0"]);
+        assert!(!ok && err.contains("--device cuda:0") && err.contains("without the `cuda` feature"), "{err}");
     }
 }

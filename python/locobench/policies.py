@@ -59,8 +59,8 @@ def make_controller_env(name, **options):
 class TrainedPolicy:
     """A trained actor acting deterministically; ``predict`` follows SB3."""
 
-    def __init__(self, path, budget=None):
-        self._core = _core.TrainedPolicy(os.fspath(path), budget)
+    def __init__(self, path, budget=None, device="cpu"):
+        self._core = _core.TrainedPolicy(os.fspath(path), budget, device)
         self.env_name = self._core.env
 
     def make_env(self, **options):
@@ -78,12 +78,14 @@ class TrainedPolicy:
         return np.asarray(self._core.act(obs.ravel().tolist()), dtype=np.float32), state
 
 
-def load_policy(path, budget=None):
-    """A trained policy, as ``locobench eval --policy PATH [--budget N]`` reads it.
+def load_policy(path, budget=None, device="cpu"):
+    """A trained policy, as ``locobench eval --policy PATH [--budget N] [--device D]`` reads it.
 
     ``path``: a run directory (its newest checkpoint, or for a committed result run such as
     ``benches/results/minitaur/ppo-8envs-seed0-2m`` its newest budget policy), a checkpoint
     directory, a budget policy file (``RUN/policies/step-N.safetensors``) or an exported policy.
     ``budget``: with a run directory, the actor the run saved at that step.
+    ``device``: where the networks run, ``"cpu"`` (the exact path) or ``"cuda"`` / ``"cuda:N"``
+    (a build with the ``cuda`` feature; see docs/gpu.md). Anything else is a ``ValueError``.
     """
-    return TrainedPolicy(path, budget)
+    return TrainedPolicy(path, budget, device)

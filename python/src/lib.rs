@@ -316,13 +316,14 @@ struct PyTrainedPolicy {
 #[pymethods]
 impl PyTrainedPolicy {
     #[new]
-    #[pyo3(signature = (path, budget=None))]
-    fn new(path: PathBuf, budget: Option<u64>) -> PyResult<Self> {
+    #[pyo3(signature = (path, budget=None, device="cpu"))]
+    fn new(path: PathBuf, budget: Option<u64>, device: &str) -> PyResult<Self> {
         if !path.exists() {
             return Err(PyFileNotFoundError::new_err(format!("{}: no such file or directory", path.display())));
         }
+        let device: locobench::device::ComputeDevice = device.parse().map_err(value_error)?;
         let (run, agent) =
-            locobench::train::resolve_policy(&path, budget).and_then(|p| p.load()).map_err(runtime_error)?;
+            locobench::train::resolve_policy(&path, budget).and_then(|p| p.load_on(device)).map_err(runtime_error)?;
         let env = make(&run.env).map_err(value_error)?;
         let spec = env.spec();
         Ok(PyTrainedPolicy {
@@ -622,6 +623,7 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyEnv>()?;
     m.add_class::<PyVecEnv>()?;
     m.add_function(wrap_pyfunction!(episode_seed, m)?)?;
+    m.add("CUDA_BUILT", locobench::device::ComputeDevice::CUDA_BUILT)?;
     m.add_class::<PyController>()?;
     m.add_class::<PyTrainedPolicy>()?;
     m.add_class::<PyRenderer>()?;

@@ -201,6 +201,20 @@ def test_missing_or_corrupt_policy_files_raise(tmp_path):
         locobench.load_policy(bad)
 
 
+def test_policy_device_is_checked():
+    source = ROOT / "models/policies/minitaur-td3"
+    with pytest.raises(ValueError, match="unknown device 'tpu'"):
+        locobench.load_policy(source, device="tpu")
+    if not locobench._core.CUDA_BUILT:
+        with pytest.raises(RuntimeError, match="without the `cuda` feature"):
+            locobench.load_policy(source, device="cuda")
+    # on the CPU, the same policy as without the argument
+    obs = [0.1] * len(locobench.load_policy(source).make_env().observation_space.low)
+    a, _ = locobench.load_policy(source, device="cpu").predict(obs)
+    b, _ = locobench.load_policy(source).predict(obs)
+    assert (a == b).all()
+
+
 # Same model, same start, same actions; MuJoCo 4.0 (PyPI) there, Debian's 2.2.2 here. Rounding
 # differences between the engines grow along a trajectory (HalfCheetah's from 1e-15 at the first
 # step to 1e-10 by step 40), so each is compared over its first steps.

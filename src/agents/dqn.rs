@@ -30,9 +30,7 @@ pub struct BranchingDqnAgent {
     levels: usize,
     gamma: f64,
     tau: f64,
-    epsilon_start: f64,
-    epsilon_end: f64,
-    exploration_steps: u64,
+    schedule: EpsilonSchedule,
     /// Shared torso and every head in one network: output `1 + branches * levels` (V, then each
     /// branch's advantages).
     q: Mlp,
@@ -40,6 +38,49 @@ pub struct BranchingDqnAgent {
     opt: Adam,
     updates: u64,
     explore_steps: u64,
+}
+
+/// Epsilon decaying linearly from `start` to `end` over `steps` exploratory actions, then staying.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct EpsilonSchedule {
+    pub start: f64,
+    pub end: f64,
+    pub steps: u64,
+}
+
+impl EpsilonSchedule {
+    pub fn new(s: &DqnConfig) -> EpsilonSchedule {
+        EpsilonSchedule { start: s.epsilon_start, end: s.epsilon_end, steps: s.exploration_steps }
+    }
+
+    /// The exploration rate after `steps` exploratory actions.
+    pub fn at(&self, steps: u64) -> f64 {
+        if steps >= self.steps {
+            return self.end;
+        }
+        let frac = steps as f64 / self.steps as f64;
+        self.start + frac * (self.end - self.start)
+    }
+}
+
+/// Each branch's best level as its normalised action value (the first of equal ones), from a
+/// `branches x levels` table of Q-values.
+pub(crate) fn greedy_levels(q: &[f32], levels: usize) -> Vec<f32> {
+    q.chunks(levels)
+        .map(|row| {
+            let k = row.iter().enumerate().fold(0, |best, (i, &v)| if v > row[best] { i } else { best });
+            level_value(k, levels)
+        })
+        .collect()
+}
+
+/// Epsilon-greedy per branch: each greedy value is replaced by a random level with probability
+/// `epsilon` (two draws from `rng` where it is, one where it is not).
+pub(crate) fn epsilon_greedy(greedy: Vec<f32>, epsilon: f64, levels: usize, rng: &mut ChaCha8Rng) -> Vec<f32> {
+    greedy
+        .into_iter()
+        .map(|g| if rng.random::<f64>() < epsilon { level_value(rng.random_range(0..levels), levels) } else { g })
+        .collect()
 }
 
 /// The normalised action value of level `k` of `levels`.
@@ -69,9 +110,7 @@ impl BranchingDqnAgent {
             levels: s.levels,
             gamma: cfg.gamma,
             tau: cfg.tau,
-            epsilon_start: s.epsilon_start,
-            epsilon_end: s.epsilon_end,
-            exploration_steps: s.exploration_steps,
+            schedule: EpsilonSchedule::new(s),
             opt: Adam::new(q.params(), cfg.critic_lr),
             q,
             target,
@@ -97,11 +136,7 @@ impl BranchingDqnAgent {
 
     /// The exploration rate after `steps` exploratory actions.
     pub fn epsilon(&self, steps: u64) -> f64 {
-        if steps >= self.exploration_steps {
-            return self.epsilon_end;
-        }
-        let frac = steps as f64 / self.exploration_steps as f64;
-        self.epsilon_start + frac * (self.epsilon_end - self.epsilon_start)
+        self.schedule.at(steps)
     }
 
     /// The TD targets of a batch, one per row.
@@ -118,13 +153,7 @@ impl BranchingDqnAgent {
     }
 
     fn greedy(&self, obs: &[f32]) -> Result<Vec<f32>> {
-        let q = self.q_table(obs)?;
-        Ok(q.chunks(self.levels)
-            .map(|row| {
-                let k = row.iter().enumerate().fold(0, |best, (i, &v)| if v > row[best] { i } else { best });
-                level_value(k, self.levels)
-            })
-            .collect())
+        Ok(greedy_levels(&self.q_table(obs)?, self.levels))
     }
 }
 
@@ -140,17 +169,7 @@ impl Agent for BranchingDqnAgent {
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
         let epsilon = self.epsilon(self.explore_steps);
         self.explore_steps += 1;
-        let greedy = self.greedy(obs)?;
-        Ok(greedy
-            .into_iter()
-            .map(|g| {
-                if rng.random::<f64>() < epsilon {
-                    level_value(rng.random_range(0..self.levels), self.levels)
-                } else {
-                    g
-                }
-            })
-            .collect())
+        Ok(epsilon_greedy(self.greedy(obs)?, epsilon, self.levels, rng))
     }
 
     fn parameters(&self) -> Vec<(String, Var)> {
@@ -320,7 +339,7 @@ mod tests {
     #[test]
     fn epsilon_decays_linearly_then_stays() {
         let a = agent(3);
-        let (start, end, steps) = (a.epsilon_start, a.epsilon_end, a.exploration_steps);
+        let (start, end, steps) = (a.schedule.start, a.schedule.end, a.schedule.steps);
         assert_eq!(a.epsilon(0), start);
         assert!((a.epsilon(steps / 2) - (start + end) / 2.0).abs() < 1e-9);
         assert_eq!(a.epsilon(steps), end);

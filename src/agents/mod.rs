@@ -88,11 +88,75 @@ pub trait OffPolicyAgent: Agent {
     }
 }
 
+/// An on-policy learner (PPO): it samples a rollout with `policy_step` and learns from its
+/// minibatches. Observations reach it raw; it keeps the statistics that normalise them.
+pub trait OnPolicyAgent: Agent {
+    /// Folds raw observations (in order) into the observation statistics.
+    fn observe(&mut self, raw: &[Vec<f64>]) -> Result<()>;
+    /// Raw observations as the networks see them (`n x obs_dim`, f32).
+    fn normalize(&self, raw: &[Vec<f64>]) -> Result<Vec<f32>>;
+    /// Samples an action for each normalised observation, with its log-probability and value.
+    fn policy_step(&self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<ppo::PolicyStep>;
+    /// The value of each normalised observation.
+    fn values(&self, obs: &[f32]) -> Result<Vec<f32>>;
+    /// Sets the learning rates to `fraction` of their configured values (annealing).
+    fn anneal(&mut self, fraction: f64);
+    /// One gradient step on a minibatch.
+    fn learn(&mut self, batch: &ppo::PpoBatch) -> Result<ppo::PpoLosses>;
+}
+
 /// Builds the agent a config asks for, initialised from `rng`: any algorithm, to act with.
 pub fn make_agent(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
     match registry::entry(cfg.algo).build {
         registry::Build::OffPolicy(_) => Ok(make_learner(cfg, obs_dim, act_dim, rng)?),
-        registry::Build::OnPolicy(build) => build(cfg, obs_dim, act_dim, rng),
+        registry::Build::OnPolicy(build) => Ok(build(cfg, obs_dim, act_dim, rng)?),
+    }
+}
+
+/// [`make_agent`] on `device`: the fused agent on the CPU, the device-generic one elsewhere.
+pub fn make_agent_on(
+    cfg: &TrainConfig,
+    obs_dim: usize,
+    act_dim: usize,
+    rng: &mut ChaCha8Rng,
+    device: crate::device::ComputeDevice,
+) -> anyhow::Result<Box<dyn Agent>> {
+    if device == crate::device::ComputeDevice::Cpu {
+        return Ok(make_agent(cfg, obs_dim, act_dim, rng)?);
+    }
+    Ok(match registry::entry(cfg.algo).build {
+        registry::Build::OffPolicy(_) => make_learner_on(cfg, obs_dim, act_dim, rng, device)?,
+        registry::Build::OnPolicy(_) => make_on_policy_on(cfg, obs_dim, act_dim, rng, device)?,
+    })
+}
+
+/// Builds the on-policy learner a config asks for on `device`: the fused agent on the CPU, the
+/// device-generic one ([`generic`]) elsewhere, from the same initial weights. An off-policy
+/// algorithm is an error.
+pub fn make_on_policy_on(
+    cfg: &TrainConfig,
+    obs_dim: usize,
+    act_dim: usize,
+    rng: &mut ChaCha8Rng,
+    device: crate::device::ComputeDevice,
+) -> anyhow::Result<Box<dyn OnPolicyAgent>> {
+    let registry::Build::OnPolicy(build) = registry::entry(cfg.algo).build else {
+        anyhow::bail!("{} learns from replay minibatches, not from its own rollouts", cfg.algo.name());
+    };
+    if device == crate::device::ComputeDevice::Cpu {
+        return Ok(build(cfg, obs_dim, act_dim, rng)?);
+    }
+    let what = generic::memory::describe(cfg, &device.to_string());
+    let agent = generic::make_generic_on_policy(cfg, obs_dim, act_dim, rng, &device.open()?)
+        .map_err(|e| explained(e, &what))?;
+    Ok(Box::new(generic::memory::Explained { inner: agent, what }))
+}
+
+/// `e`, with a device's out-of-memory error explained (see [`generic::memory::explain`]).
+fn explained(e: anyhow::Error, what: &str) -> anyhow::Error {
+    match e.downcast::<candle_core::Error>() {
+        Ok(e) => anyhow::Error::new(generic::memory::explain(e, what)),
+        Err(e) => e,
     }
 }
 
@@ -128,12 +192,7 @@ pub fn make_learner_on(
     }
     let what = generic::memory::describe(cfg, &device.to_string());
     let agent =
-        generic::make_generic_agent(cfg, obs_dim, act_dim, rng, &device.open()?).map_err(|e| match e
-            .downcast::<candle_core::Error>()
-        {
-            Ok(e) => anyhow::Error::new(generic::memory::explain(e, &what)),
-            Err(e) => e,
-        })?;
+        generic::make_generic_agent(cfg, obs_dim, act_dim, rng, &device.open()?).map_err(|e| explained(e, &what))?;
     let agent: Box<dyn OffPolicyAgent> = Box::new(generic::memory::Explained { inner: agent, what });
     Ok(if cfg.normalize_observations { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
 }

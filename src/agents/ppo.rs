@@ -19,7 +19,7 @@ use rand_distr::StandardNormal;
 
 use super::config::{positive, Algo, TrainConfig, WeightInit};
 use super::nets::{batch_tensor, orthogonal, DenseStack};
-use super::{layer_sizes, Agent};
+use super::{layer_sizes, Agent, OnPolicyAgent};
 use crate::numeric::dense::dense;
 use crate::numeric::inplace::Activation;
 use crate::numeric::optim::{Adam, Optimizer};
@@ -141,15 +141,129 @@ pub struct PpoAgent {
     actor: TanhMlp,
     log_std: Var,
     critic: TanhMlp,
-    /// Running mean, variance and count of the raw observations (f64, as gymnasium keeps them).
-    obs_mean: Var,
-    obs_var: Var,
-    obs_count: Var,
+    obs_stats: ObsStats,
     actor_opt: Adam,
     critic_opt: Adam,
     base_actor_lr: f64,
     base_critic_lr: f64,
-    normalize_observations: bool,
+}
+
+/// The policy's observation statistics: the running mean, variance and count of the raw
+/// observations (f64 on the CPU, as gymnasium keeps them), saved with the policy and used when it
+/// acts. Both PPO paths keep them on the host.
+pub(crate) struct ObsStats {
+    pub mean: Var,
+    pub var: Var,
+    pub count: Var,
+    enabled: bool,
+    clip: f64,
+}
+
+impl ObsStats {
+    /// gymnasium's `RunningMeanStd` prior: mean 0, variance 1, count 1e-4.
+    fn new(obs_dim: usize, enabled: bool, clip: f64) -> Result<ObsStats> {
+        let f64_var =
+            |values: Vec<f64>| Var::from_tensor(&Tensor::from_vec(values.clone(), values.len(), &Device::Cpu)?);
+        let prior = RunningMeanStd::new(obs_dim);
+        Ok(ObsStats {
+            mean: f64_var(prior.mean)?,
+            var: f64_var(prior.var)?,
+            count: f64_var(vec![prior.count])?,
+            enabled,
+            clip,
+        })
+    }
+
+    /// The statistics named `actor.obs_mean`, `actor.obs_var`, `actor.obs_count` in `params`
+    /// (copies, on the CPU).
+    pub fn from_named(params: &[(String, Var)], enabled: bool, clip: f64) -> Result<ObsStats> {
+        let get = |name: &str| -> Result<Var> {
+            let (_, v) = params
+                .iter()
+                .find(|(n, _)| n == name)
+                .ok_or_else(|| candle_core::Error::Msg(format!("no parameter {name}")))?;
+            Var::from_tensor(&v.as_tensor().copy()?)
+        };
+        Ok(ObsStats {
+            mean: get("actor.obs_mean")?,
+            var: get("actor.obs_var")?,
+            count: get("actor.obs_count")?,
+            enabled,
+            clip,
+        })
+    }
+
+    pub fn named_vars(&self) -> Vec<(String, Var)> {
+        vec![
+            ("actor.obs_mean".into(), self.mean.clone()),
+            ("actor.obs_var".into(), self.var.clone()),
+            ("actor.obs_count".into(), self.count.clone()),
+        ]
+    }
+
+    /// Folds a batch of raw observations (in order) into the statistics.
+    pub fn observe(&mut self, raw: &[Vec<f64>]) -> Result<()> {
+        if !self.enabled || raw.is_empty() {
+            return Ok(());
+        }
+        let mut stats = RunningMeanStd {
+            mean: self.mean.as_tensor().to_vec1::<f64>()?,
+            var: self.var.as_tensor().to_vec1::<f64>()?,
+            count: self.count.as_tensor().to_vec1::<f64>()?[0],
+        };
+        stats.update(&raw.iter().map(|o| o.as_slice()).collect::<Vec<_>>());
+        let features = stats.mean.len();
+        self.mean.set(&Tensor::from_vec(stats.mean, features, &Device::Cpu)?)?;
+        self.var.set(&Tensor::from_vec(stats.var, features, &Device::Cpu)?)?;
+        self.count.set(&Tensor::from_vec(vec![stats.count], 1, &Device::Cpu)?)
+    }
+
+    /// Raw observations normalised and clipped, as the networks see them (`n x obs_dim`, f32).
+    pub fn normalize(&self, raw: &[Vec<f64>]) -> Result<Vec<f32>> {
+        if !self.enabled {
+            return Ok(raw.iter().flatten().map(|&v| v as f32).collect());
+        }
+        let mean = self.mean.as_tensor().to_vec1::<f64>()?;
+        let var = self.var.as_tensor().to_vec1::<f64>()?;
+        let clip = self.clip;
+        Ok(raw
+            .iter()
+            .flat_map(|o| {
+                o.iter()
+                    .zip(mean.iter().zip(&var))
+                    .map(move |(&x, (&m, &v))| ((x - m) / (v + OBS_EPSILON).sqrt()).clamp(-clip, clip) as f32)
+            })
+            .collect())
+    }
+}
+
+/// Gaussian samples around each row of `mean` (`n x act_dim`) with the state-independent
+/// `log_std`, drawn from `rng` row by row, and their log-probabilities (f32, as accumulated here).
+pub(crate) fn sample_actions(mean: &[f32], log_std: &[f32], rng: &mut ChaCha8Rng) -> (Vec<f32>, Vec<f32>) {
+    let mut actions = Vec::with_capacity(mean.len());
+    let mut log_probs = Vec::with_capacity(mean.len() / log_std.len().max(1));
+    for row in mean.chunks(log_std.len()) {
+        let mut lp = 0.0f32;
+        for (m, &s) in row.iter().zip(log_std) {
+            let eps: f32 = rng.sample(StandardNormal);
+            actions.push(m + s.exp() * eps);
+            lp += -0.5 * eps * eps - s - HALF_LOG_2PI;
+        }
+        log_probs.push(lp);
+    }
+    (actions, log_probs)
+}
+
+/// Per-minibatch advantage normalisation as CleanRL does it (torch's sample std, plus 1e-8), in f64.
+pub(crate) fn normalized_advantages(advantages: &[f32]) -> Vec<f32> {
+    let n = advantages.len();
+    if n < 2 {
+        return advantages.to_vec();
+    }
+    let mean = advantages.iter().map(|&a| a as f64).sum::<f64>() / n as f64;
+    let var = advantages.iter().map(|&a| (a as f64 - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
+    let std = var.sqrt();
+    advantages.iter().map(|&a| ((a as f64 - mean) / (std + 1e-8)) as f32).collect()
 }
 
 impl PpoAgent {
@@ -165,113 +279,59 @@ impl PpoAgent {
         let mut critic_opt = Adam::new(critic.0.vars(), cfg.critic_lr);
         actor_opt.eps = settings.adam_eps;
         critic_opt.eps = settings.adam_eps;
-        let f64_var =
-            |values: Vec<f64>| Var::from_tensor(&Tensor::from_vec(values.clone(), values.len(), &Device::Cpu)?);
-        let prior = RunningMeanStd::new(obs_dim);
         Ok(PpoAgent {
             obs_dim,
             act_dim,
+            obs_stats: ObsStats::new(obs_dim, cfg.normalize_observations, settings.clip_observations)?,
             settings,
             actor,
             log_std,
             critic,
-            // gymnasium's RunningMeanStd starts at mean 0, variance 1, count 1e-4.
-            obs_mean: f64_var(prior.mean)?,
-            obs_var: f64_var(prior.var)?,
-            obs_count: f64_var(vec![prior.count])?,
             actor_opt,
             critic_opt,
             base_actor_lr: cfg.actor_lr,
             base_critic_lr: cfg.critic_lr,
-            normalize_observations: cfg.normalize_observations,
         })
     }
+}
 
-    /// Folds a batch of raw observations (`n x obs_dim`, in order) into the running statistics
-    /// (kept as f64 tensors, so checkpoints and exported policies carry them).
-    pub fn observe(&mut self, raw: &[Vec<f64>]) -> Result<()> {
-        if !self.normalize_observations || raw.is_empty() {
-            return Ok(());
-        }
-        let mut stats = RunningMeanStd {
-            mean: self.obs_mean.as_tensor().to_vec1::<f64>()?,
-            var: self.obs_var.as_tensor().to_vec1::<f64>()?,
-            count: self.obs_count.as_tensor().to_vec1::<f64>()?[0],
-        };
-        stats.update(&raw.iter().map(|o| o.as_slice()).collect::<Vec<_>>());
-        self.obs_mean.set(&Tensor::from_vec(stats.mean, self.obs_dim, &Device::Cpu)?)?;
-        self.obs_var.set(&Tensor::from_vec(stats.var, self.obs_dim, &Device::Cpu)?)?;
-        self.obs_count.set(&Tensor::from_vec(vec![stats.count], 1, &Device::Cpu)?)
+impl OnPolicyAgent for PpoAgent {
+    fn observe(&mut self, raw: &[Vec<f64>]) -> Result<()> {
+        self.obs_stats.observe(raw)
     }
 
-    /// Raw observations normalised by the running statistics and clipped, as the networks see
-    /// them (`n x obs_dim`, f32).
-    pub fn normalize(&self, raw: &[Vec<f64>]) -> Result<Vec<f32>> {
-        if !self.normalize_observations {
-            return Ok(raw.iter().flatten().map(|&v| v as f32).collect());
-        }
-        let mean = self.obs_mean.as_tensor().to_vec1::<f64>()?;
-        let var = self.obs_var.as_tensor().to_vec1::<f64>()?;
-        let clip = self.settings.clip_observations;
-        Ok(raw
-            .iter()
-            .flat_map(|o| {
-                o.iter()
-                    .zip(mean.iter().zip(&var))
-                    .map(move |(&x, (&m, &v))| ((x - m) / (v + OBS_EPSILON).sqrt()).clamp(-clip, clip) as f32)
-            })
-            .collect())
+    fn normalize(&self, raw: &[Vec<f64>]) -> Result<Vec<f32>> {
+        self.obs_stats.normalize(raw)
     }
 
-    /// Samples an action for each normalised observation, with its log-probability and value.
-    pub fn policy_step(&self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<PolicyStep> {
+    fn policy_step(&self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<PolicyStep> {
         let n = obs.len() / self.obs_dim;
         let x = batch_tensor(obs, n, self.obs_dim)?;
-        let mean = self.actor.forward(&x)?.to_vec2::<f32>()?;
+        let mean = self.actor.forward(&x)?.flatten_all()?.to_vec1::<f32>()?;
         let log_std = self.log_std.as_tensor().flatten_all()?.to_vec1::<f32>()?;
         let values = self.values(obs)?;
-        let mut actions = Vec::with_capacity(n * self.act_dim);
-        let mut log_probs = Vec::with_capacity(n);
-        for row in &mean {
-            let mut lp = 0.0f32;
-            for (m, &s) in row.iter().zip(&log_std) {
-                let eps: f32 = rng.sample(StandardNormal);
-                actions.push(m + s.exp() * eps);
-                lp += -0.5 * eps * eps - s - HALF_LOG_2PI;
-            }
-            log_probs.push(lp);
-        }
+        let (actions, log_probs) = sample_actions(&mean, &log_std, rng);
         Ok(PolicyStep { actions, log_probs, values })
     }
 
-    /// The value of each normalised observation.
-    pub fn values(&self, obs: &[f32]) -> Result<Vec<f32>> {
+    fn values(&self, obs: &[f32]) -> Result<Vec<f32>> {
         let n = obs.len() / self.obs_dim;
         self.critic.forward(&batch_tensor(obs, n, self.obs_dim)?)?.flatten_all()?.to_vec1::<f32>()
     }
 
-    /// Sets both learning rates to `fraction` of their configured values (annealing).
-    pub fn anneal(&mut self, fraction: f64) {
+    fn anneal(&mut self, fraction: f64) {
         self.actor_opt.lr = fraction * self.base_actor_lr;
         self.critic_opt.lr = fraction * self.base_critic_lr;
     }
 
-    /// One gradient step on a minibatch.
-    pub fn learn(&mut self, b: &PpoBatch) -> Result<PpoLosses> {
+    fn learn(&mut self, b: &PpoBatch) -> Result<PpoLosses> {
         let n = b.log_probs.len();
         let s = &self.settings;
         let obs = batch_tensor(&b.obs, n, self.obs_dim)?;
         let actions = batch_tensor(&b.actions, n, self.act_dim)?;
         let column = |v: &[f32]| Tensor::from_slice(v, n, &Device::Cpu);
         let old_log_probs = column(&b.log_probs)?;
-        let mut advantages = b.advantages.clone();
-        if s.norm_adv && n > 1 {
-            // torch's std is the sample std; CleanRL adds 1e-8.
-            let mean = advantages.iter().map(|&a| a as f64).sum::<f64>() / n as f64;
-            let var = advantages.iter().map(|&a| (a as f64 - mean).powi(2)).sum::<f64>() / (n - 1) as f64;
-            let std = var.sqrt();
-            advantages = advantages.iter().map(|&a| ((a as f64 - mean) / (std + 1e-8)) as f32).collect();
-        }
+        let advantages = if s.norm_adv { normalized_advantages(&b.advantages) } else { b.advantages.clone() };
         let advantages = column(&advantages)?;
 
         let mean = self.actor.forward(&obs)?;
@@ -338,7 +398,7 @@ impl PpoAgent {
 }
 
 /// ln(2 pi) / 2.
-const HALF_LOG_2PI: f32 = 0.918_938_5;
+pub(crate) const HALF_LOG_2PI: f32 = 0.918_938_5;
 
 impl Agent for PpoAgent {
     fn algo(&self) -> Algo {
@@ -362,9 +422,7 @@ impl Agent for PpoAgent {
     fn parameters(&self) -> Vec<(String, Var)> {
         let mut out = self.actor.0.named_vars("actor.mean");
         out.push(("actor.log_std".into(), self.log_std.clone()));
-        out.push(("actor.obs_mean".into(), self.obs_mean.clone()));
-        out.push(("actor.obs_var".into(), self.obs_var.clone()));
-        out.push(("actor.obs_count".into(), self.obs_count.clone()));
+        out.extend(self.obs_stats.named_vars());
         out.extend(self.critic.0.named_vars("critic"));
         out
     }
@@ -541,12 +599,12 @@ mod tests {
         for j in 0..3 {
             let mean = samples.iter().map(|s| s[j]).sum::<f64>() / count;
             let m2 = 1e-4 * (1.0 + mean * mean) + samples.iter().map(|s| (s[j] - mean).powi(2)).sum::<f64>();
-            let got_mean = a.obs_mean.as_tensor().to_vec1::<f64>().unwrap()[j];
-            let got_var = a.obs_var.as_tensor().to_vec1::<f64>().unwrap()[j];
+            let got_mean = a.obs_stats.mean.as_tensor().to_vec1::<f64>().unwrap()[j];
+            let got_var = a.obs_stats.var.as_tensor().to_vec1::<f64>().unwrap()[j];
             assert!((got_mean - mean).abs() < 1e-12, "mean {j}: {got_mean} vs {mean}");
             assert!((got_var - m2 / count).abs() < 1e-9, "var {j}: {got_var} vs {}", m2 / count);
         }
-        assert!((a.obs_count.as_tensor().to_vec1::<f64>().unwrap()[0] - count).abs() < 1e-12);
+        assert!((a.obs_stats.count.as_tensor().to_vec1::<f64>().unwrap()[0] - count).abs() < 1e-12);
     }
 
     #[test]

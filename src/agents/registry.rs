@@ -5,8 +5,8 @@ use candle_core::Result;
 use rand_chacha::ChaCha8Rng;
 
 use super::{
-    Agent, Algo, BranchingDqnAgent, CrossqAgent, CrossqConfig, DeterministicAgent, DpgConfig, DqnConfig,
-    OffPolicyAgent, PpoAgent, PpoConfig, SacAgent, SacConfig, TrainConfig,
+    Algo, BranchingDqnAgent, CrossqAgent, CrossqConfig, DeterministicAgent, DpgConfig, DqnConfig, OffPolicyAgent,
+    OnPolicyAgent, PpoAgent, PpoConfig, SacAgent, SacConfig, TrainConfig,
 };
 
 /// A registered algorithm: its name, published defaults, settings and constructor.
@@ -24,14 +24,13 @@ pub struct AlgoEntry {
 }
 
 /// How an algorithm's agent is built from its config, the observation and action sizes and the
-/// initialisation RNG: an off-policy learner, or an on-policy agent (which acts; its trainer
-/// builds the rest).
+/// initialisation RNG: an off-policy learner, or an on-policy one.
 #[derive(Clone, Copy)]
 pub enum Build {
     /// Learns from replay minibatches.
     OffPolicy(BuildFn<dyn OffPolicyAgent>),
     /// Learns from its own rollouts.
-    OnPolicy(BuildFn<dyn Agent>),
+    OnPolicy(BuildFn<dyn OnPolicyAgent>),
 }
 
 /// A constructor: config, observation and action sizes, initialisation RNG.
@@ -95,7 +94,7 @@ fn sac(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Resul
     Ok(Box::new(SacAgent::new(cfg, obs, act, rng)?))
 }
 
-fn ppo(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn Agent>> {
+fn ppo(cfg: &TrainConfig, obs: usize, act: usize, rng: &mut ChaCha8Rng) -> Result<Box<dyn OnPolicyAgent>> {
     Ok(Box::new(PpoAgent::new(cfg, obs, act, rng)?))
 }
 

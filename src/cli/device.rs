@@ -22,7 +22,8 @@ enum DeviceCommand {
     },
     /// Updates per second of one algorithm at given widths (HalfCheetah-sized inputs), as CSV.
     Speed {
-        /// td3, ddpg, sac or crossq.
+        /// td3, ddpg, sac, crossq, dqn or ppo (timed in epochs: passes over a 2048-step rollout in
+        /// minibatches of --batch).
         #[arg(long)]
         algo: String,
         #[arg(long, default_value = "cpu", value_name = "cpu|cuda[:N]")]
@@ -64,14 +65,17 @@ pub fn run(args: DeviceArgs) -> Result<()> {
             };
             let cfg = speed::sized_config(algo, &hidden, critic_hidden.as_deref(), batch);
             let dev = device.open()?;
+            let unit = if algo == Algo::Ppo { "epochs" } else { "updates" };
             let s = speed::measure(&cfg, obs, act, path, &dev, 20, seconds)?;
             let readback = speed::readback_us(&dev)?;
             if header {
-                println!("algo,device,path,hidden,critic_hidden,batch,updates,updates_per_s,upload_us,readback_us");
+                println!(
+                    "algo,device,path,hidden,critic_hidden,batch,updates,updates_per_s,upload_us,readback_us,unit"
+                );
             }
             let join = |w: &[usize]| w.iter().map(|v| v.to_string()).collect::<Vec<_>>().join("-");
             println!(
-                "{},{device},{},{},{},{batch},{},{:.1},{:.1},{:.1}",
+                "{},{device},{},{},{},{batch},{},{:.1},{:.1},{:.1},{unit}",
                 algo.name(),
                 if path == speed::Path::Fused { "fused" } else { "generic" },
                 join(&hidden),
@@ -90,7 +94,7 @@ fn run_check(device: ComputeDevice) -> Result<()> {
     let dev = device.open()?;
     println!("algo,device,updates,loss_gap,loss_tolerance,weight_gap,weight_tolerance,largest_weight_gap_at,ok");
     let mut failed = Vec::new();
-    for algo in [Algo::Td3, Algo::Ddpg, Algo::Sac, Algo::Crossq] {
+    for algo in check::ALGOS {
         let gap = check::compare(algo, &dev, check::UPDATES);
         let tol = check::tolerance(algo);
         let ok = gap.loss <= tol.loss && gap.weight <= tol.weight;

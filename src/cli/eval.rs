@@ -28,6 +28,11 @@ pub struct EvalArgs {
     /// metrics.csv's eval rows were measured on).
     #[arg(long)]
     pub training_seeds: bool,
+    /// Where the policy's networks run: cpu (the exact fused path), or cuda / cuda:N (the
+    /// device-generic path; actions agree with the CPU's to about 1e-6, so long episodes may
+    /// drift apart). Needs a build with the `cuda` feature (docs/gpu.md).
+    #[arg(long, default_value = "cpu", value_name = "cpu|cuda[:N]")]
+    pub device: locobench::device::ComputeDevice,
     /// Options over the run's own environment (perturbations it trained under return to
     /// nominal), e.g. `--reward drift=1,shake=1,energy=0.005` to evaluate under other reward
     /// weights, `--option payload_mass=2` under a payload.
@@ -38,7 +43,7 @@ pub struct EvalArgs {
 pub fn run(args: EvalArgs) -> Result<()> {
     super::deprecated_flag("--checkpoint", "--policy");
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
-    let (run, agent) = resolve_policy(&args.policy, args.budget)?.load()?;
+    let (run, agent) = resolve_policy(&args.policy, args.budget)?.load_on(args.device)?;
     let env_cfg = args.env_options.apply(run.env.for_evaluation())?;
     let mut env = make(&env_cfg)?;
     let what = format!("{} {} on {}", args.policy.display(), run.train.algo.name(), run.env.name);

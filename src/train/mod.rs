@@ -284,7 +284,7 @@ pub fn train(
         train,
     };
     if run.train.algo.is_on_policy() {
-        refuse_device(&run.train, control.device)?;
+        control.device.open()?;
         std::fs::create_dir_all(run_dir)?;
         let _lock = run_lock::RunLock::acquire(run_dir)?;
         write_bytes_atomic(&run_dir.join("config.toml"), run.to_toml()?.as_bytes())?;
@@ -386,7 +386,7 @@ pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
         });
     }
     if run.train.algo.is_on_policy() {
-        refuse_device(&run.train, control.device)?;
+        control.device.open()?;
         provenance::append(
             run_dir,
             provenance::Stretch::here(saved.step, control.threads, git_commit().as_deref()).on(control.device),
@@ -408,14 +408,6 @@ pub fn resume(run_dir: &Path, control: &RunControl) -> Result<RunSummary> {
         provenance::Stretch::here(state.step, control.threads, git_commit().as_deref()).on(control.device),
     )?;
     trainer.run(control)
-}
-
-/// On-policy agents train on the CPU only (they have no device-generic path yet).
-fn refuse_device(cfg: &TrainConfig, device: ComputeDevice) -> Result<()> {
-    if device != ComputeDevice::Cpu {
-        bail!("--device {device}: {} has no device-generic path yet; train it with --device cpu", cfg.algo.name());
-    }
-    Ok(())
 }
 
 struct Trainer {

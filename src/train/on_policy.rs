@@ -27,7 +27,7 @@ use super::scaffold::{self, Scaffold};
 use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
 use super::{finish_run, save_budget_policy, Outcome, RunConfig, RunControl, RunSummary, POLICY_BUDGETS};
 use crate::agents::ppo::{PpoBatch, PpoLosses, RunningMeanStd};
-use crate::agents::{Losses, PpoAgent, PpoConfig, TrainConfig};
+use crate::agents::{make_on_policy_on, Losses, OnPolicyAgent, PpoConfig, TrainConfig};
 use crate::envs::{make, Env, VecEnv, VecEnvSnapshot};
 use crate::policy::to_space;
 
@@ -58,7 +58,7 @@ struct OnPolicyTrainer {
     run_dir: PathBuf,
     run: RunConfig,
     settings: PpoConfig,
-    agent: PpoAgent,
+    agent: Box<dyn OnPolicyAgent>,
     envs: VecEnv,
     eval_env: Box<dyn Env>,
     rng: ChaCha8Rng,
@@ -86,7 +86,7 @@ pub(super) fn train(
 ) -> Result<RunSummary> {
     let mut t = OnPolicyTrainer::new(run_dir, run, control)?;
     if let Some(policy) = init_from {
-        policy.load_into(&t.agent)?;
+        policy.load_into(&*t.agent)?;
     }
     t.obs = t.envs.reset(run.seed)?;
     t.agent.observe(&t.obs)?;
@@ -102,7 +102,7 @@ pub(super) fn resume(
     control: &RunControl,
 ) -> Result<RunSummary> {
     let mut t = OnPolicyTrainer::new(run_dir, run, control)?;
-    let state = checkpoint::load_training(ckpt, &mut t.agent)?;
+    let state = checkpoint::load_training(ckpt, &mut *t.agent)?;
     t.rng = state.rng.restore()?;
     t.step = state.step;
     t.episodes = state.episodes;
@@ -121,8 +121,8 @@ impl OnPolicyTrainer {
         let settings = run.train.ppo().clone();
         let envs = VecEnv::new(&run.env, settings.num_envs, control.threads.max(1))?.with_episode_seeds(training_seeds);
         let spec = envs.spec().clone();
-        let agent =
-            PpoAgent::new(&run.train, spec.observation_space.dim(), spec.action_space.dim(), &mut init_rng(run.seed))?;
+        let (obs_dim, act_dim) = (spec.observation_space.dim(), spec.action_space.dim());
+        let agent = make_on_policy_on(&run.train, obs_dim, act_dim, &mut init_rng(run.seed), control.device)?;
         let n = settings.num_envs;
         Ok(OnPolicyTrainer {
             run_dir: run_dir.to_path_buf(),
@@ -180,11 +180,11 @@ impl OnPolicyTrainer {
             losses = Some(Losses { critic: l.value, actor: Some(l.policy), ..Losses::default() });
 
             if scaffold::crossed(before, self.step, eval_every) || self.step >= total {
-                let e = evaluate(&self.agent, self.eval_env.as_mut(), eval_episodes, self.run.seed)?;
+                let e = evaluate(&*self.agent, self.eval_env.as_mut(), eval_episodes, self.run.seed)?;
                 self.best_eval = Some(self.best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 let row =
                     MetricsRow::progress("eval", self.step, losses, sc.rate(self.step), sc.wall(self.wall_offset));
-                sc.evaluated(&self.run_dir, &mut self.metrics, row, e, control, &self.agent, self.run.seed)?;
+                sc.evaluated(&self.run_dir, &mut self.metrics, row, e, control, &*self.agent, self.run.seed)?;
             }
             sc.bar.set_position(self.step);
             if self.step >= next_checkpoint {
@@ -194,7 +194,7 @@ impl OnPolicyTrainer {
         };
         sc.end()?;
         if outcome == Outcome::Finished {
-            save_budget_policy(&self.run_dir, self.step, &self.agent)?;
+            save_budget_policy(&self.run_dir, self.step, &*self.agent)?;
         }
         let checkpoint = self.save(sc.wall(self.wall_offset))?;
         let summary = sc.summary(&self.run_dir, outcome, self.step, self.best_eval, checkpoint);
@@ -232,7 +232,7 @@ impl OnPolicyTrainer {
             // counts too: it ends on a whole rollout, past a budget that is not a multiple of one.
             let budgets = POLICY_BUDGETS.iter().copied().chain([self.cfg().total_steps]);
             if let Some(budget) = budgets.filter(|&b| before < b && b <= self.step).min() {
-                save_budget_policy(&self.run_dir, budget, &self.agent)?;
+                save_budget_policy(&self.run_dir, budget, &*self.agent)?;
             }
 
             // Observation statistics see every observation once: each ended episode's last,
@@ -381,7 +381,7 @@ impl OnPolicyTrainer {
             best_eval_mean: self.best_eval,
         };
         let tensors = self.rollout_state()?;
-        checkpoint::save_with(&self.run_dir.clone(), &mut self.agent, &state, &self.metrics, |dir| {
+        checkpoint::save_with(&self.run_dir.clone(), &mut *self.agent, &state, &self.metrics, |dir| {
             candle_core::safetensors::save(&tensors, dir.join(ROLLOUT_FILE))?;
             Ok(())
         })

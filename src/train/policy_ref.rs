@@ -10,6 +10,7 @@
 //! - an exported policy directory (or its `policy.safetensors`): that actor.
 use std::path::{Path, PathBuf};
 
+use crate::device::ComputeDevice;
 use anyhow::{bail, Context, Result};
 
 use crate::agents::Agent;
@@ -177,7 +178,12 @@ impl PolicyRef {
     /// The run's config and an agent of its shape with the policy's weights: every network from
     /// a checkpoint, the actor (with its observation statistics) otherwise.
     pub fn load(&self) -> Result<(RunConfig, Box<dyn Agent>)> {
-        let (run, agent) = super::run_dir::run_agent(&self.run_dir()?)?;
+        self.load_on(ComputeDevice::Cpu)
+    }
+
+    /// [`PolicyRef::load`] with the networks on `device` (the device-generic path off the CPU).
+    pub fn load_on(&self, device: ComputeDevice) -> Result<(RunConfig, Box<dyn Agent>)> {
+        let (run, agent) = super::run_dir::run_agent(&self.run_dir()?, device)?;
         self.load_into(agent.as_ref())?;
         Ok((run, agent))
     }

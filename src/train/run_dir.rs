@@ -5,7 +5,8 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
-use crate::agents::{make_agent, Agent};
+use crate::agents::{make_agent, make_agent_on, Agent};
+use crate::device::ComputeDevice;
 use crate::envs::make;
 use crate::io::write_bytes_atomic;
 
@@ -175,11 +176,11 @@ pub fn budget_policy_steps(run_dir: &Path) -> Vec<u64> {
     steps
 }
 
-/// The config of the run in `dir` and a freshly initialised agent of its shape.
-pub(super) fn run_agent(dir: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
+/// The config of the run in `dir` and a freshly initialised agent of its shape on `device`.
+pub(super) fn run_agent(dir: &Path, device: ComputeDevice) -> Result<(RunConfig, Box<dyn Agent>)> {
     let run = read_run_config(dir)?;
     let env = make(&run.env)?;
     let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
-    let agent = make_agent(&run.train, obs_dim, act_dim, &mut init_rng(run.seed))?;
+    let agent = make_agent_on(&run.train, obs_dim, act_dim, &mut init_rng(run.seed), device)?;
     Ok((run, agent))
 }

@@ -21,26 +21,42 @@ pub struct DeviceAdam {
     pub eps: f64,
     step: u64,
     params: Vec<Var>,
-    m: Vec<Tensor>,
-    v: Vec<Tensor>,
+    /// Where each parameter's values start in the flat moments.
+    offsets: Vec<usize>,
+    /// Both moments of every parameter, as one flat tensor each.
+    m: Tensor,
+    v: Tensor,
 }
 
 impl DeviceAdam {
     /// Adam over `params` with betas (0.9, 0.999) and eps 1e-8, moments zero on the params' device.
     pub fn new(params: Vec<Var>, lr: f64) -> Result<DeviceAdam> {
-        let zeros = |p: &Var| p.as_tensor().zeros_like();
-        let m = params.iter().map(zeros).collect::<Result<_>>()?;
-        let v = params.iter().map(zeros).collect::<Result<_>>()?;
-        Ok(DeviceAdam { lr, beta1: 0.9, beta2: 0.999, eps: 1e-8, step: 0, params, m, v })
+        let mut offsets = Vec::with_capacity(params.len());
+        let mut total = 0;
+        for p in &params {
+            offsets.push(total);
+            total += p.elem_count();
+        }
+        let device = params.first().map_or(Device::Cpu, |p| p.device().clone());
+        let m = Tensor::zeros(total, candle_core::DType::F32, &device)?;
+        Ok(DeviceAdam { lr, beta1: 0.9, beta2: 0.999, eps: 1e-8, step: 0, params, offsets, v: m.clone(), m })
+    }
+
+    fn part(&self, flat: &Tensor, i: usize) -> Result<Tensor> {
+        let p = &self.params[i];
+        flat.narrow(0, self.offsets[i], p.elem_count())?.reshape(p.shape())
     }
 
     /// One update from the gradients in `grads`; parameters without one are left alone.
     ///
-    /// The parameters that have a gradient are updated together: their gradients, moments and
-    /// updates as one flat tensor each, so a step costs a few kernels per parameter (gather and
-    /// scatter) and a dozen for the arithmetic, instead of a dozen per parameter. On a GPU, where
-    /// each kernel costs a launch, that is most of the optimiser's time.
+    /// The gradients, moments and updates are one flat tensor each, so a step costs two kernels
+    /// per parameter (gathering its gradient, writing its update) and a dozen for the arithmetic,
+    /// instead of a dozen per parameter. On a GPU, where each kernel costs a launch, that is most
+    /// of the optimiser's time.
     pub fn step(&mut self, grads: &GradStore) -> Result<()> {
+        if self.params.is_empty() {
+            return Ok(());
+        }
         self.step += 1;
         // as the fused step computes them: in f64, then rounded to f32
         let bias_correction1 = (1.0 - self.beta1.powi(self.step as i32)) as f32;
@@ -48,31 +64,39 @@ impl DeviceAdam {
         let (b1, b2) = (self.beta1 as f32, self.beta2 as f32);
         let step_size = self.lr as f32 / bias_correction1;
         let inv_sqrt_bc2 = 1.0 / bias_correction2.sqrt();
-        let live: Vec<usize> =
-            (0..self.params.len()).filter(|&i| grads.get(self.params[i].as_tensor()).is_some()).collect();
-        if live.is_empty() {
+        let grad = |i: usize| grads.get(self.params[i].as_tensor());
+        let live: Vec<bool> = (0..self.params.len()).map(|i| grad(i).is_some()).collect();
+        if !live.contains(&true) {
             return Ok(());
         }
-        let flat = |ts: Vec<Tensor>| -> Result<Tensor> {
-            let flat = ts.iter().map(|t| t.flatten_all()).collect::<Result<Vec<_>>>()?;
-            Tensor::cat(&flat, 0)
-        };
-        let g = flat(live.iter().map(|&i| grads.get(self.params[i].as_tensor()).expect("live").clone()).collect())?;
-        let m = flat(live.iter().map(|&i| self.m[i].clone()).collect())?;
-        let v = flat(live.iter().map(|&i| self.v[i].clone()).collect())?;
-        let m = (m.affine(b1 as f64, 0.0)? + g.affine((1.0 - b1) as f64, 0.0)?)?;
-        let v = (v.affine(b2 as f64, 0.0)? + g.sqr()?.affine((1.0 - b2) as f64, 0.0)?)?;
+        // a parameter without a gradient gets zeros here, and its old moments back below
+        let g = (0..self.params.len())
+            .map(|i| match grad(i) {
+                Some(g) => g.flatten_all(),
+                None => self.params[i].as_tensor().zeros_like()?.flatten_all(),
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let g = Tensor::cat(&g, 0)?;
+        let m = (self.m.affine(b1 as f64, 0.0)? + g.affine((1.0 - b1) as f64, 0.0)?)?;
+        let v = (self.v.affine(b2 as f64, 0.0)? + g.sqr()?.affine((1.0 - b2) as f64, 0.0)?)?;
         let denominator = v.sqrt()?.affine(inv_sqrt_bc2 as f64, self.eps)?;
         let update = (m.affine(step_size as f64, 0.0)? / denominator)?;
-        let mut offset = 0;
-        for &i in &live {
-            let p = &self.params[i];
-            let (len, shape) = (p.elem_count(), p.shape().clone());
-            let part = |t: &Tensor| t.narrow(0, offset, len)?.reshape(shape.clone());
-            p.set(&(p.as_tensor() - part(&update)?)?)?;
-            self.m[i] = part(&m)?;
-            self.v[i] = part(&v)?;
-            offset += len;
+        for (i, &live) in live.iter().enumerate() {
+            if live {
+                let p = &self.params[i];
+                p.set(&(p.as_tensor() - self.part(&update, i)?)?)?;
+            }
+        }
+        if live.iter().all(|&l| l) {
+            (self.m, self.v) = (m, v);
+        } else {
+            let keep = |new: &Tensor, old: &Tensor| -> Result<Tensor> {
+                let parts = (0..self.params.len())
+                    .map(|i| self.part(if live[i] { new } else { old }, i)?.flatten_all())
+                    .collect::<Result<Vec<_>>>()?;
+                Tensor::cat(&parts, 0)
+            };
+            (self.m, self.v) = (keep(&m, &self.m)?, keep(&v, &self.v)?);
         }
         Ok(())
     }
@@ -81,16 +105,17 @@ impl DeviceAdam {
 impl Optimizer for DeviceAdam {
     fn state(&self, prefix: &str) -> Result<(Vec<(String, Tensor)>, u64)> {
         let mut out = Vec::new();
-        for (i, (m, v)) in self.m.iter().zip(&self.v).enumerate() {
-            out.push((format!("{prefix}.{i}.m"), m.flatten_all()?.to_device(&Device::Cpu)?));
-            out.push((format!("{prefix}.{i}.v"), v.flatten_all()?.to_device(&Device::Cpu)?));
+        for i in 0..self.params.len() {
+            out.push((format!("{prefix}.{i}.m"), self.part(&self.m, i)?.flatten_all()?.to_device(&Device::Cpu)?));
+            out.push((format!("{prefix}.{i}.v"), self.part(&self.v, i)?.flatten_all()?.to_device(&Device::Cpu)?));
         }
         Ok((out, self.step))
     }
 
     fn load_state(&mut self, prefix: &str, tensors: &HashMap<String, Tensor>, step: u64) -> anyhow::Result<()> {
-        for (i, p) in self.params.iter().enumerate() {
-            for (name, slot) in [("m", &mut self.m[i]), ("v", &mut self.v[i])] {
+        let flat = |name: &str| -> anyhow::Result<Tensor> {
+            let mut parts = Vec::with_capacity(self.params.len());
+            for (i, p) in self.params.iter().enumerate() {
                 let key = format!("{prefix}.{i}.{name}");
                 let t = tensors.get(&key).ok_or_else(|| anyhow::anyhow!("checkpoint lacks optimiser tensor {key}"))?;
                 anyhow::ensure!(
@@ -99,9 +124,12 @@ impl Optimizer for DeviceAdam {
                     t.elem_count(),
                     p.elem_count()
                 );
-                *slot = t.reshape(p.shape())?.to_device(p.device())?;
+                parts.push(t.flatten_all()?.to_dtype(candle_core::DType::F32)?);
             }
-        }
+            Ok(Tensor::cat(&parts, 0)?.to_device(self.m.device())?)
+        };
+        let (m, v) = (flat("m")?, flat("v")?);
+        (self.m, self.v) = (m, v);
         self.step = step;
         Ok(())
     }

@@ -3,12 +3,13 @@
 //! agree within a stated tolerance, per algorithm. The two paths round differently (the fused
 //! kernels' order of operations against candle's), and Adam amplifies that where a gradient is near
 //! zero; over 100 updates the gaps stay a few f32 roundings wide.
-use candle_core::Device;
+use candle_core::{DType, Device, Var};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::make_generic_agent;
-use crate::agents::{make_learner, Algo, Batch, Losses, TrainConfig};
+use super::{make_generic_agent, make_generic_on_policy};
+use crate::agents::ppo::{PpoBatch, PpoLosses};
+use crate::agents::{make_learner, Agent, Algo, Batch, Losses, OnPolicyAgent, PpoAgent, TrainConfig};
 
 /// The comparison's observation and action sizes.
 pub const OBS: usize = 7;
@@ -34,6 +35,10 @@ pub fn config(algo: Algo) -> TrainConfig {
         c.critic_hidden = vec![48, 48];
         // both normalisation modes within the 100 updates
         c.renorm_warmup_steps = 40;
+    }
+    if algo == Algo::Ppo {
+        // large steps, so that the ratio and value clips engage within the 100 updates
+        (cfg.actor_lr, cfg.critic_lr) = (1e-2, 1e-2);
     }
     cfg
 }
@@ -64,6 +69,9 @@ pub struct Gap {
 
 /// Runs both paths through `updates` updates; `device` hosts the generic one.
 pub fn compare(algo: Algo, device: &Device, updates: usize) -> Gap {
+    if algo == Algo::Ppo {
+        return compare_ppo(device, updates);
+    }
     let cfg = config(algo);
     let mut fused = make_learner(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11)).unwrap();
     let mut generic = make_generic_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11), device).unwrap();
@@ -87,26 +95,97 @@ pub fn compare(algo: Algo, device: &Device, updates: usize) -> Gap {
     }
     // the same RNG draws on both paths
     assert_eq!(rng_f.random::<u64>(), rng_g.random::<u64>(), "{algo:?}: the paths drew different noise");
+    let fused_names: Vec<_> = fused.optimizers().iter().map(|(n, _)| *n).collect();
+    let generic_names: Vec<_> = generic.optimizers().iter().map(|(n, _)| *n).collect();
+    assert_eq!(fused_names, generic_names, "{algo:?}: the optimiser state is laid out differently");
+    weight_gap(&*fused, &*generic, &mut gap);
+    gap
+}
+
+/// The largest absolute difference between the two agents' parameters of the same name.
+fn weight_gap(fused: &dyn Agent, generic: &dyn Agent, gap: &mut Gap) {
     let generic_params = generic.parameters();
     for (name, var) in fused.parameters() {
         let (_, other) = generic_params.iter().find(|(n, _)| *n == name).unwrap_or_else(|| panic!("no {name}"));
         assert_eq!(var.dims(), other.dims(), "{name}");
-        let a = var.flatten_all().unwrap().to_vec1::<f32>().unwrap();
-        let b = other.flatten_all().unwrap().to_device(&Device::Cpu).unwrap().to_vec1::<f32>().unwrap();
-        for (x, y) in a.iter().zip(&b) {
-            let d = (*x as f64 - *y as f64).abs();
+        // as f64: PPO's observation statistics are f64
+        let values = |v: &Var| -> Vec<f64> {
+            v.flatten_all().unwrap().to_device(&Device::Cpu).unwrap().to_dtype(DType::F64).unwrap().to_vec1().unwrap()
+        };
+        for (x, y) in values(&var).iter().zip(&values(other)) {
+            let d = (x - y).abs();
             if d > gap.weight {
                 gap.weight = d;
                 gap.weight_name = name.clone();
             }
         }
     }
-    // the same optimiser state layout (a checkpoint moves between the paths)
+}
+
+/// `n` samples of a rollout for PPO's comparison: observations, the actions `agent` samples there
+/// with their log-probabilities and values, random advantages and returns near the values.
+fn ppo_batch(agent: &PpoAgent, rng: &mut ChaCha8Rng, n: usize) -> PpoBatch {
+    let obs: Vec<f32> = (0..n * OBS).map(|_| rng.random_range(-2.0f32..2.0)).collect();
+    let step = agent.policy_step(&obs, rng).unwrap();
+    let advantages: Vec<f32> = (0..n).map(|_| rng.random_range(-1.5f32..1.5)).collect();
+    let returns = step.values.iter().zip(&advantages).map(|(v, a)| v + a).collect();
+    PpoBatch { obs, actions: step.actions, log_probs: step.log_probs, advantages, returns, values: step.values }
+}
+
+/// PPO's comparison: rollouts of 8 minibatches sampled by the fused agent as it learns (so the
+/// ratios move away from 1 and the clips engage, as in training), each learned from by both paths,
+/// with the learning rate annealed between rollouts.
+fn compare_ppo(device: &Device, updates: usize) -> Gap {
+    let cfg = config(Algo::Ppo);
+    let mut fused = PpoAgent::new(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11)).unwrap();
+    let mut generic = make_generic_on_policy(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11), device).unwrap();
+    let mut data = ChaCha8Rng::seed_from_u64(3);
+    let raw: Vec<Vec<f64>> = (0..32).map(|_| (0..OBS).map(|_| data.random_range(-3.0..3.0)).collect()).collect();
+    fused.observe(&raw).unwrap();
+    generic.observe(&raw).unwrap();
+    let mut gap = Gap::default();
+    let relative = |a: f64, b: f64| (a - b).abs() / (1.0 + b.abs());
+    let mut rollout = Vec::new();
+    let mut clipped = 0.0f64;
+    for u in 0..updates {
+        if u % 8 == 0 {
+            let fraction = 1.0 - u as f64 / updates as f64;
+            fused.anneal(fraction);
+            generic.anneal(fraction);
+            rollout = (0..8).map(|_| ppo_batch(&fused, &mut data, cfg.batch_size)).collect();
+        }
+        let b = &rollout[u % 8];
+        let lf: PpoLosses = fused.learn(b).unwrap();
+        let lg: PpoLosses = generic.learn(b).unwrap();
+        for (x, y) in
+            [(lg.policy, lf.policy), (lg.value, lf.value), (lg.entropy, lf.entropy), (lg.approx_kl, lf.approx_kl)]
+        {
+            assert!(x.is_finite(), "ppo update {u}: {lg:?}");
+            gap.loss = gap.loss.max(relative(x, y));
+        }
+        // a share of the minibatch: a ratio on the clip's edge may fall either side
+        assert!(
+            (lg.clip_fraction - lf.clip_fraction).abs() <= 1.0 / cfg.batch_size as f64,
+            "update {u}: {lg:?} vs {lf:?}"
+        );
+        clipped = clipped.max(lf.clip_fraction);
+    }
+    assert!(updates < 30 || clipped > 0.05, "ppo: the ratio clip never engaged (largest clip fraction {clipped})");
+    let obs: Vec<f32> = (0..4 * OBS).map(|i| (i as f32 * 0.37).sin()).collect();
+    let (mut r1, mut r2) = (ChaCha8Rng::seed_from_u64(6), ChaCha8Rng::seed_from_u64(6));
+    let (sf, sg) = (fused.policy_step(&obs, &mut r1).unwrap(), generic.policy_step(&obs, &mut r2).unwrap());
+    for (x, y) in sf.actions.iter().chain(&sf.values).zip(sg.actions.iter().chain(&sg.values)) {
+        gap.loss = gap.loss.max(relative(*y as f64, *x as f64));
+    }
     let fused_names: Vec<_> = fused.optimizers().iter().map(|(n, _)| *n).collect();
     let generic_names: Vec<_> = generic.optimizers().iter().map(|(n, _)| *n).collect();
-    assert_eq!(fused_names, generic_names);
+    assert_eq!(fused_names, generic_names, "ppo: the optimiser state is laid out differently");
+    weight_gap(&fused, &*generic, &mut gap);
     gap
 }
+
+/// Every algorithm, in the order the check reports them.
+pub const ALGOS: [Algo; 6] = [Algo::Td3, Algo::Ddpg, Algo::Sac, Algo::Crossq, Algo::Dqn, Algo::Ppo];
 
 /// The stated tolerance per algorithm (docs/gpu.md quotes these): on the CPU the measured gaps
 /// are about 1e-7 (losses, relative) and 1e-7 to 1e-6 (weights, absolute; CrossQ's running
@@ -115,6 +194,6 @@ pub fn tolerance(algo: Algo) -> Tolerance {
     match algo {
         Algo::Td3 | Algo::Ddpg | Algo::Sac => Tolerance { loss: 1e-5, weight: 1e-5 },
         Algo::Crossq => Tolerance { loss: 1e-5, weight: 2e-5 },
-        Algo::Ppo | Algo::Dqn => unreachable!("no generic path"),
+        Algo::Dqn | Algo::Ppo => Tolerance { loss: 1e-5, weight: 1e-5 },
     }
 }

@@ -173,8 +173,11 @@ impl OffPolicyAgent for GenericCrossq {
         let alpha = self.log_alpha.as_tensor().detach().exp()?;
 
         // One pass of both critics over [(s, a); (s', a')]: the halves share batch statistics.
+        // detached: the critics' loss reaches the next action through the shared batch statistics,
+        // but the critics' step does not train the actor
         let (next_a, next_logp) =
             squashed_sample(&self.policy(&b.next_obs, false)?, &b.noise[0], TanhCorrection::Exact)?;
+        let (next_a, next_logp) = (next_a.detach(), next_logp.detach());
         let joint =
             Tensor::cat(&[Tensor::cat(&[&b.obs, &b.actions], 1)?, Tensor::cat(&[&b.next_obs, &next_a], 1)?], 0)?;
         let q = self

@@ -128,7 +128,7 @@ impl OffPolicyAgent for GenericDeterministic {
 
         let mut next_action = self.actor_target.forward(&b.next_obs)?.tanh()?;
         if let Some(eps) = b.noise.first() {
-            next_action = (next_action + eps)?.clamp(-1f32, 1f32)?;
+            next_action = super::layers::clamp(&(next_action + eps)?, -1.0, 1.0)?;
         }
         let q_next = self.critic_targets.forward(&Tensor::cat(&[&b.next_obs, &next_action], 1)?)?.min(0)?;
         let y = (&b.rewards + (&b.not_done * q_next)?.affine(self.gamma, 0.0)?)?.detach();

@@ -2,15 +2,41 @@
 //! network `[out, in]`, or k networks stacked `[k, out, in]`), batch renormalisation, and SAC's
 //! tanh-squashed Gaussian head. Each is the fused CPU node's function written as candle's graph
 //! (the graphs the fused nodes are tested against in `numeric::`).
-use candle_core::{Device, Result, Tensor, Var, D};
+use std::collections::HashMap;
+use std::sync::{Mutex, OnceLock};
+
+use candle_core::{Device, DeviceLocation, Result, Tensor, Var, D};
 
 use crate::agents::config::TanhCorrection;
 use crate::agents::sac::{LOG_STD_MAX, LOG_STD_MIN};
 
-/// Dense layers with ReLU between them and nothing after the last. Weights are `[out, in]`
-/// (one network) or `[k, out, in]` with biases `[k, 1, out]` (k networks evaluated together).
+/// `value` as a one-element tensor on `device`, uploaded once and kept. candle's scalar forms
+/// (`clamp(lo, hi)`, `maximum(lo)`) upload their scalar on every call, and on a GPU each such
+/// upload is a synchronous copy that drains the queue of launched kernels.
+pub(crate) fn constant(value: f32, device: &Device) -> Result<Tensor> {
+    static KEPT: OnceLock<Mutex<HashMap<(DeviceLocation, u32), Tensor>>> = OnceLock::new();
+    let key = (device.location(), value.to_bits());
+    let mut kept = KEPT.get_or_init(Default::default).lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(t) = kept.get(&key) {
+        return Ok(t.clone());
+    }
+    let t = Tensor::new(&[value], device)?;
+    kept.insert(key, t.clone());
+    Ok(t)
+}
+
+/// `x` clamped to `[lo, hi]`: candle's `clamp` (the same two operations, so the same values and
+/// gradients) with its bounds kept on the device.
+pub(crate) fn clamp(x: &Tensor, lo: f32, hi: f32) -> Result<Tensor> {
+    x.broadcast_maximum(&constant(lo, x.device())?)?.broadcast_minimum(&constant(hi, x.device())?)
+}
+
+/// Dense layers with ReLU (or tanh, [`DeviceStack::with_tanh`]) between them and nothing after
+/// the last. Weights are `[out, in]` (one network) or `[k, out, in]` with biases `[k, 1, out]` (k
+/// networks evaluated together).
 pub(crate) struct DeviceStack {
     layers: Vec<(Var, Var)>,
+    tanh: bool,
 }
 
 impl DeviceStack {
@@ -32,7 +58,12 @@ impl DeviceStack {
         if layers.is_empty() {
             candle_core::bail!("no layers named {prefix}.N.weight");
         }
-        Ok(DeviceStack { layers })
+        Ok(DeviceStack { layers, tanh: false })
+    }
+
+    /// The same layers with tanh between them (PPO's networks).
+    pub fn with_tanh(self) -> DeviceStack {
+        DeviceStack { tanh: true, ..self }
     }
 
     pub fn layers(&self) -> &[(Var, Var)] {
@@ -50,10 +81,10 @@ impl DeviceStack {
         };
         let h = if w.rank() == 3 { x.broadcast_matmul(&w.transpose(1, 2)?)? } else { x.matmul(&w.t()?)? };
         let h = h.broadcast_add(&b)?;
-        if i + 1 < self.layers.len() {
-            h.relu()
-        } else {
-            Ok(h)
+        match i + 1 < self.layers.len() {
+            true if self.tanh => h.tanh(),
+            true => h.relu(),
+            false => Ok(h),
         }
     }
 
@@ -136,9 +167,11 @@ impl DeviceRenorm {
             (self.scale.as_tensor().clone(), self.bias.as_tensor().clone())
         };
         let f = scale.elem_count();
-        // detached copies: the statistics are no parameters, and `set` below overwrites their storage
-        let rm = self.running_mean.as_tensor().detach().reshape((1, f))?.copy()?;
-        let rv = self.running_var.as_tensor().detach().reshape((1, f))?.copy()?;
+        // Views of the statistics, which are no parameters. `set` below overwrites their storage:
+        // that is safe because candle runs each operation when it is called (on a GPU, in stream
+        // order), and no gradient reads these values back.
+        let rm = self.running_mean.as_tensor().detach().reshape((1, f))?;
+        let rv = self.running_var.as_tensor().detach().reshape((1, f))?;
         let (mean, var) = if !train {
             (rm, rv)
         } else {
@@ -152,12 +185,13 @@ impl DeviceRenorm {
             let corrected = if steps >= c.warmup {
                 let running_std = rv.affine(1.0, c.eps)?.sqrt()?;
                 let std = var.detach().affine(1.0, c.eps)?.sqrt()?;
-                let r = (std / &running_std)?.clamp(1.0 / c.r_max, c.r_max)?;
-                let d = mean.detach().broadcast_sub(&rm)?.broadcast_div(&running_std)?.clamp(-c.d_max, c.d_max)?;
+                let r = clamp(&(std / &running_std)?, (1.0 / c.r_max) as f32, c.r_max as f32)?;
+                let d = mean.detach().broadcast_sub(&rm)?.broadcast_div(&running_std)?;
+                let d = clamp(&d, -c.d_max as f32, c.d_max as f32)?;
                 let corrected_var = var.broadcast_div(&r.sqr()?)?;
                 // sqrt's gradient is infinite at a constant column's zero variance, where the fused
                 // node takes the term's gradient as zero; flooring the variance does the same
-                let std = var.clamp(1e-30f32, f32::MAX)?.sqrt()?;
+                let std = var.broadcast_maximum(&constant(1e-30, var.device())?)?.sqrt()?;
                 let corrected_mean = (&mean - (d * std / &r)?)?;
                 (corrected_mean, corrected_var)
             } else {
@@ -187,7 +221,7 @@ impl DeviceRenorm {
 pub(crate) fn squashed_sample(out: &Tensor, eps: &Tensor, correction: TanhCorrection) -> Result<(Tensor, Tensor)> {
     let a = out.dim(1)? / 2;
     let mean = out.narrow(1, 0, a)?;
-    let log_std = out.narrow(1, a, a)?.clamp(LOG_STD_MIN as f32, LOG_STD_MAX as f32)?;
+    let log_std = clamp(&out.narrow(1, a, a)?, LOG_STD_MIN as f32, LOG_STD_MAX as f32)?;
     let u = (mean + (log_std.exp()? * eps)?)?;
     let half_log_2pi = 0.5 * (2.0 * std::f64::consts::PI).ln();
     let gaussian = (eps.sqr()?.affine(-0.5, -half_log_2pi)? - &log_std)?;

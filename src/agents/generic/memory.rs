@@ -5,7 +5,8 @@ use rand_chacha::ChaCha8Rng;
 
 use crate::agents::buffer::{Batch, ReplayBuffer};
 use crate::agents::config::{Algo, TrainConfig};
-use crate::agents::{Agent, Losses, OffPolicyAgent};
+use crate::agents::ppo::{PolicyStep, PpoBatch, PpoLosses};
+use crate::agents::{Agent, Losses, OffPolicyAgent, OnPolicyAgent};
 use crate::numeric::optim::Optimizer;
 
 /// What an out-of-memory error names: `crossq with actor 256-256, critics 2048-2048, batch 256 on cuda:0`.
@@ -34,13 +35,13 @@ pub(crate) fn explain(e: candle_core::Error, what: &str) -> candle_core::Error {
     }
 }
 
-/// A device-generic agent whose errors go through [`explain`].
-pub(crate) struct Explained {
-    pub inner: Box<dyn OffPolicyAgent>,
+/// A device-generic agent (off- or on-policy) whose errors go through [`explain`].
+pub(crate) struct Explained<A: ?Sized> {
+    pub inner: Box<A>,
     pub what: String,
 }
 
-impl Agent for Explained {
+impl<A: Agent + ?Sized> Agent for Explained<A> {
     fn algo(&self) -> Algo {
         self.inner.algo()
     }
@@ -74,13 +75,39 @@ impl Agent for Explained {
     }
 }
 
-impl OffPolicyAgent for Explained {
+impl OffPolicyAgent for Explained<dyn OffPolicyAgent> {
     fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
         self.inner.update(batch, rng).map_err(|e| explain(e, &self.what))
     }
 
     fn fit_observations(&mut self, buffer: &ReplayBuffer) -> Result<()> {
         self.inner.fit_observations(buffer).map_err(|e| explain(e, &self.what))
+    }
+}
+
+impl OnPolicyAgent for Explained<dyn OnPolicyAgent> {
+    fn observe(&mut self, raw: &[Vec<f64>]) -> Result<()> {
+        self.inner.observe(raw)
+    }
+
+    fn normalize(&self, raw: &[Vec<f64>]) -> Result<Vec<f32>> {
+        self.inner.normalize(raw)
+    }
+
+    fn policy_step(&self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<PolicyStep> {
+        self.inner.policy_step(obs, rng).map_err(|e| explain(e, &self.what))
+    }
+
+    fn values(&self, obs: &[f32]) -> Result<Vec<f32>> {
+        self.inner.values(obs).map_err(|e| explain(e, &self.what))
+    }
+
+    fn anneal(&mut self, fraction: f64) {
+        self.inner.anneal(fraction)
+    }
+
+    fn learn(&mut self, batch: &PpoBatch) -> Result<PpoLosses> {
+        self.inner.learn(batch).map_err(|e| explain(e, &self.what))
     }
 }
 
@@ -110,7 +137,7 @@ mod tests {
         (cfg.hidden, cfg.batch_size) = (vec![16, 16], 8);
         let make = || make_generic_agent(&cfg, 5, 2, &mut ChaCha8Rng::seed_from_u64(1), &Device::Cpu).unwrap();
         let mut plain = make();
-        let mut wrapped = Explained { inner: make(), what: describe(&cfg, "cpu") };
+        let mut wrapped: Explained<dyn OffPolicyAgent> = Explained { inner: make(), what: describe(&cfg, "cpu") };
         let batch = Batch::new(8, 5, 2);
         let (mut r1, mut r2) = (ChaCha8Rng::seed_from_u64(2), ChaCha8Rng::seed_from_u64(2));
         assert_eq!(plain.update(&batch, &mut r1).unwrap(), wrapped.update(&batch, &mut r2).unwrap());

@@ -1,5 +1,5 @@
-//! The device-generic path: TD3, DDPG, SAC (v2) and CrossQ written with candle's own operations
-//! alone, so they run on any candle device: the CPU, or a CUDA GPU in a build with the `cuda`
+//! The device-generic path: TD3, DDPG, SAC (v2), CrossQ, the branching DQN and PPO written with
+//! candle's own operations alone, so they run on any candle device: the CPU, or a CUDA GPU in a build with the `cuda`
 //! feature (`--device cuda`). On the CPU the fused path ([`crate::numeric`]) stays the default; this
 //! path is its reference implementation, tested against it from the same weights and batches
 //! (`tests` below).
@@ -15,8 +15,10 @@ pub mod adam;
 pub mod check;
 mod crossq;
 mod dpg;
+mod dqn;
 mod layers;
 pub(crate) mod memory;
+mod ppo;
 mod sac;
 pub mod speed;
 #[cfg(test)]
@@ -28,13 +30,16 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::buffer::Batch;
 use super::config::{Algo, TrainConfig};
-use super::OffPolicyAgent;
+use super::{OffPolicyAgent, OnPolicyAgent};
 
 pub use crossq::GenericCrossq;
 pub use dpg::GenericDeterministic;
+pub use dqn::GenericDqn;
+pub use ppo::GenericPpo;
 pub use sac::GenericSac;
 
-/// The device-generic agent for `cfg`, initialised from `rng` exactly as the fused one is.
+/// The device-generic off-policy learner for `cfg`, initialised from `rng` exactly as the fused
+/// one is.
 pub fn make_generic_agent(
     cfg: &TrainConfig,
     obs_dim: usize,
@@ -46,12 +51,24 @@ pub fn make_generic_agent(
         Algo::Td3 | Algo::Ddpg => Box::new(GenericDeterministic::new(cfg, obs_dim, act_dim, rng, device)?),
         Algo::Sac => Box::new(GenericSac::new(cfg, obs_dim, act_dim, rng, device)?),
         Algo::Crossq => Box::new(GenericCrossq::new(cfg, obs_dim, act_dim, rng, device)?),
-        Algo::Ppo | Algo::Dqn => anyhow::bail!(
-            "{} has no device-generic path yet: train it with --device cpu (the generic path covers td3, ddpg, \
-             sac and crossq)",
-            cfg.algo.name()
-        ),
+        Algo::Dqn => Box::new(GenericDqn::new(cfg, obs_dim, act_dim, rng, device)?),
+        Algo::Ppo => anyhow::bail!("ppo learns from its own rollouts: build it with make_generic_on_policy"),
     })
+}
+
+/// The device-generic on-policy learner (PPO) for `cfg`, initialised from `rng` exactly as the
+/// fused one is.
+pub fn make_generic_on_policy(
+    cfg: &TrainConfig,
+    obs_dim: usize,
+    act_dim: usize,
+    rng: &mut ChaCha8Rng,
+    device: &Device,
+) -> anyhow::Result<Box<dyn OnPolicyAgent>> {
+    match cfg.algo {
+        Algo::Ppo => Ok(Box::new(GenericPpo::new(cfg, obs_dim, act_dim, rng, device)?)),
+        other => anyhow::bail!("{} learns from replay minibatches: build it with make_generic_agent", other.name()),
+    }
 }
 
 /// A batch on the device: one host-to-device copy of every column and of the update's noise.

@@ -4,11 +4,12 @@
 use std::time::Instant;
 
 use candle_core::{Device, Tensor};
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
-use super::{make_generic_agent, DeviceBatch};
-use crate::agents::{make_learner, Algo, Batch, TrainConfig};
+use super::{make_generic_agent, make_generic_on_policy, DeviceBatch};
+use crate::agents::ppo::PpoBatch;
+use crate::agents::{make_learner, Algo, Batch, OnPolicyAgent, PpoAgent, TrainConfig};
 
 /// Which implementation to time.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -22,9 +23,9 @@ pub enum Path {
 /// One measurement.
 #[derive(Debug, Clone)]
 pub struct Speed {
-    /// Updates per second over the timed stretch.
+    /// Updates per second over the timed stretch (for PPO: epochs per second).
     pub updates_per_s: f64,
-    /// Updates timed.
+    /// Updates timed (for PPO: epochs, each a pass over a rollout in minibatches).
     pub updates: u64,
     /// Microseconds per batch upload (one host-to-device copy, then a read-back of one value
     /// to wait for it); 0 for the fused path, which copies nothing.
@@ -32,7 +33,8 @@ pub struct Speed {
 }
 
 /// Times `cfg`'s updates for about `seconds` after `warmup` untimed ones, on HalfCheetah-sized
-/// inputs (`obs`, `act`).
+/// inputs (`obs`, `act`). PPO's unit is an epoch: one pass over a rollout of `num_steps` samples
+/// in minibatches of `batch_size` (SB3's `n_steps` and `batch_size`).
 pub fn measure(
     cfg: &TrainConfig,
     obs: usize,
@@ -42,6 +44,9 @@ pub fn measure(
     warmup: usize,
     seconds: f64,
 ) -> anyhow::Result<Speed> {
+    if cfg.algo == Algo::Ppo {
+        return measure_ppo(cfg, obs, act, path, device, seconds);
+    }
     let mut init = ChaCha8Rng::seed_from_u64(0);
     let mut agent = match path {
         Path::Fused => make_learner(cfg, obs, act, &mut init)?,
@@ -75,6 +80,53 @@ pub fn measure(
     Ok(Speed { updates_per_s, updates, upload_us })
 }
 
+fn measure_ppo(
+    cfg: &TrainConfig,
+    obs: usize,
+    act: usize,
+    path: Path,
+    device: &Device,
+    seconds: f64,
+) -> anyhow::Result<Speed> {
+    let mut init = ChaCha8Rng::seed_from_u64(0);
+    let mut agent: Box<dyn OnPolicyAgent> = match path {
+        Path::Fused => Box::new(PpoAgent::new(cfg, obs, act, &mut init)?),
+        Path::Generic => make_generic_on_policy(cfg, obs, act, &mut init, device)?,
+    };
+    let mut rng = ChaCha8Rng::seed_from_u64(1);
+    let rollout = cfg.ppo().num_steps;
+    let minibatches: Vec<PpoBatch> = (0..rollout.div_ceil(cfg.batch_size))
+        .map(|_| {
+            let observations: Vec<f32> = (0..cfg.batch_size * obs).map(|_| rng.random_range(-1.0f32..1.0)).collect();
+            let step = agent.policy_step(&observations, &mut rng)?;
+            let advantages: Vec<f32> = (0..cfg.batch_size).map(|_| rng.random_range(-1.0f32..1.0)).collect();
+            let returns = step.values.iter().zip(&advantages).map(|(v, a)| v + a).collect();
+            Ok(PpoBatch {
+                obs: observations,
+                actions: step.actions,
+                log_probs: step.log_probs,
+                advantages,
+                returns,
+                values: step.values,
+            })
+        })
+        .collect::<anyhow::Result<_>>()?;
+    let epoch = |agent: &mut Box<dyn OnPolicyAgent>| -> anyhow::Result<()> {
+        for b in &minibatches {
+            agent.learn(b)?;
+        }
+        Ok(())
+    };
+    epoch(&mut agent)?;
+    let start = Instant::now();
+    let mut epochs = 0u64;
+    while start.elapsed().as_secs_f64() < seconds {
+        epoch(&mut agent)?;
+        epochs += 1;
+    }
+    Ok(Speed { updates_per_s: epochs as f64 / start.elapsed().as_secs_f64(), updates: epochs, upload_us: 0.0 })
+}
+
 /// Microseconds per read-back of one value already on the device (the floor under any
 /// synchronisation).
 pub fn readback_us(device: &Device) -> anyhow::Result<f64> {
@@ -92,6 +144,10 @@ pub fn sized_config(algo: Algo, hidden: &[usize], critic_hidden: Option<&[usize]
     let mut cfg = TrainConfig::defaults(algo);
     cfg.hidden = hidden.to_vec();
     cfg.batch_size = batch;
+    if let Some(p) = cfg.ppo.as_mut() {
+        // SB3's PPO defaults: rollouts of 2048 steps from one env
+        (p.num_envs, p.num_steps) = (1, 2048);
+    }
     if let (Some(c), Some(w)) = (cfg.crossq.as_mut(), critic_hidden) {
         c.critic_hidden = w.to_vec();
     }

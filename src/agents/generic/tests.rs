@@ -4,7 +4,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::check::{compare, config, tolerance, ACT, OBS, UPDATES};
-use super::make_generic_agent;
+use super::{make_generic_agent, make_generic_on_policy};
 use crate::agents::{make_agent, make_learner, Algo, TrainConfig};
 
 fn check(algo: Algo) {
@@ -42,20 +42,27 @@ fn crossq_generic_path_follows_the_fused_one() {
 }
 
 #[test]
-fn generic_path_refuses_what_it_does_not_cover() {
-    for algo in [Algo::Ppo, Algo::Dqn] {
-        let err =
-            make_generic_agent(&TrainConfig::defaults(algo), OBS, ACT, &mut ChaCha8Rng::seed_from_u64(1), &Device::Cpu)
-                .err()
-                .unwrap()
-                .to_string();
-        assert!(err.contains("no device-generic path") && err.contains("--device cpu"), "{err}");
-    }
+fn dqn_generic_path_follows_the_fused_one() {
+    check(Algo::Dqn);
+}
+
+#[test]
+fn ppo_generic_path_follows_the_fused_one() {
+    check(Algo::Ppo);
+}
+
+#[test]
+fn each_builder_refuses_the_other_kind_of_learner() {
+    let rng = &mut ChaCha8Rng::seed_from_u64(1);
+    let err = make_generic_agent(&TrainConfig::defaults(Algo::Ppo), OBS, ACT, rng, &Device::Cpu).err().unwrap();
+    assert!(err.to_string().contains("ppo learns from its own rollouts"), "{err}");
+    let err = make_generic_on_policy(&TrainConfig::defaults(Algo::Sac), OBS, ACT, rng, &Device::Cpu).err().unwrap();
+    assert!(err.to_string().contains("sac learns from replay minibatches"), "{err}");
 }
 
 #[test]
 fn acting_agrees_with_the_fused_path() {
-    for algo in [Algo::Td3, Algo::Sac, Algo::Crossq] {
+    for algo in [Algo::Td3, Algo::Sac, Algo::Crossq, Algo::Dqn] {
         let cfg = config(algo);
         let fused = make_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(2)).unwrap();
         let mut generic = make_generic_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(2), &Device::Cpu).unwrap();
@@ -74,7 +81,7 @@ fn acting_agrees_with_the_fused_path() {
 fn a_fused_checkpoints_state_continues_on_the_generic_path() {
     // What a checkpoint holds (parameters by name, optimiser moments by name, counters) moves
     // from the fused agent into the generic one, which then updates as the fused one does.
-    for algo in [Algo::Td3, Algo::Sac, Algo::Crossq] {
+    for algo in [Algo::Td3, Algo::Sac, Algo::Crossq, Algo::Dqn] {
         let cfg = config(algo);
         let mut fused = make_learner(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(21)).unwrap();
         // another seed: every weight must come from the fused agent's state
