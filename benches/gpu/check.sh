@@ -1,11 +1,14 @@
 #!/usr/bin/env bash
 # The GPU check (docs/gpu.md), one command of at most 8 minutes on a machine with an NVIDIA GPU:
-#   1. the device-generic path on CUDA against the fused CPU path (locobench device check);
+#   1. the device-generic path on CUDA against the fused CPU path, all six algorithms
+#      (locobench device check);
 #   2. update speed, locobench on the GPU beside Stable-Baselines3 on the same GPU in the same run
-#      (TD3 400-300, SAC 256-256, CrossQ critics 256 / 1024 / 2048, a PPO epoch for SB3), and the
-#      launch floor (CrossQ at width 8, batch 8);
-#   3. same seed, same metrics on the GPU, and an exact resume;
-#   4. CrossQ with 2048-wide critics on HalfCheetah until DEADLINE (seconds since the epoch; by
+#      (TD3 400-300, SAC 256-256, CrossQ critics 256 / 1024 / 2048, a PPO epoch), and the launch
+#      floor (CrossQ at width 8, batch 8); with BASELINE_LOCOBENCH set, the CrossQ rows again
+#      from that (earlier) build, so that a change to the path is timed against what it replaced;
+#   3. same seed, same metrics on the GPU, and an exact resume (CrossQ and PPO);
+#   4. a shipped policy evaluated with its networks on the GPU and on the CPU;
+#   5. CrossQ with 2048-wide critics on HalfCheetah until DEADLINE (seconds since the epoch; by
 #      default 8 minutes after the start) less a margin.
 # Usage, from the repository root:  bash benches/gpu/check.sh OUT_DIR
 # Needs: a CUDA build (scripts/build-cuda.sh) at $LOCOBENCH (default target/cuda/release/locobench);
@@ -46,7 +49,22 @@ speed() { "$bin" device speed --device "$device" --seconds "$speed_seconds" "$@"
     speed --algo sac --hidden 256,256
     for w in 256 1024 2048; do speed --algo crossq --hidden 256,256 --critic-hidden $w,$w; done
     speed --algo crossq --hidden 8,8 --critic-hidden 8,8 --batch 8
+    speed --algo ppo --hidden 64,64 --batch 64
 } | tee "$out/locobench-updates.csv"
+if [ -n "${BASELINE_LOCOBENCH:-}" ]; then
+    log "2b. the same CrossQ rows from the baseline build $BASELINE_LOCOBENCH"
+    {
+        echo "# the baseline build: $("$BASELINE_LOCOBENCH" --version 2>&1 | head -1)"
+        first=--header
+        for w in 256 2048; do
+            "$BASELINE_LOCOBENCH" device speed --device "$device" --seconds "$speed_seconds" --algo crossq --hidden 256,256 \
+                --critic-hidden $w,$w $first
+            first=
+        done
+        "$BASELINE_LOCOBENCH" device speed --device "$device" --seconds "$speed_seconds" --algo crossq --hidden 8,8 \
+            --critic-hidden 8,8 --batch 8
+    } | tee "$out/baseline-updates.csv"
+fi
 timeout 150 python3 benches/sb3/sb3_updates.py "${device%%:*}" "$speed_seconds" | tee "$out/sb3-updates.csv"
 
 log "3. same seed, same metrics; exact resume"
@@ -65,10 +83,29 @@ strip() { cut -d, -f1-9,12- "$1/metrics.csv"; }
     cmp -s <(strip "$out/tmp-a") <(strip "$out/tmp-c") && echo "stopped at 1250 and resumed,yes" || echo "stopped at 1250 and resumed,no"
 } | tee "$out/determinism.csv"
 diff <(strip "$out/tmp-a") <(strip "$out/tmp-b") | head -5
+# PPO: Hopper, three copies, rollouts of 300 steps, checkpoints every 600 (rollout boundaries);
+# no learning-rate annealing, so that the shorter first stretch anneals as the whole run does
+ppo="--env hopper --algo ppo --seed 0 --device $device --quiet
+     --set num_envs=3,num_steps=100,num_minibatches=4,update_epochs=2,anneal_lr=false,eval_every=600,eval_episodes=2,checkpoint_every=600"
+"$bin" train $ppo --steps 2400 --out "$out/tmp-pa" >/dev/null &&
+    "$bin" train $ppo --steps 2400 --out "$out/tmp-pb" >/dev/null &&
+    "$bin" train $ppo --steps 1200 --out "$out/tmp-pc" >/dev/null &&
+    "$bin" train --resume "$out/tmp-pc" --steps 2400 --device "$device" --quiet >/dev/null
+{
+    cmp -s <(strip "$out/tmp-pa") <(strip "$out/tmp-pb") && echo "ppo: same seed twice,yes" || echo "ppo: same seed twice,no"
+    cmp -s <(strip "$out/tmp-pa") <(strip "$out/tmp-pc") && echo "ppo: stopped at 1200 and resumed,yes" || echo "ppo: stopped at 1200 and resumed,no"
+} | tee -a "$out/determinism.csv"
+
+log "4. shipped policies, their networks on $device and on the cpu"
+for p in minitaur-ppo minitaur-td3; do
+    for d in cpu "$device"; do
+        "$bin" eval --policy models/policies/$p --episodes 10 --device "$d" 2>&1 | sed "s/^/$d: /"
+    done
+done | tee "$out/eval-devices.txt"
 
 train_seconds=$((deadline - $(date +%s) - 30))
 [ "$train_seconds" -lt 30 ] && train_seconds=30
-log "4. crossq, critics $width-$width, half-cheetah, ${train_seconds} s"
+log "5. crossq, critics $width-$width, half-cheetah, ${train_seconds} s"
 run="$out/tmp-crossq$width"
 timeout -k 40 -s INT "$train_seconds" "$bin" train --env half-cheetah --algo crossq --seed 0 --device "$device" --quiet \
     --set "critic_hidden=[$width,$width]" --steps 1000000 --out "$run" >/dev/null
