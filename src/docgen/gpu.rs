@@ -73,6 +73,31 @@ pub(crate) fn speed(results: &Path) -> Result<String> {
             first.num("readback_us")
         );
     }
+    let baseline_path = ours_path.with_file_name("baseline-updates.csv");
+    let mut baseline = String::new();
+    if baseline_path.is_file() {
+        let before = read(&baseline_path)?;
+        baseline += "\nThe same rows in the same run from the baseline build (the previous version of the path; \
+                `BASELINE_LOCOBENCH`, benches/gpu/check.sh):\n\n| algorithm | critics | batch | baseline, updates/s | \
+                this build, updates/s | speed-up |\n|---|---|---|---|---|---|\n";
+        for b in &before {
+            let now = ours.iter().find(|r| {
+                r.text("algo") == b.text("algo") && widths(r) == widths(b) && r.text("batch") == b.text("batch")
+            });
+            if let Some(r) = now {
+                let _ = writeln!(
+                    baseline,
+                    "| {} | {} | {} | {:.0} | {:.0} | {:.2}x |",
+                    b.text("algo"),
+                    b.text("critic_hidden"),
+                    b.text("batch"),
+                    b.num("updates_per_s"),
+                    r.num("updates_per_s"),
+                    r.num("updates_per_s") / b.num("updates_per_s")
+                );
+            }
+        }
+    }
     if let Some(f) = floor {
         let _ = write!(
             out,
@@ -83,7 +108,7 @@ pub(crate) fn speed(results: &Path) -> Result<String> {
             f.num("updates_per_s")
         );
     }
-    Ok(out + "\n")
+    Ok(out + "\n" + &baseline)
 }
 
 /// The generic path against the fused one on the GPU, and same-seed determinism there.
@@ -107,8 +132,9 @@ pub(crate) fn check(results: &Path) -> Result<String> {
     }
     let det = path.with_file_name("determinism.csv");
     if det.is_file() {
-        out += "\nSame seed, same numbers on that GPU (CrossQ, critics 2048-2048, HalfCheetah; short runs, step 3 of \
-                benches/gpu/check.sh):\n\n";
+        out +=
+            "\nSame seed, same numbers on that GPU (short runs, step 3 of benches/gpu/check.sh: CrossQ with critics \
+                2048-2048 on HalfCheetah, PPO on Hopper):\n\n";
         for r in read(&det)? {
             let _ = writeln!(out, "- {}: metrics rows identical: {}", r.text("what"), r.text("identical_metrics_rows"));
         }
