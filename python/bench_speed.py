@@ -5,8 +5,12 @@
 Per env: (1) locobench through gymnasium.make (wrappers, NumPy conversions), (2) the same env's
 raw binding call per step (one Python-to-Rust crossing), (3) the same steps looped in Rust (no
 crossing), (4) Gymnasium's own v5 env (MuJoCo 4.0 from PyPI) through gymnasium.make, and (5) the
-vector env (8 copies, the class gymnasium.make_vec builds) on one thread and on two. The
-binding's overhead per step is (2) - (3). Zero actions; episodes reset when they end.
+vector env (8 copies, the class gymnasium.make_vec builds) on one thread and on two, and (6) the
+same vector env's steps looped in Rust on one thread and on two: the gain a second thread can
+give on this machine, which (5) approaches as the Python side of a step shrinks; (7) the vector
+env's former step, which batched one info dict per copy through Gymnasium's `_add_info`. (5), (6)
+and (7) take turns, the median of seven rounds each. The binding's
+overhead per step is (2) - (3). Zero actions; episodes reset when they end.
 """
 import os
 import platform
@@ -22,11 +26,16 @@ import locobench
 ENVS = [("half-cheetah", "HalfCheetah-v5"), ("hopper", "Hopper-v5"), ("ant", "Ant-v5"), ("minitaur", None)]
 
 
-def rate(step, n):
+def rate(step, n, rounds=3):
+    """Steps per second, the best of `rounds` rounds of `n` steps (a shared machine's noise only
+    ever slows a round down)."""
     step(n // 10)  # warm up
-    start = time.perf_counter()
-    step(n)
-    return n / (time.perf_counter() - start)
+    best = 0.0
+    for _ in range(rounds):
+        start = time.perf_counter()
+        step(n)
+        best = max(best, n / (time.perf_counter() - start))
+    return best
 
 
 def gym_loop(env):
@@ -66,16 +75,40 @@ def rust_loop(env):
 VEC_COPIES = 8
 
 
-def vec_loop(name, threads):
+def vec_loop(name, threads, dicts=False):
+    """The vector env's step; with `dicts`, the step that batches one info dict per copy through
+    Gymnasium's `_add_info` (what the vector env did before it built its infos from columns)."""
     envs = locobench.LocobenchVectorEnv(name, VEC_COPIES, threads=threads)
     actions = np.zeros(envs.action_space.shape, dtype=np.float32)
     envs.reset(seed=0)
+    step = envs._step_with_dicts if dicts else envs.step
 
     def run(n):
         for _ in range(n // VEC_COPIES):
-            envs.step(actions)
+            step(actions)
 
     return run
+
+
+def interleaved(loops, n, rounds=7):
+    """Steps per second of each loop, the median of `rounds` rounds of `n` steps, the loops taking
+    turns within a round so that a slow stretch of a shared machine falls on all of them alike."""
+    for loop in loops:
+        loop(n // 10)
+    rates = [[] for _ in loops]
+    for _ in range(rounds):
+        for i, loop in enumerate(loops):
+            start = time.perf_counter()
+            loop(n)
+            rates[i].append(n / (time.perf_counter() - start))
+    return [float(np.median(r)) for r in rates]
+
+
+def vec_rust_loop(name, threads):
+    envs = locobench.LocobenchVectorEnv(name, VEC_COPIES, threads=threads)
+    actions = [[0.0] * envs.single_action_space.shape[0]] * VEC_COPIES
+    envs.reset(seed=0)
+    return lambda n: envs._core.step_repeat(actions, n // VEC_COPIES)
 
 
 def cpu():
@@ -96,7 +129,9 @@ def main():
     print(f"# machine: {cpu()} ({simd}), {os.cpu_count()} cores; commit {commit}; python {platform.python_version()}, "
           f"gymnasium {gym.__version__}; command: python python/bench_speed.py {steps}" + (f"; {note}" if note else ""))
     print("env,locobench_gym_steps_per_s,locobench_raw_steps_per_s,locobench_rust_steps_per_s,binding_overhead_us,"
-          "gymnasium_steps_per_s,vec8_1_thread_steps_per_s,vec8_2_threads_steps_per_s")
+          "gymnasium_steps_per_s,vec8_1_thread_steps_per_s,vec8_2_threads_steps_per_s,"
+          "vec8_rust_1_thread_steps_per_s,vec8_rust_2_threads_steps_per_s,"
+          "vec8_dicts_1_thread_steps_per_s,vec8_dicts_2_threads_steps_per_s")
     for name, gym_id in ENVS:
         ours = gym.make(locobench.ENV_IDS[name])
         g = rate(gym_loop(ours), steps)
@@ -104,8 +139,11 @@ def main():
         rust = rate(rust_loop(ours), steps)
         overhead = (1 / raw - 1 / rust) * 1e6
         theirs = rate(gym_loop(gym.make(gym_id)), steps) if gym_id else float("nan")
-        vec1, vec2 = (rate(vec_loop(name, t), steps) for t in (1, 2))
-        print(f"{name},{g:.0f},{raw:.0f},{rust:.0f},{overhead:.2f},{theirs:.0f},{vec1:.0f},{vec2:.0f}")
+        loops = [vec_loop(name, t) for t in (1, 2)] + [vec_rust_loop(name, t) for t in (1, 2)]
+        loops += [vec_loop(name, t, dicts=True) for t in (1, 2)]
+        vec1, vec2, rust1, rust2, dicts1, dicts2 = interleaved(loops, steps)
+        print(f"{name},{g:.0f},{raw:.0f},{rust:.0f},{overhead:.2f},{theirs:.0f},{vec1:.0f},{vec2:.0f},"
+              f"{rust1:.0f},{rust2:.0f},{dicts1:.0f},{dicts2:.0f}")
 
 
 if __name__ == "__main__":

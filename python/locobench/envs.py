@@ -68,7 +68,7 @@ def _float64_actions(actions, shape, what, hint=""):
         raise TypeError(f"{what} dtype {a.dtype} is not numeric")
     if a.shape != shape:
         raise ValueError(f"{what} shape {a.shape}, expected {shape}{hint}")
-    return a.astype(np.float64)
+    return a.astype(np.float64, copy=False)
 
 
 class LocobenchEnv(gym.Env):

@@ -78,6 +78,14 @@ class LocobenchVectorEnv(VectorEnv):
 
     def step(self, actions):
         a = _float64_actions(actions, self.action_space.shape, "actions", " (num_envs, action dim)")
+        s = self._core.step_arrays(np.ascontiguousarray(a))
+        if s is not None:
+            return s["observations"], s["rewards"], s["terminated"], s["truncated"], _vector_infos(s)
+        return self._step_with_dicts(a)
+
+    def _step_with_dicts(self, a):
+        """The step for copies whose infos differ in their keys: one dict per copy, batched by
+        Gymnasium's ``_add_info``."""
         obs, rewards, terminated, truncated, final_obs, step_infos = self._core.step(a.tolist())
         infos = {}
         for i, info in enumerate(step_infos):
@@ -96,3 +104,51 @@ class LocobenchVectorEnv(VectorEnv):
 
     def render(self):
         return None
+
+
+def _vector_infos(s):
+    """The infos ``_add_info`` would build from each copy's info dict (same keys, masks, values
+    and dtypes), made from the step's columns: a copy whose episode ended has its last info under
+    ``final_info`` and its last observation under ``final_obs``; the others' infos are at the top."""
+    ended = s["ended"]
+    infos = {}
+    if not ended.all():
+        _masked_info(infos, s, ~ended)
+    if ended.any():
+        final_obs = np.full(len(ended), None, dtype=object)
+        for i in np.flatnonzero(ended):
+            final_obs[i] = s["final_observations"][i]
+        infos["final_obs"] = final_obs
+        infos["_final_obs"] = ended.copy()
+        infos["final_info"] = _masked_info({}, s, ended)
+        infos["_final_info"] = ended.copy()
+    return infos
+
+
+def _masked_info(out, s, mask):
+    every = mask.all()
+
+    def column(values):
+        return values.copy() if every else np.where(mask, values, np.zeros((), values.dtype))
+
+    for key, names, table in (("reward_terms", s["term_names"], s["reward_terms"]), ("metrics", s["metric_names"], s["metrics"])):
+        group = {}
+        for j, name in enumerate(names):
+            group[name] = column(table[:, j])
+            group["_" + name] = mask.copy()
+        out[key] = group
+        out["_" + key] = mask.copy()
+    out["clipped_actions"] = column(s["clipped_actions"])
+    out["_clipped_actions"] = mask.copy()
+    out["unstable"] = column(s["unstable"])
+    out["_unstable"] = mask.copy()
+    warned = [i for i, w in enumerate(s["warnings"]) if w and mask[i]]
+    if warned:
+        warnings = np.full(len(mask), None, dtype=object)
+        has = np.zeros(len(mask), dtype=bool)
+        for i in warned:
+            warnings[i] = s["warnings"][i]
+            has[i] = True
+        out["warnings"] = warnings
+        out["_warnings"] = has
+    return out

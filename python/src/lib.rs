@@ -9,6 +9,7 @@ use locobench::controller::command::{Command, SpeedProfile};
 use locobench::envs::{env_names, make, reward_weight_option, EnvConfig, VecEnv};
 use locobench::policy::Policy;
 use locobench::runtime::Runtime;
+use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2};
 use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -215,6 +216,86 @@ impl PyVecEnv {
         let infos = s.infos.iter().map(|info| info_dict(py, info, false)).collect::<PyResult<Vec<_>>>()?;
         Ok((s.observations, s.rewards, s.terminated, s.truncated, s.final_observations, infos))
     }
+
+    /// Steps every copy `n` times with the same actions in Rust, without crossing into Python
+    /// between steps (what `python/bench_speed.py` compares the Python vector env against).
+    fn step_repeat(&self, py: Python<'_>, actions: Vec<Vec<f64>>, n: usize) -> PyResult<()> {
+        let envs = &self.envs;
+        py.detach(|| {
+            let mut envs = envs.lock().unwrap_or_else(|p| p.into_inner());
+            (0..n).try_for_each(|_| envs.step(&actions).map(|_| ()))
+        })
+        .map_err(value_error)
+    }
+
+    /// `step` with NumPy arrays in (`actions`, `[copies, action dim]`) and out, and the infos as
+    /// columns over the copies; None where the copies' infos do not share their term and metric
+    /// names (the caller then uses `step`). What the Python vector env steps with: it builds
+    /// few Python objects, so little of a step holds the GIL.
+    fn step_arrays<'py>(
+        &self,
+        py: Python<'py>,
+        actions: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<Option<VecStepArrays<'py>>> {
+        let actions: Vec<Vec<f64>> = actions.as_array().rows().into_iter().map(|r| r.to_vec()).collect();
+        let envs = &self.envs;
+        let s = py.detach(|| envs.lock().unwrap_or_else(|p| p.into_inner()).step(&actions)).map_err(value_error)?;
+        let n = s.rewards.len();
+        let first = &s.infos[0];
+        let names = |pairs: &[(&'static str, f64)]| pairs.iter().map(|(k, _)| *k).collect::<Vec<_>>();
+        let (term_names, metric_names) = (names(&first.reward_terms), names(&first.metrics));
+        if s.infos.iter().any(|i| names(&i.reward_terms) != term_names || names(&i.metrics) != metric_names) {
+            return Ok(None);
+        }
+        let table = |pick: fn(&locobench::envs::Info) -> &[(&'static str, f64)], width: usize| {
+            let flat: Vec<f64> = s.infos.iter().flat_map(|i| pick(i).iter().map(|(_, v)| *v)).collect();
+            PyArray1::from_vec(py, flat).reshape([n, width])
+        };
+        let obs_dim = s.observations.first().map_or(0, Vec::len);
+        let flat_obs: Vec<f64> = s.observations.into_iter().flatten().collect();
+        Ok(Some(VecStepArrays {
+            observations: PyArray1::from_vec(py, flat_obs).reshape([n, obs_dim])?,
+            rewards: PyArray1::from_vec(py, s.rewards),
+            terminated: PyArray1::from_vec(py, s.terminated),
+            truncated: PyArray1::from_vec(py, s.truncated),
+            ended: PyArray1::from_iter(py, s.final_observations.iter().map(Option::is_some)),
+            final_observations: s
+                .final_observations
+                .into_iter()
+                .map(|o| o.map(|o| PyArray1::from_vec(py, o)))
+                .collect(),
+            reward_terms: table(|i| &i.reward_terms, term_names.len())?,
+            term_names,
+            metrics: table(|i| &i.metrics, metric_names.len())?,
+            metric_names,
+            clipped_actions: PyArray1::from_iter(py, s.infos.iter().map(|i| i.clipped_actions as i64)),
+            unstable: PyArray1::from_iter(py, s.infos.iter().map(|i| i.unstable)),
+            warnings: s.infos.iter().map(|i| i.warnings.clone()).collect(),
+        }))
+    }
+}
+
+/// A vector step as arrays (`PyVecEnv::step_arrays`), the infos as columns over the copies.
+#[derive(IntoPyObject)]
+struct VecStepArrays<'py> {
+    observations: Bound<'py, PyArray2<f64>>,
+    rewards: Bound<'py, PyArray1<f64>>,
+    terminated: Bound<'py, PyArray1<bool>>,
+    truncated: Bound<'py, PyArray1<bool>>,
+    /// The copies whose episode ended this step.
+    ended: Bound<'py, PyArray1<bool>>,
+    /// The ended episodes' last observations (None for the other copies).
+    final_observations: Vec<Option<Bound<'py, PyArray1<f64>>>>,
+    /// `[copies, terms]`, in `term_names` order.
+    reward_terms: Bound<'py, PyArray2<f64>>,
+    term_names: Vec<&'static str>,
+    /// `[copies, metrics]`, in `metric_names` order.
+    metrics: Bound<'py, PyArray2<f64>>,
+    metric_names: Vec<&'static str>,
+    clipped_actions: Bound<'py, PyArray1<i64>>,
+    unstable: Bound<'py, PyArray1<bool>>,
+    /// Each copy's MuJoCo warnings (empty where none).
+    warnings: Vec<Vec<String>>,
 }
 
 /// The reset seed of episode `episode` of copy `copy` after a vector reset with `seed`.

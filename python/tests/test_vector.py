@@ -71,6 +71,43 @@ def test_each_copy_is_the_single_env_with_its_episode_seeds():
                 assert info["final_info"]["_reward_terms"][i]
 
 
+def assert_same_infos(ours, theirs, path="infos"):
+    assert set(ours) == set(theirs), f"{path}: keys {sorted(ours)} vs {sorted(theirs)}"
+    for key in theirs:
+        a, b = ours[key], theirs[key]
+        if isinstance(b, dict):
+            assert_same_infos(a, b, f"{path}[{key!r}]")
+        else:
+            assert a.dtype == b.dtype and a.shape == b.shape, f"{path}[{key!r}]: {a.dtype}{a.shape} vs {b.dtype}{b.shape}"
+            for x, y in zip(a, b):
+                if isinstance(y, np.ndarray) or isinstance(x, np.ndarray):
+                    np.testing.assert_array_equal(x, y)
+                else:
+                    assert x == y, f"{path}[{key!r}]: {a} vs {b}"
+
+
+def test_infos_from_columns_equal_gymnasiums_batching_of_each_copys_dict():
+    """The step's infos, built from columns, are what Gymnasium's ``_add_info`` makes of the copies'
+    info dicts (same keys, masks, values and dtypes), with episodes ending in some copies (a
+    7-step time limit, staggered by a falling Hopper) and not in others."""
+    fast = locobench.LocobenchVectorEnv("hopper", num_envs=3, threads=2, max_episode_steps=7)
+    slow = locobench.LocobenchVectorEnv("hopper", num_envs=3, threads=2, max_episode_steps=7)
+    fast.reset(seed=4)
+    slow.reset(seed=4)
+    rng = np.random.default_rng(2)
+    ended_steps = 0
+    for _ in range(30):
+        a = rng.uniform(-1, 1, size=(3, 3))
+        out = fast.step(a)
+        ref = slow._step_with_dicts(a)
+        for x, y in zip(out[:4], ref[:4]):
+            np.testing.assert_array_equal(x, y)
+            assert x.dtype == y.dtype
+        assert_same_infos(out[4], ref[4])
+        ended_steps += "final_obs" in out[4]
+    assert 0 < ended_steps < 30
+
+
 def test_same_numbers_on_one_thread_and_two():
     one = rollout(locobench.LocobenchVectorEnv("hopper", num_envs=4, threads=1), seed=5, steps=60)
     two = rollout(locobench.LocobenchVectorEnv("hopper", num_envs=4, threads=2), seed=5, steps=60)

@@ -133,6 +133,24 @@ pub(crate) fn python_speed(results: &Path) -> Result<String> {
             fixed(r.num("vec8_2_threads_steps_per_s"), 0),
         );
     }
+    if rows.iter().any(|r| r.num("vec8_rust_2_threads_steps_per_s").is_finite()) {
+        out += "\nThe vector env's gain from a second thread, beside the same vector env looped in Rust (what a \
+                second thread can give on that machine) and beside its former step, which batched one info dict \
+                per copy through Gymnasium's `_add_info`; the three took turns, the median of seven rounds each:\n\n\
+                | env | vector env, 2 threads / 1 | looped in Rust, 2 threads / 1 | former step, 2 threads / 1 | vector env / former step, 2 threads |\n|---|---|---|---|---|\n";
+        for r in &rows {
+            let gain = |two: &str, one: &str| r.num(two) / r.num(one);
+            let _ = writeln!(
+                out,
+                "| {} | {:.2}x | {:.2}x | {:.2}x | {:.2}x |",
+                r.text("env"),
+                gain("vec8_2_threads_steps_per_s", "vec8_1_thread_steps_per_s"),
+                gain("vec8_rust_2_threads_steps_per_s", "vec8_rust_1_thread_steps_per_s"),
+                gain("vec8_dicts_2_threads_steps_per_s", "vec8_dicts_1_thread_steps_per_s"),
+                gain("vec8_2_threads_steps_per_s", "vec8_dicts_2_threads_steps_per_s"),
+            );
+        }
+    }
     Ok(out)
 }
 
