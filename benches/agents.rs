@@ -12,7 +12,7 @@ use std::time::Duration;
 
 use criterion::{criterion_group, criterion_main, Criterion, Throughput};
 use locobench::agents::ppo::PpoBatch;
-use locobench::agents::{make_learner, Agent, Algo, Batch, PpoAgent, ReplayBuffer, TrainConfig};
+use locobench::agents::{make_learner, Agent, Algo, Batch, OnPolicyAgent, PpoAgent, ReplayBuffer, TrainConfig};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 

@@ -78,10 +78,22 @@ class LocobenchVectorEnv(VectorEnv):
 
     def step(self, actions):
         a = _float64_actions(actions, self.action_space.shape, "actions", " (num_envs, action dim)")
-        s = self._core.step_arrays(np.ascontiguousarray(a))
-        if s is not None:
-            return s["observations"], s["rewards"], s["terminated"], s["truncated"], _vector_infos(s)
-        return self._step_with_dicts(a)
+        s = self._core.step_arrays(a.tobytes())
+        if s is None:
+            return self._step_with_dicts(a)
+        n = self.num_envs
+        s["ended"] = np.frombuffer(s["ended"], dtype=bool)
+        s["reward_terms"] = np.frombuffer(s["reward_terms"], dtype=np.float64).reshape(n, -1)
+        s["metrics"] = np.frombuffer(s["metrics"], dtype=np.float64).reshape(n, -1)
+        s["clipped_actions"] = np.frombuffer(s["clipped_actions"], dtype=np.int64)
+        s["unstable"] = np.frombuffer(s["unstable"], dtype=bool)
+        return (
+            np.frombuffer(s["observations"], dtype=np.float64).reshape(n, -1),
+            np.frombuffer(s["rewards"], dtype=np.float64),
+            np.frombuffer(s["terminated"], dtype=bool),
+            np.frombuffer(s["truncated"], dtype=bool),
+            _vector_infos(s),
+        )
 
     def _step_with_dicts(self, a):
         """The step for copies whose infos differ in their keys: one dict per copy, batched by
@@ -117,7 +129,7 @@ def _vector_infos(s):
     if ended.any():
         final_obs = np.full(len(ended), None, dtype=object)
         for i in np.flatnonzero(ended):
-            final_obs[i] = s["final_observations"][i]
+            final_obs[i] = np.asarray(s["final_observations"][i], dtype=np.float64)
         infos["final_obs"] = final_obs
         infos["_final_obs"] = ended.copy()
         infos["final_info"] = _masked_info({}, s, ended)

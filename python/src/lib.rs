@@ -9,10 +9,9 @@ use locobench::controller::command::{Command, SpeedProfile};
 use locobench::envs::{env_names, make, reward_weight_option, EnvConfig, VecEnv};
 use locobench::policy::Policy;
 use locobench::runtime::Runtime;
-use numpy::{PyArray1, PyArray2, PyArrayMethods, PyReadonlyArray2};
 use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::PyDict;
+use pyo3::types::{PyByteArray, PyDict};
 
 fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
@@ -228,74 +227,91 @@ impl PyVecEnv {
         .map_err(value_error)
     }
 
-    /// `step` with NumPy arrays in (`actions`, `[copies, action dim]`) and out, and the infos as
-    /// columns over the copies; None where the copies' infos do not share their term and metric
-    /// names (the caller then uses `step`). What the Python vector env steps with: it builds
-    /// few Python objects, so little of a step holds the GIL.
-    fn step_arrays<'py>(
-        &self,
-        py: Python<'py>,
-        actions: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<Option<VecStepArrays<'py>>> {
-        let actions: Vec<Vec<f64>> = actions.as_array().rows().into_iter().map(|r| r.to_vec()).collect();
+    /// `step` with flat buffers in (`actions`: `[copies, action dim]` f64, native-endian) and out,
+    /// and the infos as columns over the copies; None where the copies' infos do not share their
+    /// term and metric names (the caller then uses `step`). What the Python vector env steps with:
+    /// it builds few Python objects, so little of a step holds the GIL.
+    fn step_arrays<'py>(&self, py: Python<'py>, actions: &[u8]) -> PyResult<Option<VecStepArrays<'py>>> {
+        let values: Vec<f64> =
+            actions.chunks_exact(8).map(|b| f64::from_ne_bytes(b.try_into().expect("8 bytes"))).collect();
         let envs = &self.envs;
-        let s = py.detach(|| envs.lock().unwrap_or_else(|p| p.into_inner()).step(&actions)).map_err(value_error)?;
-        let n = s.rewards.len();
+        let s = py
+            .detach(|| {
+                let mut envs = envs.lock().unwrap_or_else(|p| p.into_inner());
+                let width = envs.spec().action_space.dim();
+                let expected = envs.len() * width;
+                if actions.len() != 8 * expected {
+                    return Err(locobench::envs::EnvError::ActionLength { expected, got: actions.len() / 8 });
+                }
+                let rows: Vec<Vec<f64>> = values.chunks(width).map(<[f64]>::to_vec).collect();
+                envs.step(&rows)
+            })
+            .map_err(value_error)?;
         let first = &s.infos[0];
         let names = |pairs: &[(&'static str, f64)]| pairs.iter().map(|(k, _)| *k).collect::<Vec<_>>();
         let (term_names, metric_names) = (names(&first.reward_terms), names(&first.metrics));
         if s.infos.iter().any(|i| names(&i.reward_terms) != term_names || names(&i.metrics) != metric_names) {
             return Ok(None);
         }
-        let table = |pick: fn(&locobench::envs::Info) -> &[(&'static str, f64)], width: usize| {
-            let flat: Vec<f64> = s.infos.iter().flat_map(|i| pick(i).iter().map(|(_, v)| *v)).collect();
-            PyArray1::from_vec(py, flat).reshape([n, width])
+        let column = |pick: fn(&locobench::envs::Info) -> &[(&'static str, f64)]| {
+            f64_bytes(py, s.infos.iter().flat_map(|i| pick(i).iter().map(|(_, v)| *v)))
         };
-        let obs_dim = s.observations.first().map_or(0, Vec::len);
-        let flat_obs: Vec<f64> = s.observations.into_iter().flatten().collect();
         Ok(Some(VecStepArrays {
-            observations: PyArray1::from_vec(py, flat_obs).reshape([n, obs_dim])?,
-            rewards: PyArray1::from_vec(py, s.rewards),
-            terminated: PyArray1::from_vec(py, s.terminated),
-            truncated: PyArray1::from_vec(py, s.truncated),
-            ended: PyArray1::from_iter(py, s.final_observations.iter().map(Option::is_some)),
-            final_observations: s
-                .final_observations
-                .into_iter()
-                .map(|o| o.map(|o| PyArray1::from_vec(py, o)))
-                .collect(),
-            reward_terms: table(|i| &i.reward_terms, term_names.len())?,
+            observations: f64_bytes(py, s.observations.iter().flatten().copied()),
+            rewards: f64_bytes(py, s.rewards.iter().copied()),
+            terminated: bool_bytes(py, s.terminated.iter().copied()),
+            truncated: bool_bytes(py, s.truncated.iter().copied()),
+            ended: bool_bytes(py, s.final_observations.iter().map(Option::is_some)),
+            reward_terms: column(|i| &i.reward_terms),
             term_names,
-            metrics: table(|i| &i.metrics, metric_names.len())?,
+            metrics: column(|i| &i.metrics),
             metric_names,
-            clipped_actions: PyArray1::from_iter(py, s.infos.iter().map(|i| i.clipped_actions as i64)),
-            unstable: PyArray1::from_iter(py, s.infos.iter().map(|i| i.unstable)),
+            clipped_actions: PyByteArray::new(
+                py,
+                &s.infos.iter().flat_map(|i| (i.clipped_actions as i64).to_ne_bytes()).collect::<Vec<u8>>(),
+            ),
+            unstable: bool_bytes(py, s.infos.iter().map(|i| i.unstable)),
             warnings: s.infos.iter().map(|i| i.warnings.clone()).collect(),
+            final_observations: s.final_observations,
         }))
     }
 }
 
-/// A vector step as arrays (`PyVecEnv::step_arrays`), the infos as columns over the copies.
+/// A vector step as flat native-endian buffers (`PyVecEnv::step_arrays`), which the Python side
+/// views as NumPy arrays without a copy; the infos as columns over the copies.
 #[derive(IntoPyObject)]
 struct VecStepArrays<'py> {
-    observations: Bound<'py, PyArray2<f64>>,
-    rewards: Bound<'py, PyArray1<f64>>,
-    terminated: Bound<'py, PyArray1<bool>>,
-    truncated: Bound<'py, PyArray1<bool>>,
+    /// f64, `[copies, observation dim]`.
+    observations: Bound<'py, PyByteArray>,
+    /// f64 per copy.
+    rewards: Bound<'py, PyByteArray>,
+    /// One byte (0 or 1) per copy.
+    terminated: Bound<'py, PyByteArray>,
+    truncated: Bound<'py, PyByteArray>,
     /// The copies whose episode ended this step.
-    ended: Bound<'py, PyArray1<bool>>,
+    ended: Bound<'py, PyByteArray>,
     /// The ended episodes' last observations (None for the other copies).
-    final_observations: Vec<Option<Bound<'py, PyArray1<f64>>>>,
-    /// `[copies, terms]`, in `term_names` order.
-    reward_terms: Bound<'py, PyArray2<f64>>,
+    final_observations: Vec<Option<Vec<f64>>>,
+    /// f64, `[copies, terms]`, in `term_names` order.
+    reward_terms: Bound<'py, PyByteArray>,
     term_names: Vec<&'static str>,
-    /// `[copies, metrics]`, in `metric_names` order.
-    metrics: Bound<'py, PyArray2<f64>>,
+    /// f64, `[copies, metrics]`, in `metric_names` order.
+    metrics: Bound<'py, PyByteArray>,
     metric_names: Vec<&'static str>,
-    clipped_actions: Bound<'py, PyArray1<i64>>,
-    unstable: Bound<'py, PyArray1<bool>>,
+    /// i64 per copy.
+    clipped_actions: Bound<'py, PyByteArray>,
+    unstable: Bound<'py, PyByteArray>,
     /// Each copy's MuJoCo warnings (empty where none).
     warnings: Vec<Vec<String>>,
+}
+
+/// `values` as native-endian bytes in a Python bytearray.
+fn f64_bytes<'py>(py: Python<'py>, values: impl Iterator<Item = f64>) -> Bound<'py, PyByteArray> {
+    PyByteArray::new(py, &values.flat_map(f64::to_ne_bytes).collect::<Vec<u8>>())
+}
+
+fn bool_bytes<'py>(py: Python<'py>, values: impl Iterator<Item = bool>) -> Bound<'py, PyByteArray> {
+    PyByteArray::new(py, &values.map(u8::from).collect::<Vec<u8>>())
 }
 
 /// The reset seed of episode `episode` of copy `copy` after a vector reset with `seed`.

@@ -36,8 +36,35 @@ pub struct BranchingDqnAgent {
     q: Mlp,
     target: Mlp,
     opt: Adam,
-    updates: u64,
-    explore_steps: u64,
+    steps: DqnCounters,
+}
+
+/// The counters a resume needs: gradient updates and exploratory actions taken (which set
+/// epsilon). Both DQN paths keep them, under the same checkpoint names.
+#[derive(Debug, Clone, Copy, Default)]
+pub(crate) struct DqnCounters {
+    pub updates: u64,
+    pub explore_steps: u64,
+}
+
+impl DqnCounters {
+    pub fn counters(&self) -> Vec<(&'static str, u64)> {
+        vec![("updates", self.updates), ("explore_steps", self.explore_steps)]
+    }
+
+    pub fn set(&mut self, name: &str, value: u64) {
+        match name {
+            "updates" => self.updates = value,
+            "explore_steps" => self.explore_steps = value,
+            _ => {}
+        }
+    }
+}
+
+/// The checkpoint names of a branching DQN's networks: the Q-network is the policy (what an
+/// exported policy keeps), then its target.
+pub(crate) fn named_networks(q: Vec<(String, Var)>, target: Vec<(String, Var)>) -> Vec<(String, Var)> {
+    q.into_iter().chain(target).collect()
 }
 
 /// Epsilon decaying linearly from `start` to `end` over `steps` exploratory actions, then staying.
@@ -114,8 +141,7 @@ impl BranchingDqnAgent {
             opt: Adam::new(q.params(), cfg.critic_lr),
             q,
             target,
-            updates: 0,
-            explore_steps: 0,
+            steps: DqnCounters::default(),
         })
     }
 
@@ -167,16 +193,13 @@ impl Agent for BranchingDqnAgent {
     }
 
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
-        let epsilon = self.epsilon(self.explore_steps);
-        self.explore_steps += 1;
+        let epsilon = self.epsilon(self.steps.explore_steps);
+        self.steps.explore_steps += 1;
         Ok(epsilon_greedy(self.greedy(obs)?, epsilon, self.levels, rng))
     }
 
     fn parameters(&self) -> Vec<(String, Var)> {
-        // The Q-network is the policy: it is what an exported policy keeps.
-        let mut out = self.q.named_vars("actor.q");
-        out.extend(self.target.named_vars("q_target"));
-        out
+        named_networks(self.q.named_vars("actor.q"), self.target.named_vars("q_target"))
     }
 
     fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
@@ -184,15 +207,11 @@ impl Agent for BranchingDqnAgent {
     }
 
     fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("updates", self.updates), ("explore_steps", self.explore_steps)]
+        self.steps.counters()
     }
 
     fn set_counter(&mut self, name: &str, value: u64) {
-        match name {
-            "updates" => self.updates = value,
-            "explore_steps" => self.explore_steps = value,
-            _ => {}
-        }
+        self.steps.set(name, value)
     }
 }
 
@@ -208,7 +227,7 @@ impl OffPolicyAgent for BranchingDqnAgent {
         let grads = loss.backward()?;
         self.opt.step(&grads)?;
         polyak_update(&self.q, &self.target, self.tau)?;
-        self.updates += 1;
+        self.steps.updates += 1;
         Ok(Losses { critic: loss.to_scalar::<f32>()? as f64, ..Default::default() })
     }
 }

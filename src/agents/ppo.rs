@@ -237,6 +237,22 @@ impl ObsStats {
     }
 }
 
+/// The checkpoint names of PPO's networks, in the order both paths list them: the policy's mean
+/// network, its log-std and observation statistics (together, what an exported policy keeps),
+/// then the value network.
+pub(crate) fn named_networks(
+    mean: Vec<(String, Var)>,
+    log_std: &Var,
+    obs_stats: &ObsStats,
+    critic: Vec<(String, Var)>,
+) -> Vec<(String, Var)> {
+    let mut out = mean;
+    out.push(("actor.log_std".into(), log_std.clone()));
+    out.extend(obs_stats.named_vars());
+    out.extend(critic);
+    out
+}
+
 /// Gaussian samples around each row of `mean` (`n x act_dim`) with the state-independent
 /// `log_std`, drawn from `rng` row by row, and their log-probabilities (f32, as accumulated here).
 pub(crate) fn sample_actions(mean: &[f32], log_std: &[f32], rng: &mut ChaCha8Rng) -> (Vec<f32>, Vec<f32>) {
@@ -420,11 +436,12 @@ impl Agent for PpoAgent {
     }
 
     fn parameters(&self) -> Vec<(String, Var)> {
-        let mut out = self.actor.0.named_vars("actor.mean");
-        out.push(("actor.log_std".into(), self.log_std.clone()));
-        out.extend(self.obs_stats.named_vars());
-        out.extend(self.critic.0.named_vars("critic"));
-        out
+        named_networks(
+            self.actor.0.named_vars("actor.mean"),
+            &self.log_std,
+            &self.obs_stats,
+            self.critic.0.named_vars("critic"),
+        )
     }
 
     fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {

@@ -8,7 +8,7 @@ use super::layers::DeviceStack;
 use super::{read_scalars, row, DeviceBatch};
 use crate::agents::buffer::Batch;
 use crate::agents::config::{Algo, TrainConfig};
-use crate::agents::dqn::{epsilon_greedy, greedy_levels, value_level, EpsilonSchedule};
+use crate::agents::dqn::{epsilon_greedy, greedy_levels, named_networks, value_level, DqnCounters, EpsilonSchedule};
 use crate::agents::{Agent, BranchingDqnAgent, Losses, OffPolicyAgent};
 use crate::numeric::optim::Optimizer;
 
@@ -24,8 +24,7 @@ pub struct GenericDqn {
     q: DeviceStack,
     target: DeviceStack,
     opt: DeviceAdam,
-    updates: u64,
-    explore_steps: u64,
+    steps: DqnCounters,
 }
 
 impl GenericDqn {
@@ -52,8 +51,7 @@ impl GenericDqn {
             opt: DeviceAdam::new(q.vars(), cfg.critic_lr)?,
             q,
             target,
-            updates: 0,
-            explore_steps: 0,
+            steps: DqnCounters::default(),
         })
     }
 
@@ -81,15 +79,13 @@ impl Agent for GenericDqn {
     }
 
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
-        let epsilon = self.schedule.at(self.explore_steps);
-        self.explore_steps += 1;
+        let epsilon = self.schedule.at(self.steps.explore_steps);
+        self.steps.explore_steps += 1;
         Ok(epsilon_greedy(self.greedy(obs)?, epsilon, self.levels, rng))
     }
 
     fn parameters(&self) -> Vec<(String, Var)> {
-        let mut out = self.q.named_vars("actor.q");
-        out.extend(self.target.named_vars("q_target"));
-        out
+        named_networks(self.q.named_vars("actor.q"), self.target.named_vars("q_target"))
     }
 
     fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
@@ -97,15 +93,11 @@ impl Agent for GenericDqn {
     }
 
     fn counters(&self) -> Vec<(&'static str, u64)> {
-        vec![("updates", self.updates), ("explore_steps", self.explore_steps)]
+        self.steps.counters()
     }
 
     fn set_counter(&mut self, name: &str, value: u64) {
-        match name {
-            "updates" => self.updates = value,
-            "explore_steps" => self.explore_steps = value,
-            _ => {}
-        }
+        self.steps.set(name, value)
     }
 }
 
@@ -125,7 +117,7 @@ impl OffPolicyAgent for GenericDqn {
         let loss = q.broadcast_sub(&y)?.sqr()?.mean_all()?;
         self.opt.step(&loss.backward()?)?;
         self.q.polyak_into(&self.target, self.tau)?;
-        self.updates += 1;
+        self.steps.updates += 1;
         Ok(Losses { critic: read_scalars(&[&loss])?[0], ..Default::default() })
     }
 }

@@ -10,7 +10,7 @@ use super::layers::{clamp, constant, DeviceStack};
 use super::read_scalars;
 use crate::agents::config::{Algo, PpoConfig, TrainConfig};
 use crate::agents::ppo::{
-    normalized_advantages, sample_actions, ObsStats, PolicyStep, PpoBatch, PpoLosses, HALF_LOG_2PI,
+    named_networks, normalized_advantages, sample_actions, ObsStats, PolicyStep, PpoBatch, PpoLosses, HALF_LOG_2PI,
 };
 use crate::agents::{Agent, OnPolicyAgent, PpoAgent};
 use crate::numeric::optim::Optimizer;
@@ -218,11 +218,12 @@ impl Agent for GenericPpo {
     }
 
     fn parameters(&self) -> Vec<(String, Var)> {
-        let mut out = self.actor.named_vars("actor.mean");
-        out.push(("actor.log_std".into(), self.log_std.clone()));
-        out.extend(self.obs_stats.named_vars());
-        out.extend(self.critic.named_vars("critic"));
-        out
+        named_networks(
+            self.actor.named_vars("actor.mean"),
+            &self.log_std,
+            &self.obs_stats,
+            self.critic.named_vars("critic"),
+        )
     }
 
     fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn Optimizer)> {
