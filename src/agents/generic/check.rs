@@ -3,7 +3,7 @@
 //! agree within a stated tolerance, per algorithm. The two paths round differently (the fused
 //! kernels' order of operations against candle's), and Adam amplifies that where a gradient is near
 //! zero; over 100 updates the gaps stay a few f32 roundings wide.
-use candle_core::{DType, Device, Var};
+use candle_core::{DType, Device, Result, Var};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -124,12 +124,13 @@ fn weight_gap(fused: &dyn Agent, generic: &dyn Agent, gap: &mut Gap) {
 
 /// `n` samples of a rollout for PPO's comparison: observations, the actions `agent` samples there
 /// with their log-probabilities and values, random advantages and returns near the values.
-fn ppo_batch(agent: &PpoAgent, rng: &mut ChaCha8Rng, n: usize) -> PpoBatch {
-    let obs: Vec<f32> = (0..n * OBS).map(|_| rng.random_range(-2.0f32..2.0)).collect();
-    let step = agent.policy_step(&obs, rng).unwrap();
+/// (The comparison's minibatches, and the speed measurement's.)
+pub(crate) fn ppo_batch(agent: &dyn OnPolicyAgent, rng: &mut ChaCha8Rng, n: usize, obs_dim: usize) -> Result<PpoBatch> {
+    let obs: Vec<f32> = (0..n * obs_dim).map(|_| rng.random_range(-2.0f32..2.0)).collect();
+    let step = agent.policy_step(&obs, rng)?;
     let advantages: Vec<f32> = (0..n).map(|_| rng.random_range(-1.5f32..1.5)).collect();
     let returns = step.values.iter().zip(&advantages).map(|(v, a)| v + a).collect();
-    PpoBatch { obs, actions: step.actions, log_probs: step.log_probs, advantages, returns, values: step.values }
+    Ok(PpoBatch { obs, actions: step.actions, log_probs: step.log_probs, advantages, returns, values: step.values })
 }
 
 /// PPO's comparison: rollouts of 8 minibatches sampled by the fused agent as it learns (so the
@@ -152,7 +153,7 @@ fn compare_ppo(device: &Device, updates: usize) -> Gap {
             let fraction = 1.0 - u as f64 / updates as f64;
             fused.anneal(fraction);
             generic.anneal(fraction);
-            rollout = (0..8).map(|_| ppo_batch(&fused, &mut data, cfg.batch_size)).collect();
+            rollout = (0..8).map(|_| ppo_batch(&fused, &mut data, cfg.batch_size, OBS).unwrap()).collect();
         }
         let b = &rollout[u % 8];
         let lf: PpoLosses = fused.learn(b).unwrap();

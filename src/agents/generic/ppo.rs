@@ -103,11 +103,10 @@ impl OnPolicyAgent for GenericPpo {
 
     fn policy_step(&self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<PolicyStep> {
         let x = self.rows(obs)?;
-        let n = x.dim(0)?;
+        // one read-back: each row is the policy's mean, then the value
         let both = Tensor::cat(&[self.actor.forward(&x)?, self.critic.forward(&x)?], 1)?.to_vec2::<f32>()?;
         let mean: Vec<f32> = both.iter().flat_map(|r| r[..self.act_dim].to_vec()).collect();
         let values: Vec<f32> = both.iter().map(|r| r[self.act_dim]).collect();
-        debug_assert_eq!(values.len(), n);
         let log_std = self.log_std.as_tensor().flatten_all()?.to_vec1::<f32>()?;
         let (actions, log_probs) = sample_actions(&mean, &log_std, rng);
         Ok(PolicyStep { actions, log_probs, values })

@@ -4,7 +4,7 @@
 use std::time::Instant;
 
 use candle_core::{Device, Tensor};
-use rand::{Rng, SeedableRng};
+use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
 use super::{make_generic_agent, make_generic_on_policy, DeviceBatch};
@@ -96,21 +96,8 @@ fn measure_ppo(
     let mut rng = ChaCha8Rng::seed_from_u64(1);
     let rollout = cfg.ppo().num_steps;
     let minibatches: Vec<PpoBatch> = (0..rollout.div_ceil(cfg.batch_size))
-        .map(|_| {
-            let observations: Vec<f32> = (0..cfg.batch_size * obs).map(|_| rng.random_range(-1.0f32..1.0)).collect();
-            let step = agent.policy_step(&observations, &mut rng)?;
-            let advantages: Vec<f32> = (0..cfg.batch_size).map(|_| rng.random_range(-1.0f32..1.0)).collect();
-            let returns = step.values.iter().zip(&advantages).map(|(v, a)| v + a).collect();
-            Ok(PpoBatch {
-                obs: observations,
-                actions: step.actions,
-                log_probs: step.log_probs,
-                advantages,
-                returns,
-                values: step.values,
-            })
-        })
-        .collect::<anyhow::Result<_>>()?;
+        .map(|_| super::check::ppo_batch(agent.as_ref(), &mut rng, cfg.batch_size, obs))
+        .collect::<candle_core::Result<_>>()?;
     let epoch = |agent: &mut Box<dyn OnPolicyAgent>| -> anyhow::Result<()> {
         for b in &minibatches {
             agent.learn(b)?;
