@@ -46,16 +46,19 @@ existing=()
 for d in "${runs[@]}"; do
   if [ -d "$d" ]; then existing+=("$d"); else echo "not committed (yet): $d" >&2; fi
 done
-# Peers evaluated outside locobench (locobench.evaluate(out=...)): Stable-Baselines3's PPO on
-# Minitaur with rl-baselines3-zoo's settings (benches/sb3_peer.py), one row per seed.
+# Peers evaluated outside locobench (locobench.evaluate(out=...)), one row per label with a seed per
+# directory (benches/sb3_peer.py): Stable-Baselines3's PPO on Minitaur with rl-baselines3-zoo's
+# settings and on HalfCheetah with locobench's own PPO settings.
 external=()
-for d in $r/minitaur/sb3-ppo-seed*-1m/external; do
+for d in $r/minitaur/sb3-ppo-seed*-1m/external $r/half-cheetah/sb3-ppo*-seed*-1m/external; do
   [ -d "$d" ] && external+=(--external "$d")
 done
-# The newest committed robustness suite (cargo bench --bench robustness) becomes each env's
-# robustness section.
+# The newest committed robustness suite of each env (cargo bench --bench robustness) becomes that
+# env's robustness section: Minitaur's in the dated directory, Ant's in its ant/ folder.
 robustness=()
-suite=$(ls -d $r/20??-??-??-*/robustness.csv 2>/dev/null | sort | tail -1)
-[ -n "$suite" ] && robustness=(--robustness "$(dirname "$suite")")
+for f in robustness.csv ant/robustness.csv; do
+  suite=$(ls -d $r/20??-??-??-*/$f 2>/dev/null | sort | tail -1)
+  [ -n "$suite" ] && robustness+=(--robustness "$(dirname "$suite")")
+done
 rm -rf "$out"  # no chart of an earlier layout left behind
 "$bin" report --runs "${existing[@]}" "${external[@]}" --out "$out" "${videos[@]}" "${robustness[@]}" "${@:2}"

@@ -1,7 +1,8 @@
 //! `cargo bench --bench robustness`: the robustness suite (`locobench robustness`) for the
 //! shipped Minitaur policies beside the controller at its best speed and at each policy's speed,
 //! written with its wall time into `benches/results/<date>-<machine>/` (robustness.csv and
-//! robustness.toml), which the report and docs read.
+//! robustness.toml), which the report and docs read. With LOCOBENCH_ROBUSTNESS_ENV=ant it plays
+//! Ant's suite (CrossQ at 300k, three seeds) into `benches/results/<date>-<machine>/ant/`.
 //!
 //! Knobs: LOCOBENCH_ROBUSTNESS_POLICIES (`label=reference[@budget]`, comma-separated, the same
 //! label once per seed of a row; default each walking algorithm's best row by its shipped policy:
@@ -38,19 +39,33 @@ fn main() -> Result<()> {
     // Each walking algorithm's best row on Minitaur, by its shipped seed: PPO at 1M (seed 0), the
     // robust PPO at 1M, TD3 at 1M (seed 1). A row's other seeds can be added through
     // LOCOBENCH_ROBUSTNESS_POLICIES (the same label once per seed).
-    let rows = [
-        "ppo 1M=models/policies/minitaur-ppo",
-        "ppo-robust 1M=models/policies/minitaur-ppo-robust",
-        "td3 1M=models/policies/minitaur-td3",
-    ];
-    let default_policies =
-        rows.into_iter().filter(|p| root.join(p.split_once('=').unwrap().1).exists()).collect::<Vec<_>>().join(",");
+    let env_name = var("LOCOBENCH_ROBUSTNESS_ENV").unwrap_or_else(|| "minitaur".into());
+    let rows: &[&str] = match env_name.as_str() {
+        "minitaur" => &[
+            "ppo 1M=models/policies/minitaur-ppo",
+            "ppo-robust 1M=models/policies/minitaur-ppo-robust",
+            "td3 1M=models/policies/minitaur-td3",
+        ],
+        // Ant's best walking row: CrossQ at 300k, every committed seed.
+        "ant" => &[
+            "crossq=benches/results/ant/crossq-256-seed0@300000",
+            "crossq=benches/results/ant/crossq-256-seed1@300000",
+            "crossq=benches/results/ant/crossq-256-seed2@300000",
+        ],
+        other => anyhow::bail!("LOCOBENCH_ROBUSTNESS_ENV: the suite covers minitaur and ant, not '{other}'"),
+    };
+    let default_policies = rows
+        .iter()
+        .filter(|p| root.join(p.split_once('=').unwrap().1.split('@').next().unwrap()).exists())
+        .copied()
+        .collect::<Vec<_>>()
+        .join(",");
     let policies = var("LOCOBENCH_ROBUSTNESS_POLICIES").unwrap_or(default_policies);
     let items: Vec<String> = policies.split(',').filter(|p| !p.is_empty()).map(String::from).collect();
     // References stay as given (relative to the crate root, where cargo runs benches), so the
     // committed files name them the same on every machine.
     let mut agents = Contender::parse_agents(&items)?;
-    let env = EnvConfig::new("minitaur");
+    let env = EnvConfig::new(&env_name);
     let (axes, controller, episodes, out) = if smoke {
         agents.truncate(1);
         let out = tempfile::tempdir()?.keep();
@@ -64,23 +79,26 @@ fn main() -> Result<()> {
             .map(str::parse)
             .collect::<Result<Vec<ControllerChoice>>>()?;
         let episodes = var("LOCOBENCH_ROBUSTNESS_EPISODES").map_or(Ok(50), |v| v.parse()).context("episodes")?;
-        let out = var("LOCOBENCH_ROBUSTNESS_OUT").map_or_else(results_dir, |v| Ok(PathBuf::from(v)))?;
-        (select("minitaur", &axes)?, controller, episodes, out)
+        // Minitaur's suite sits in the dated directory itself, another env's in a folder named after it.
+        let dated = || results_dir().map(|d| if env_name == "minitaur" { d } else { d.join(&env_name) });
+        let out = var("LOCOBENCH_ROBUSTNESS_OUT").map_or_else(dated, |v| Ok(PathBuf::from(v)))?;
+        (select(&env_name, &axes)?, controller, episodes, out)
     };
     let seed = var("LOCOBENCH_ROBUSTNESS_SEED").map_or(Ok(100), |v| v.parse()).context("seed")?;
     let threads = var("LOCOBENCH_ROBUSTNESS_THREADS")
         .map_or(Ok(locobench::evaluation::parallel::default_threads()), |v| v.parse())
         .context("threads")?;
     let suite = Suite { env, axes, protocol: Protocol { episodes, seed }, threads };
+    let env_var = if env_name == "minitaur" { String::new() } else { format!("LOCOBENCH_ROBUSTNESS_ENV={env_name} ") };
     let command = format!(
-        "LOCOBENCH_ROBUSTNESS_POLICIES={policies} LOCOBENCH_ROBUSTNESS_EPISODES={episodes} \
+        "{env_var}LOCOBENCH_ROBUSTNESS_POLICIES={policies} LOCOBENCH_ROBUSTNESS_EPISODES={episodes} \
          LOCOBENCH_ROBUSTNESS_SEED={seed} cargo bench --bench robustness"
     );
     // LOCOBENCH_ROBUSTNESS_REUSE: an earlier suite's directory whose matching cells are kept.
     let (reuse, from) = match var("LOCOBENCH_ROBUSTNESS_REUSE") {
         Some(dir) if !smoke => {
             let (cells, meta) = output::reusable(std::path::Path::new(&dir), &suite)?;
-            (cells, Some((dir, meta.wall_seconds)))
+            (cells, Some((dir, meta.total_wall())))
         }
         _ => (Vec::new(), None),
     };

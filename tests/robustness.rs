@@ -38,8 +38,8 @@ fn a_small_suite_writes_every_cell_the_same_on_any_thread_count() {
     assert!(ok, "{err}");
     assert!(out.contains("payload (kg):") && out.contains("90% up to"), "{out}");
     let (cells, meta) = read_dir(&a).unwrap();
-    // Two contenders x (nominal + 4 payload levels + 4 latency levels).
-    assert_eq!(cells.len(), 2 * 9);
+    // Two contenders x (nominal + 4 payload levels + 5 latency levels).
+    assert_eq!(cells.len(), 2 * 10);
     assert!(cells.iter().all(|c| c.outcomes.len() == 2));
     assert_eq!(meta.episodes, 2);
     assert_eq!(meta.protocol_seed, 100);
@@ -67,6 +67,7 @@ fn a_small_suite_writes_every_cell_the_same_on_any_thread_count() {
         "0",
         "--robustness",
         a.to_str().unwrap(),
+        "--videos",
     ]);
     assert!(ok, "{err}");
     let md = std::fs::read_to_string(report.join("README.md")).unwrap();
@@ -74,6 +75,15 @@ fn a_small_suite_writes_every_cell_the_same_on_any_thread_count() {
     for axis in ["payload", "latency"] {
         let svg = std::fs::read_to_string(report.join(format!("minitaur_robustness_{axis}.svg"))).unwrap();
         assert!(svg.contains("survival") && svg.contains("ppo"));
+        // Its side-by-side clip: the policy and the controller replaying an episode of the suite,
+        // ending as the suite recorded it.
+        let stem = format!("minitaur_robustness_{axis}");
+        let mp4 = std::fs::read(report.join("videos").join(format!("{stem}.mp4"))).unwrap();
+        assert_eq!(&mp4[4..8], b"ftyp", "{stem}.mp4");
+        assert!(md.contains(&format!("](videos/{stem}.gif)")), "{stem} in the Markdown");
+        let caption = md.split(&format!("videos/{stem}.gif")).next().unwrap().rsplit("![").next().unwrap();
+        assert!(caption.contains("left to right ppo (") && caption.contains("as the suite recorded them"), "{caption}");
+        assert!(!caption.contains("The replay ended otherwise"), "{caption}");
     }
 }
 

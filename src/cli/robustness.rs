@@ -54,7 +54,7 @@ pub fn run(args: RobustnessArgs) -> Result<()> {
     let (reuse, from) = match &args.reuse {
         Some(dir) => {
             let (cells, meta) = output::reusable(dir, &suite)?;
-            (cells, Some((dir.display().to_string(), meta.wall_seconds)))
+            (cells, Some((dir.display().to_string(), meta.total_wall())))
         }
         None => (Vec::new(), None),
     };

@@ -209,6 +209,42 @@ pub(crate) fn report_timing(results: &Path) -> Result<String> {
     Ok(out)
 }
 
+/// The newest `ppo-vs-sb3.csv` (`benches/ppo_vs_sb3.py`): locobench's PPO and SB3's with the same
+/// settings on HalfCheetah, per seed, and how much longer SB3 took in all.
+pub(crate) fn ppo_vs_sb3(results: &Path) -> Result<String> {
+    let path = newest(results, "ppo-vs-sb3.csv")?;
+    let rows = read(&path)?;
+    let mut out = quoting(&path)?
+        + "\n\n| implementation | seed | steps | wall time | CPU time | held-out return |\n|---|---|---|---|---|---|\n";
+    for r in &rows {
+        let _ = writeln!(
+            out,
+            "| {} | {} | {:.0} | {:.0} s | {:.0} s | {:.1} [{:.1}, {:.1}] |",
+            r.text("implementation"),
+            r.num("seed"),
+            r.num("steps"),
+            r.num("wall_s"),
+            r.num("cpu_s"),
+            r.num("held_out_return"),
+            r.num("held_out_low"),
+            r.num("held_out_high")
+        );
+    }
+    let total = |prefix: &str, col: &str| -> f64 {
+        rows.iter().filter(|r| r.text("implementation").starts_with(prefix)).map(|r| r.num(col)).sum()
+    };
+    let (ours, theirs) = (total("locobench", "cpu_s"), total("stable-baselines3", "cpu_s"));
+    if ours > 0.0 && theirs > 0.0 {
+        let _ = writeln!(
+            out,
+            "\nOver the seeds, SB3 took {:.1}x locobench's CPU time ({:.1}x its wall time).",
+            theirs / ours,
+            total("stable-baselines3", "wall_s") / total("locobench", "wall_s")
+        );
+    }
+    Ok(out)
+}
+
 /// The newest `time-to-walk.csv` (`cargo bench --bench time_to_walk`): per algorithm and
 /// threshold, how many runs reached it and how long they took.
 pub(crate) fn time_to_walk(results: &Path) -> Result<String> {

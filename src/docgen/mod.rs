@@ -66,6 +66,11 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
         },
         Section {
             file: "docs/evaluation.md",
+            name: "ppo-vs-sb3",
+            text: benchmarks::ppo_vs_sb3(&root.join(BENCH_RESULTS_DIR))?,
+        },
+        Section {
+            file: "docs/evaluation.md",
             name: "report-timing",
             text: benchmarks::report_timing(&root.join(BENCH_RESULTS_DIR))?,
         },
@@ -84,7 +89,12 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
         Section {
             file: "docs/robustness.md",
             name: "robustness",
-            text: robustness::summary(&root.join(BENCH_RESULTS_DIR))?,
+            text: robustness::summary(&root.join(BENCH_RESULTS_DIR), "minitaur")?,
+        },
+        Section {
+            file: "docs/robustness.md",
+            name: "robustness-ant",
+            text: robustness::summary(&root.join(BENCH_RESULTS_DIR), "ant")?,
         },
         Section {
             file: "docs/python.md",

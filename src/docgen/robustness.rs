@@ -9,11 +9,18 @@ use anyhow::Result;
 use super::benchmarks::{newest, source};
 use crate::report::robustness::{goal_lines, provenance, summary_table, SuiteData};
 
-/// The suite's summary as Markdown.
-pub(crate) fn summary(results: &Path) -> Result<String> {
-    let csv = newest(results, crate::evaluation::robustness::output::CSV_FILE)?;
+/// The newest suite of `env` as Markdown: Minitaur's sits in the dated directory itself, another
+/// env's in a folder named after it (`cargo bench --bench robustness` writes them so).
+pub(crate) fn summary(results: &Path, env: &str) -> Result<String> {
+    let file = crate::evaluation::robustness::output::CSV_FILE;
+    let csv = if env == "minitaur" { newest(results, file)? } else { newest(results, &format!("{env}/{file}"))? };
     let suite = SuiteData::read(csv.parent().expect("a file in a directory"))?;
-    let mut out = format!("From {}. {}\n\n", source(&csv), provenance(&suite));
+    let from = if env == "minitaur" {
+        source(&csv)
+    } else {
+        format!("the newest benches/results/<date>-<machine>/{env}/{file}")
+    };
+    let mut out = format!("From {from}. {}\n\n", provenance(&suite));
     let (header, rows) = summary_table(&suite);
     let _ = writeln!(out, "| {} |\n|{}", header.join(" | "), "---|".repeat(header.len()));
     for row in rows {

@@ -28,6 +28,8 @@ pub struct Panel {
     pub speed: f64,
     /// Whether it ended in a fall (terminated before its time limit).
     pub fell: bool,
+    /// Whether the physics blew up.
+    pub unstable: bool,
     /// When a push on the base began (simulated seconds from the reset), if one did.
     pub push_time: Option<f64>,
 }
@@ -73,6 +75,7 @@ pub fn film_episode(
         episode_return: summary.episode_return,
         speed,
         fell: summary.terminated,
+        unstable: summary.unstable,
     })
 }
 

@@ -13,6 +13,7 @@ pub mod heldout;
 pub mod plots;
 pub mod progress;
 pub mod robustness;
+pub mod robustness_clips;
 pub mod runs;
 mod sections;
 pub mod videos;
@@ -174,7 +175,7 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
             }
         }
         for suite in suites.iter().filter(|s| s.meta.env.name == *env) {
-            robustness::section(&mut doc, out, suite)?;
+            robustness::section(&mut doc, out, suite, opts.videos.then_some(opts.threads))?;
         }
         let section = report.controllers.get(env);
         let clips = if opts.videos {

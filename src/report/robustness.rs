@@ -244,12 +244,17 @@ pub fn provenance(s: &SuiteData) -> String {
          in the env's default options plus the axis's own; a row of several trained seeds plays every episode \
          once per seed. Survival is the share of episodes that walked to the time limit, with its 95% Wilson \
          interval; episodes where the physics blew up are counted apart, not as falls. The controller reads the \
-         simulator's state (base pose and velocity, masses, gravity) where the policies read their 28 observed \
-         values, so sensor noise reaches the controller only through the motor angles and velocities, and it \
-         knows a payload or a slope that the policies must feel. Measured on {} at commit {}, {:.0} s of wall time \
-         with {} threads: `{}`.",
+         simulator's state (base pose and velocity, masses, gravity) where the policies read their {} observed \
+         values{}. Measured on {} at commit {}, {:.0} s of wall time with {} threads: `{}`.",
         m.episodes,
         m.protocol_seed,
+        crate::envs::make(&m.env).map_or(0, |e| e.spec().observation_space.dim()),
+        if s.axes.iter().any(|a| matches!(a.apply, crate::evaluation::robustness::axes::Apply::Options(_))) {
+            ", so sensor noise reaches the controller only through the motor angles and velocities, and it knows a \
+             payload or a slope that the policies must feel"
+        } else {
+            ""
+        },
         m.machine,
         &m.git_commit[..m.git_commit.len().min(12)],
         m.wall_seconds,
@@ -266,8 +271,14 @@ pub fn provenance(s: &SuiteData) -> String {
 }
 
 /// The section: provenance, summary table, goal, then per axis its chart and cells.
-pub(crate) fn section(doc: &mut Document, out: &Path, s: &SuiteData) -> Result<()> {
+/// With `videos` (the threads to film with), each axis also gets its side-by-side clip
+/// ([`super::robustness_clips`]).
+pub(crate) fn section(doc: &mut Document, out: &Path, s: &SuiteData, videos: Option<usize>) -> Result<()> {
     let env = &s.meta.env.name;
+    let clips = match videos {
+        Some(threads) => super::robustness_clips::film_axes(s, out, threads)?,
+        None => Vec::new(),
+    };
     doc.heading(2, "Robustness suite");
     doc.paragraph(provenance(s));
     doc.heading(3, format!("Who survives the largest perturbation at {:.0}%", SURVIVAL_BAR * 100.0));
@@ -284,6 +295,9 @@ pub(crate) fn section(doc: &mut Document, out: &Path, s: &SuiteData) -> Result<(
         let svg = chart(s, axis)?;
         crate::io::write_bytes_atomic(&out.join(&file), svg.as_bytes())?;
         doc.image(file, format!("Survival against {} with 95% Wilson bands.", axis.label));
+        if let Some((_, clip)) = clips.iter().find(|(a, _)| a.name == axis.name) {
+            doc.video(clip);
+        }
         let (header, rows) = axis_table(s, axis);
         doc.table(&header.iter().map(String::as_str).collect::<Vec<_>>(), rows);
     }

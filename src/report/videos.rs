@@ -38,10 +38,12 @@ pub(crate) const GIF_SECONDS: f64 = 5.0;
 /// The push filmed (velocity change, m/s): the second level of the push table.
 pub const FILMED_PUSH: f64 = super::controller::PUSH_LEVELS[1];
 
-/// One panel of a clip: a learned row's representative run, or the controller at a speed.
+/// One panel of a clip: a learned row's representative run, a policy by reference (a robustness
+/// suite's contender, in the suite's env), or the controller at a speed.
 #[derive(Debug, Clone)]
 enum Actor {
     Learned { run_dir: std::path::PathBuf, budget: u64, label: String },
+    Policy { source: crate::evaluation::robustness::suite::PolicySource, label: String },
     Controller { speed: f64 },
 }
 
@@ -55,6 +57,35 @@ pub struct ClipPlan {
     panels: Vec<Actor>,
     push: Option<Push>,
     env: EnvConfig,
+    /// The episode's reset seed; the protocol's first held-out episode when absent.
+    episode_seed: Option<u64>,
+}
+
+impl ClipPlan {
+    /// A clip of a robustness suite's contenders side by side, left to right, on one episode of
+    /// `env` (an axis's level) with `push`: each policy row by its first seed, each controller at
+    /// its commanded speed.
+    pub fn of_contenders(
+        stem: String,
+        caption: String,
+        contenders: &[crate::evaluation::robustness::Contender],
+        env: EnvConfig,
+        push: Option<Push>,
+        episode_seed: u64,
+    ) -> Result<ClipPlan> {
+        use crate::evaluation::robustness::Contender;
+        let panels = contenders
+            .iter()
+            .map(|c| match c {
+                Contender::Controller { speed, .. } => Ok(Actor::Controller { speed: *speed }),
+                Contender::Agent { label, seeds } => Ok(Actor::Policy {
+                    source: seeds.first().with_context(|| format!("{label} has no policy"))?.clone(),
+                    label: label.clone(),
+                }),
+            })
+            .collect::<Result<Vec<_>>>()?;
+        Ok(ClipPlan { stem, caption, panels, push, env, episode_seed: Some(episode_seed) })
+    }
 }
 
 /// A clip written.
@@ -77,6 +108,8 @@ pub struct Clip {
     pub fps: f64,
     /// Bytes of the MP4 and the GIF.
     pub bytes: (u64, u64),
+    /// How each panel's episode ended, left to right: whether it fell (a blow-up counts as one).
+    pub fell: Vec<bool>,
 }
 
 /// How rows are ranked: by the lower end of the 95% interval of their mean held-out return, then
@@ -167,7 +200,14 @@ pub fn plan(
             ),
             None => (vec![learned], format!("{who}; the first held-out episode")),
         };
-        plans.push(ClipPlan { stem: stem.clone(), caption, panels: panels.clone(), push: None, env: cfg.clone() });
+        plans.push(ClipPlan {
+            stem: stem.clone(),
+            caption,
+            panels: panels.clone(),
+            push: None,
+            env: cfg.clone(),
+            episode_seed: None,
+        });
         if push {
             plans.push(ClipPlan {
                 stem: format!("{stem}_push"),
@@ -177,6 +217,7 @@ pub fn plan(
                 panels,
                 push: Some(Push::lateral(FILMED_PUSH)),
                 env: cfg,
+                episode_seed: None,
             });
         }
     }
@@ -193,12 +234,12 @@ pub fn film(
 ) -> Result<Vec<Clip>> {
     let dir = out.join(VIDEO_DIR);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
-    let episode_seed = protocol.reset_seeds().first().copied().context("the protocol has no episodes")?;
+    let first_seed = protocol.reset_seeds().first().copied().context("the protocol has no episodes")?;
     let jobs: Vec<(usize, usize)> =
         plans.iter().enumerate().flat_map(|(c, p)| (0..p.panels.len()).map(move |k| (c, k))).collect();
     let panels = map_in_order(&jobs, threads, |&(c, k)| {
         let plan = &plans[c];
-        film_panel(&plan.panels[k], &plan.env, plan.push, runs, episode_seed)
+        film_panel(&plan.panels[k], &plan.env, plan.push, runs, plan.episode_seed.unwrap_or(first_seed))
             .with_context(|| format!("filming {} (panel {})", plan.stem, k + 1))
     })?;
     let mut clips = Vec::new();
@@ -233,6 +274,16 @@ fn film_panel(
             let (cfg, agent) = source.load(run_dir, *budget)?;
             let mut policy = AgentPolicy { agent: agent.as_ref(), label: label.clone() };
             film_episode(&cfg.env.for_evaluation(), &mut policy, &settings, fps, episode_seed, Some(label), push)
+        }
+        Actor::Policy { source, label } => {
+            // In the given env, as the robustness suite plays it: the policy's own training
+            // options are not used.
+            let (run, agent) = crate::train::resolve_policy(&source.reference, source.budget)?
+                .load()
+                .with_context(|| format!("loading {label} from {}", source.reference.display()))?;
+            anyhow::ensure!(run.env.name == env.name, "{label} was trained on {}, not on {}", run.env.name, env.name);
+            let mut policy = AgentPolicy { agent: agent.as_ref(), label: label.clone() };
+            film_episode(env, &mut policy, &settings, fps, episode_seed, Some(label), push)
         }
         Actor::Controller { speed } => {
             // In the learned policy's env, switched to the controller's action mode, as the
@@ -270,5 +321,6 @@ fn write_clip(plan: &ClipPlan, panels: &[Panel], dir: &Path) -> Result<Clip> {
         duration: panels.iter().map(|p| p.seconds).fold(0.0, f64::max),
         fps,
         bytes: (size(&video), size(&gif)),
+        fell: panels.iter().map(|p| p.fell || p.unstable).collect(),
     })
 }

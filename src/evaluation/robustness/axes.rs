@@ -53,13 +53,13 @@ const NOISE: &[(&str, f64)] = &[("noise_angle", 0.05), ("noise_velocity", 1.0), 
 /// survives an axis's last level is marked so in the suite's tables).
 pub const MINITAUR_AXES: &[Axis] = &[
     axis("push_lateral", "sideways push", "m/s", 0.0, &[0.25, 0.5, 1.0, 1.5], Apply::Push(Lateral)),
-    axis("push_frontal", "push along the heading", "m/s", 0.0, &[0.5, 1.5, 2.5, 4.0], Apply::Push(Frontal)),
+    axis("push_frontal", "push along the heading", "m/s", 0.0, &[0.5, 1.5, 2.5, 4.0, 6.0, 8.0], Apply::Push(Frontal)),
     axis(
         "friction_low",
         "ground friction (scale, low)",
         "x",
         1.0,
-        &[0.3, 0.1, 0.03, 0.01],
+        &[0.3, 0.1, 0.03, 0.01, 0.003, 0.001],
         Apply::Options(&[("friction_scale", 1.0)]),
     ),
     axis(
@@ -88,13 +88,20 @@ pub const MINITAUR_AXES: &[Axis] = &[
         Apply::Options(&[("motor_strength", 1.0)]),
     ),
     axis("battery", "battery voltage", "V", 16.0, &[12.0, 9.0, 6.0, 3.0], Apply::Options(&[("battery_voltage", 1.0)])),
-    axis("latency", "control latency", "s", 0.0, &[0.002, 0.004, 0.01, 0.02], Apply::Options(&[("latency", 1.0)])),
+    axis(
+        "latency",
+        "control latency",
+        "s",
+        0.0,
+        &[0.002, 0.004, 0.01, 0.02, 0.04],
+        Apply::Options(&[("latency", 1.0)]),
+    ),
     axis(
         "sensor_noise",
         "sensor noise (x 0.05 rad, 1 rad/s, 0.05 rad)",
         "x",
         0.0,
-        &[0.25, 0.5, 1.0, 2.0, 4.0],
+        &[0.25, 0.5, 1.0, 2.0, 4.0, 8.0, 16.0],
         Apply::Options(NOISE),
     ),
     axis(
@@ -105,15 +112,36 @@ pub const MINITAUR_AXES: &[Axis] = &[
         &[0.005, 0.01, 0.02, 0.04, 0.07],
         Apply::Options(&[("terrain_step_height", 1.0)]),
     ),
-    axis("slope_up", "slope up", "deg", 0.0, &[5.0, 10.0, 15.0, 22.0], Apply::Options(&[("slope", 1.0)])),
-    axis("slope_down", "slope down", "deg", 0.0, &[2.5, 5.0, 10.0, 15.0, 22.0], Apply::Options(&[("slope", -1.0)])),
+    axis("slope_up", "slope up", "deg", 0.0, &[5.0, 10.0, 15.0, 22.0, 30.0], Apply::Options(&[("slope", 1.0)])),
+    axis(
+        "slope_down",
+        "slope down",
+        "deg",
+        0.0,
+        &[2.5, 5.0, 10.0, 15.0, 22.0, 30.0],
+        Apply::Options(&[("slope", -1.0)]),
+    ),
 ];
 
-/// Ant's axes: the pushes (its env has none of Minitaur's perturbation options), up to 8 m/s: the
-/// controller survived every push up to 3 m/s.
+/// Ant's axes: the pushes (its env has none of Minitaur's perturbation options), up to 16 m/s: the
+/// controller survived more than 90% of the pushes at 8 m/s.
 pub const ANT_AXES: &[Axis] = &[
-    axis("push_lateral", "sideways push", "m/s", 0.0, &[0.5, 1.0, 2.0, 3.0, 5.0, 8.0], Apply::Push(Lateral)),
-    axis("push_frontal", "push along the heading", "m/s", 0.0, &[0.5, 1.0, 2.0, 3.0, 5.0, 8.0], Apply::Push(Frontal)),
+    axis(
+        "push_lateral",
+        "sideways push",
+        "m/s",
+        0.0,
+        &[0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 16.0],
+        Apply::Push(Lateral),
+    ),
+    axis(
+        "push_frontal",
+        "push along the heading",
+        "m/s",
+        0.0,
+        &[0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 16.0],
+        Apply::Push(Frontal),
+    ),
 ];
 
 /// The axes of `env`'s suite; an error for an env without one.

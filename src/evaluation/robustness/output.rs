@@ -36,8 +36,12 @@ pub struct SuiteMeta {
     pub protocol_seed: u64,
     /// Cells evaluated at once.
     pub threads: usize,
-    /// Wall time of the whole suite, planning included (s).
+    /// Wall time of this run of the suite, planning included (s).
     pub wall_seconds: f64,
+    /// With cells reused from earlier suites: the wall time of every run that played them, this
+    /// one included (s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub total_wall_seconds: Option<f64>,
     /// Every contender: label and what it is.
     pub contenders: Vec<String>,
     /// How the controller's speeds were chosen.
@@ -62,13 +66,15 @@ pub fn run_to_dir(
     known.extend(reuse.iter().cloned());
     let cells = suite.run(&p.contenders, &known)?;
     let mut notes = p.notes;
+    let mut earlier = None;
     if let Some((dir, wall)) = reused_from {
+        earlier = Some(wall);
         let n = cells
             .iter()
             .filter(|c| reuse.iter().any(|r| r.policy == c.policy && r.axis == c.axis && r.level == c.level))
             .count();
         notes.push(format!(
-            "{n} of the {} cells were taken from the earlier suite in {dir}, which took {wall:.0} s; this run's wall time is the rest",
+            "{n} of the {} cells were taken from the earlier suite in {dir}, which took {wall:.0} s in all; this run's wall time is the rest",
             cells.len()
         ));
     }
@@ -81,31 +87,68 @@ pub fn run_to_dir(
         protocol_seed: suite.protocol.seed,
         threads: suite.threads,
         wall_seconds: start.elapsed().as_secs_f64(),
-        contenders: p
-            .contenders
-            .iter()
-            .map(|c| match c {
-                Contender::Controller { label, speed } => format!("{label}: the controller commanded {speed} m/s"),
-                Contender::Agent { label, seeds } => format!(
-                    "{label}: {}",
-                    seeds
-                        .iter()
-                        .map(|s| format!(
-                            "{}{}",
-                            s.reference.display(),
-                            s.budget.map_or(String::new(), |b| format!(" at budget {b}"))
-                        ))
-                        .collect::<Vec<_>>()
-                        .join(", ")
-                ),
-            })
-            .collect(),
+        total_wall_seconds: earlier.map(|w| w + start.elapsed().as_secs_f64()),
+        contenders: p.contenders.iter().map(describe).collect(),
         notes,
     };
     write_atomic(&dir.join(CSV_FILE), |w| Ok(w.write_all(to_csv(&cells).as_bytes())?))?;
     let text = toml::to_string_pretty(&meta).context("writing the suite's metadata")?;
     write_atomic(&dir.join(META_FILE), |w| Ok(w.write_all(text.as_bytes())?))?;
     Ok((cells, meta))
+}
+
+/// A contender as the metadata lists it: `LABEL: the controller commanded SPEED m/s`, or
+/// `LABEL: REFERENCE[ at budget B], ...` (one per seed).
+pub fn describe(c: &Contender) -> String {
+    match c {
+        Contender::Controller { label, speed } => format!("{label}: the controller commanded {speed} m/s"),
+        Contender::Agent { label, seeds } => format!(
+            "{label}: {}",
+            seeds
+                .iter()
+                .map(|s| format!(
+                    "{}{}",
+                    s.reference.display(),
+                    s.budget.map_or(String::new(), |b| format!(" at budget {b}"))
+                ))
+                .collect::<Vec<_>>()
+                .join(", ")
+        ),
+    }
+}
+
+/// The contender a [`describe`] line stands for; an error naming the line when it is not one.
+pub fn parse_description(line: &str) -> Result<Contender> {
+    let Some((label, what)) = line.split_once(": ") else {
+        anyhow::bail!("'{line}' is not a suite contender (LABEL: WHAT)");
+    };
+    if let Some(speed) = what.strip_prefix("the controller commanded ").and_then(|r| r.strip_suffix(" m/s")) {
+        let speed = speed.parse().with_context(|| format!("'{line}': '{speed}' is not a speed"))?;
+        return Ok(Contender::Controller { label: label.to_string(), speed });
+    }
+    let seeds = what
+        .split(", ")
+        .map(|s| match s.rsplit_once(" at budget ") {
+            Some((r, b)) => Ok(super::suite::PolicySource {
+                reference: r.into(),
+                budget: Some(b.parse().with_context(|| format!("'{line}': '{b}' is not a step budget"))?),
+            }),
+            None => Ok(super::suite::PolicySource { reference: s.into(), budget: None }),
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(Contender::Agent { label: label.to_string(), seeds })
+}
+
+impl SuiteMeta {
+    /// The contenders, as [`parse_description`] reads them back from `contenders`.
+    pub fn parsed_contenders(&self) -> Result<Vec<Contender>> {
+        self.contenders.iter().map(|l| parse_description(l)).collect()
+    }
+
+    /// The wall time of every run that played this suite's cells (s).
+    pub fn total_wall(&self) -> f64 {
+        self.total_wall_seconds.unwrap_or(self.wall_seconds)
+    }
 }
 
 /// Reads a committed suite: its cells and metadata from `dir`.
@@ -182,4 +225,37 @@ pub fn summary_lines(cells: &[Cell], axes: &[Axis], controller: Option<&str>) ->
         }
     }
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::evaluation::robustness::suite::PolicySource;
+
+    #[test]
+    fn contenders_read_back_from_their_description() {
+        let contenders = [
+            Contender::Controller { label: "controller 1.563 m/s (best)".into(), speed: 1.5625 },
+            Contender::Agent {
+                label: "ppo 1M".into(),
+                seeds: vec![PolicySource { reference: "models/policies/minitaur-ppo".into(), budget: None }],
+            },
+            Contender::Agent {
+                label: "crossq".into(),
+                seeds: (0..3)
+                    .map(|s| PolicySource {
+                        reference: format!("benches/results/ant/crossq-256-seed{s}").into(),
+                        budget: Some(300_000),
+                    })
+                    .collect(),
+            },
+        ];
+        for c in contenders {
+            assert_eq!(parse_description(&describe(&c)).unwrap(), c);
+        }
+        let err = parse_description("no colon here").unwrap_err().to_string();
+        assert!(err.contains("no colon here"), "{err}");
+        let err = parse_description("x: a at budget many").unwrap_err().to_string();
+        assert!(err.contains("'many' is not a step budget"), "{err}");
+    }
 }

@@ -197,6 +197,24 @@ impl Cell {
     }
 }
 
+/// A cell with only its outcomes (one letter per episode: S, F, U), for tests of what is
+/// computed from them.
+#[cfg(test)]
+pub(crate) fn test_cell(policy: &str, kind: &str, axis: &str, level: f64, outcomes: &str) -> Cell {
+    Cell {
+        env: "minitaur".into(),
+        policy: policy.into(),
+        kind: kind.into(),
+        commanded: f64::NAN,
+        axis: axis.into(),
+        level,
+        outcomes: outcomes.chars().map(|c| Outcome::from_letter(c).unwrap()).collect(),
+        ret: Interval::point(0.0),
+        speed: 0.0,
+        cost_of_transport: 0.0,
+    }
+}
+
 /// The axis name of the unperturbed cell.
 pub const NOMINAL: &str = "nominal";
 

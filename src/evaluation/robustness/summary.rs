@@ -81,18 +81,7 @@ mod tests {
     use crate::evaluation::robustness::axes::MINITAUR_AXES;
 
     fn cell(policy: &str, axis: &str, level: f64, outcomes: &str) -> Cell {
-        Cell {
-            env: "minitaur".into(),
-            policy: policy.into(),
-            kind: "policy".into(),
-            commanded: f64::NAN,
-            axis: axis.into(),
-            level,
-            outcomes: outcomes.chars().map(|c| Outcome::from_letter(c).unwrap()).collect(),
-            ret: Interval::point(0.0),
-            speed: 0.0,
-            cost_of_transport: 0.0,
-        }
+        crate::evaluation::robustness::suite::test_cell(policy, "policy", axis, level, outcomes)
     }
 
     #[test]
