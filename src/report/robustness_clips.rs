@@ -1,11 +1,14 @@
 //! One side-by-side clip per axis of a committed robustness suite (`report --robustness DIR
 //! --videos`): every policy row (by its first seed) and the controller at its best speed, left to
-//! right, replaying one episode the suite played, at the mildest level of the axis where their
-//! outcomes differ. The replay is checked against the suite's recorded outcomes.
+//! right, replaying one episode the suite played, at the mildest level of the axis where the
+//! outcomes of those that walk nominally differ. The replay is checked against the suite's
+//! recorded outcomes.
 use anyhow::{Context, Result};
 
 use super::robustness::SuiteData;
 use super::videos::{film, Clip, ClipPlan};
+use crate::evaluation::robustness::suite::NOMINAL;
+use crate::evaluation::robustness::summary::SURVIVAL_BAR;
 use crate::evaluation::robustness::{Axis, Contender, Outcome};
 use crate::evaluation::Protocol;
 
@@ -27,10 +30,18 @@ fn panels(s: &SuiteData) -> Result<Vec<Contender>> {
     Ok(all.into_iter().filter(|c| matches!(c, Contender::Agent { .. }) || Some(c.label()) == best).collect())
 }
 
-/// The mildest level of `axis`, and the first episode there, at which one of `labels` survives
-/// and another falls (the first seed of a row of several); without one, the last level's first
-/// episode. `None` when a contender has no cell on the axis.
+/// The mildest level of `axis`, and the first episode there, at which one of the contenders that
+/// survive at least 90% of the nominal episodes survives and another of them falls (all of
+/// `labels` when fewer than two do; a row of several seeds by its first seed); without one, the
+/// last level's first episode. The outcomes are those of every one of `labels`. `None` when a
+/// contender has no cell on the axis.
 pub fn pick(s: &SuiteData, axis: &Axis, labels: &[&str]) -> Option<Pick> {
+    let strong =
+        |l: &str| s.cells.iter().any(|c| c.policy == l && c.axis == NOMINAL && c.survival().estimate >= SURVIVAL_BAR);
+    let mut deciders: Vec<bool> = labels.iter().map(|l| strong(l)).collect();
+    if deciders.iter().filter(|d| **d).count() < 2 {
+        deciders = vec![true; labels.len()];
+    }
     let episodes = s.meta.episodes;
     let outcomes_at = |level: f64| -> Option<Vec<&[Outcome]>> {
         labels
@@ -45,7 +56,8 @@ pub fn pick(s: &SuiteData, axis: &Axis, labels: &[&str]) -> Option<Pick> {
         let cells = outcomes_at(level)?;
         for k in 0..episodes {
             let here: Vec<Outcome> = cells.iter().map(|o| o[k]).collect();
-            if here.contains(&Outcome::Survived) && here.contains(&Outcome::Fell) {
+            let decided = || here.iter().zip(&deciders).filter(|(_, d)| **d).map(|(o, _)| *o);
+            if decided().any(|o| o == Outcome::Survived) && decided().any(|o| o == Outcome::Fell) {
                 return Some(Pick { level, episode: k, outcomes: here });
             }
         }
@@ -131,19 +143,32 @@ mod tests {
 
     #[test]
     fn the_clip_replays_the_mildest_level_where_outcomes_differ() {
-        let mut cells = Vec::new();
-        // Both survive 1 kg; at 2 kg the controller falls in the second episode, the policy in
-        // none; at 4 kg both fall in every episode. A row of two seeds counts its first seed.
-        for (level, policy, ctrl) in
-            [(1.0, "SSSSSS", "SSS"), (2.0, "SSSFFF", "SFS"), (4.0, "FFFFFF", "FFF"), (6.0, "FFFFFF", "FFF")]
-        {
+        // "weak" falls in a nominal episode (below 90%), so its outcomes do not pick the episode.
+        let mut cells = vec![
+            cell("ppo", NOMINAL, 0.0, "SSS"),
+            cell("ctrl (best)", NOMINAL, 0.0, "SSS"),
+            cell("weak", NOMINAL, 0.0, "FSS"),
+        ];
+        // Both survive 1 kg (where "weak" falls once); at 2 kg the controller falls in the second
+        // episode, the policy in none; at 4 kg both fall in every episode. A row of two seeds
+        // counts its first seed.
+        for (level, policy, ctrl, weak) in [
+            (1.0, "SSSSSS", "SSS", "FSS"),
+            (2.0, "SSSFFF", "SFS", "FFF"),
+            (4.0, "FFFFFF", "FFF", "FFF"),
+            (6.0, "FFFFFF", "FFF", "FFF"),
+        ] {
             cells.push(cell("ppo", "payload", level, policy));
             cells.push(cell("ctrl (best)", "payload", level, ctrl));
+            cells.push(cell("weak", "payload", level, weak));
         }
         let s = suite(cells.clone());
         let axis = s.axes[0];
-        let p = pick(&s, &axis, &["ppo", "ctrl (best)"]).unwrap();
-        assert_eq!(p, Pick { level: 2.0, episode: 1, outcomes: vec![Outcome::Survived, Outcome::Fell] });
+        let p = pick(&s, &axis, &["ppo", "weak", "ctrl (best)"]).unwrap();
+        assert_eq!(p, Pick { level: 2.0, episode: 1, outcomes: vec![Outcome::Survived, Outcome::Fell, Outcome::Fell] });
+        // With only one contender above the bar, every contender decides.
+        let p = pick(&s, &axis, &["ppo", "weak"]).unwrap();
+        assert_eq!((p.level, p.episode), (1.0, 0));
         // Where no episode tells them apart, the last level's first episode.
         let same: Vec<Cell> =
             cells.iter().map(|c| Cell { outcomes: vec![Outcome::Fell; c.outcomes.len()], ..c.clone() }).collect();
