@@ -12,7 +12,11 @@ with `normalize: true` (SB3's VecNormalize on observations and rewards). Writes 
   deterministic actions through the VecNormalize observation statistics), with the controller at
   the policy's speed where the env has one;
 - `external/`: those episodes with their provenance, for `locobench report --external`;
-- `run.toml`: the hyperparameters, the library versions, the machine, the wall time.
+- `run.toml`: the hyperparameters, the library versions, the machine, the wall and CPU time of
+  training.
+
+`half-cheetah-cleanrl` trains SB3 with locobench's own PPO settings instead (CleanRL's), for
+`benches/ppo_vs_sb3.py`'s like-for-like comparison.
 
 Run with `OMP_NUM_THREADS=1` (one core per run), from a venv with stable-baselines3 and locobench
 (`bash python/check_sb3.sh` makes target/sb3-check-venv):
@@ -55,7 +59,31 @@ ZOO = {
         policy_kwargs=dict(log_std_init=-2, ortho_init=False, activation_fn=torch.nn.ReLU,
                            net_arch=dict(pi=[256, 256], vf=[256, 256])),
     ),
+    # The settings of locobench's own PPO runs (benches/results/half-cheetah/ppo-seed*-1m: CleanRL's
+    # ppo_continuous_action.py), so that the two implementations meet with the same hyperparameters
+    # and the same networks: 64-64 tanh, orthogonal init, 2048-step rollouts, 32 minibatches of 64,
+    # 10 epochs, Adam 3e-4 (epsilon 1e-5) annealed linearly to 0, value clipping at 0.2,
+    # gradient-norm limit 0.5, observations and rewards normalised and clipped at 10.
+    "half-cheetah-cleanrl": dict(
+        id="locobench/HalfCheetah-v5",
+        n_envs=1,
+        ppo=dict(n_steps=2048, batch_size=64, gae_lambda=0.95, gamma=0.99, n_epochs=10, ent_coef=0.0,
+                 learning_rate="linear 3e-4", clip_range=0.2, clip_range_vf=0.2, vf_coef=0.5, max_grad_norm=0.5),
+        policy_kwargs=dict(net_arch=dict(pi=[64, 64], vf=[64, 64]), optimizer_kwargs=dict(eps=1e-5)),
+        source="locobench's PPO settings (CleanRL ppo_continuous_action.py)",
+        label="sb3-ppo-cleanrl",
+    ),
 }
+
+
+def ppo_kwargs(zoo):
+    """SB3's PPO arguments; "linear X" is a learning rate annealed linearly from X to 0."""
+    kwargs = dict(zoo["ppo"])
+    lr = kwargs["learning_rate"]
+    if isinstance(lr, str):
+        start = float(lr.split()[1])
+        kwargs["learning_rate"] = lambda remaining: start * remaining
+    return kwargs
 
 
 class Progress(BaseCallback):
@@ -94,12 +122,14 @@ def main():
         model = PPO.load(out / "model.zip", env=venv, device="cpu")
         wall = None
     else:
-        venv = VecNormalize(venv)
+        # rl-baselines3-zoo's `normalize: true` gives VecNormalize the algorithm's discount factor
+        # (rl_zoo3/exp_manager.py, "Use the same discount factor as for the algorithm").
+        venv = VecNormalize(venv, gamma=zoo["ppo"]["gamma"])
         model = PPO("MlpPolicy", venv, seed=seed, verbose=0, device="cpu", policy_kwargs=zoo["policy_kwargs"],
-                    **zoo["ppo"])
-        started = time.perf_counter()
+                    **ppo_kwargs(zoo))
+        started, cpu_started = time.perf_counter(), time.process_time()
         model.learn(total_timesteps=steps, callback=Progress(out / "progress.csv", started))
-        wall = time.perf_counter() - started
+        wall, cpu_time = time.perf_counter() - started, time.process_time() - cpu_started
         model.save(out / "model.zip")
         venv.save(out / "vecnormalize.pkl")
 
@@ -110,9 +140,9 @@ def main():
         action, _ = model.predict(normalised, deterministic=True)
         return action
 
-    controller = env_name in ("minitaur", "ant")
+    controller = zoo["id"] in ("locobench/Minitaur-v0", "locobench/Ant-v5")
     held_out = locobench.evaluate(act, zoo["id"], episodes=50, seed=0, controller=controller, out=out / "external",
-                                  label="sb3-ppo", training_seed=seed, steps=steps, policy_file=out / "model.zip",
+                                  label=zoo.get("label", "sb3-ppo"), training_seed=seed, steps=steps, policy_file=out / "model.zip",
                                   library=("stable-baselines3", stable_baselines3.__version__))
     (out / "held_out.json").write_text(json.dumps(held_out, indent=1, default=float))
     if trained:
@@ -125,8 +155,8 @@ def main():
         f"seed = {seed}",
         f"steps = {steps}",
         f"n_envs = {zoo['n_envs']}",
-        'hyperparameters = "rl-baselines3-zoo hyperparams/ppo.yml, ' + ("MinitaurBulletEnv-v0" if env_name == "minitaur" else "HalfCheetah-v3") + '; VecNormalize"',
-        "ppo = " + json.dumps(zoo["ppo"]).replace(":", " =").replace('"', ""),
+        'hyperparameters = "' + zoo.get("source", "rl-baselines3-zoo hyperparams/ppo.yml, " + ("MinitaurBulletEnv-v0" if env_name == "minitaur" else "HalfCheetah-v3")) + '; VecNormalize"',
+        "ppo = {" + ", ".join(f"{k} = {json.dumps(v)}" for k, v in zoo["ppo"].items()) + "}",
         f'policy_kwargs = "{kwargs}"',
         f'stable_baselines3 = "{stable_baselines3.__version__}"',
         f'torch = "{torch.__version__}"',
@@ -135,6 +165,7 @@ def main():
         f'cpu = "{cpu()}"',
         f"torch_threads = {torch.get_num_threads()}",
         f"wall_time_s = {wall:.1f}",
+        f"cpu_time_s = {cpu_time:.1f}",
     ]
     (out / "run.toml").write_text("\n".join(lines) + "\n")
     print(f"{env_name} seed {seed}: {steps} steps in {wall:.0f} s; held-out return "
