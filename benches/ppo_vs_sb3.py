@@ -5,9 +5,11 @@ Both sides train with CleanRL's `ppo_continuous_action.py` settings (locobench's
 `benches/sb3_peer.py half-cheetah-cleanrl` sets SB3 to them), one core each, on the same machine:
 
 - SB3: `benches/sb3_peer.py half-cheetah-cleanrl SEED 1000000 benches/results/half-cheetah/sb3-ppo-cleanrl-seedSEED-1m`;
-  its wall time comes from the run's run.toml and its CPU time from a log of samples of the
-  process's CPU seconds beside its progress rows (`--cpu-log`, lines `unix_s seed cpu_s progress_row`),
-  taken at its last progress row (the end of training, before the held-out evaluation);
+  its wall and CPU time of training come from the run's run.toml, or, for runs from before
+  sb3_peer.py recorded CPU time, from a log of samples of the process's CPU seconds beside its
+  progress rows (`--cpu-log`, lines `unix_s seed cpu_s progress_row`, sampled from
+  /proc/PID/stat), taken at its last progress row (the end of training, before the held-out
+  evaluation);
 - locobench: `/usr/bin/time -f "%e %U %S" locobench train --env half-cheetah --algo ppo --seed SEED
   --steps 1000000 --threads 1 --out DIR` (`--ours DIR`, holding seedN/ and timeN.txt), which
   includes its periodic evaluation (10 episodes every 10k steps) that the SB3 run does not do.
@@ -62,7 +64,7 @@ def crate_version():
 def main():
     ap = argparse.ArgumentParser()
     ap.add_argument("--ours", required=True, type=pathlib.Path)
-    ap.add_argument("--cpu-log", required=True, type=pathlib.Path)
+    ap.add_argument("--cpu-log", type=pathlib.Path, help="for runs whose run.toml has no cpu_time_s")
     ap.add_argument("--out", required=True, type=pathlib.Path, help="benches/results/<date>-<machine>/ppo-vs-sb3.csv")
     ap.add_argument("--note", default="")
     args = ap.parse_args()
@@ -74,7 +76,8 @@ def main():
         steps = int(run["steps"])
         rows.append(dict(implementation="stable-baselines3 " + run["stable_baselines3"].strip('"'),
                          seed=seed, steps=steps, wall_s=float(run["wall_time_s"]),
-                         cpu_s=cpu_at_end(args.cpu_log, seed, steps), held_out=held["return_mean"]))
+                         cpu_s=float(run["cpu_time_s"]) if "cpu_time_s" in run else cpu_at_end(args.cpu_log, seed, steps),
+                         held_out=held["return_mean"]))
     for seed in SEEDS:
         rerun = args.ours / f"seed{seed}"
         committed = RESULTS / f"half-cheetah/ppo-seed{seed}-1m"
