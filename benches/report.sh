@@ -35,7 +35,7 @@ runs=(
   $r/{half-cheetah,walker2d}/ppo-seed{0,1,2}-1m $r/hopper/ppo-seed{0,1,2,3,4,5,6,7,8,9}-1m
   $r/minitaur/ppo-8envs-seed{0,1,2}-2m $r/minitaur/dqn-seed0-300k $r/inverted-pendulum/dqn-seed0
   # PPO trained for robustness (random shoves, rough ground, latency, sensor noise, slopes),
-  # stopped at 1M steps of its 2M schedule; evaluated in the nominal env like every row
+  # 2M steps, policies at 1M and 2M; evaluated in the nominal env like every row
   $r/minitaur/ppo-robust-seed{0,1,2}-2m
   # SAC on Minitaur with Freeman's reward (no energy cost; drift weights 0, 0.5 and 1), 500k; CrossQ
   # with 256-wide critics, policies at 100k and 300k
