@@ -25,6 +25,9 @@ pub const VIDEO_DIR: &str = "videos";
 /// Each panel's size: two side by side make a 640x240 clip.
 const PANEL: (usize, usize) = (320, 240);
 
+/// A robustness clip's panel: four side by side make a 960x180 clip.
+const SMALL_PANEL: (usize, usize) = (240, 180);
+
 /// At most this many frames per simulated second, and about this many frames per panel at most
 /// (a 50-second Ant episode is filmed at fewer frames per second than a 10-second Minitaur one).
 const MAX_FPS: f64 = 25.0;
@@ -59,6 +62,11 @@ pub struct ClipPlan {
     env: EnvConfig,
     /// The episode's reset seed; the protocol's first held-out episode when absent.
     episode_seed: Option<u64>,
+    /// Each panel's size in pixels.
+    panel: (usize, usize),
+    /// End the clip a second after the last panel that falls has fallen (the whole episode when
+    /// none falls): what a robustness clip is about is decided by then.
+    until_decided: bool,
 }
 
 impl ClipPlan {
@@ -84,7 +92,16 @@ impl ClipPlan {
                 }),
             })
             .collect::<Result<Vec<_>>>()?;
-        Ok(ClipPlan { stem, caption, panels, push, env, episode_seed: Some(episode_seed) })
+        Ok(ClipPlan {
+            stem,
+            caption,
+            panels,
+            push,
+            env,
+            episode_seed: Some(episode_seed),
+            panel: SMALL_PANEL,
+            until_decided: true,
+        })
     }
 }
 
@@ -207,6 +224,8 @@ pub fn plan(
             push: None,
             env: cfg.clone(),
             episode_seed: None,
+            panel: PANEL,
+            until_decided: false,
         });
         if push {
             plans.push(ClipPlan {
@@ -218,6 +237,8 @@ pub fn plan(
                 push: Some(Push::lateral(FILMED_PUSH)),
                 env: cfg,
                 episode_seed: None,
+                panel: PANEL,
+                until_decided: false,
             });
         }
     }
@@ -239,7 +260,7 @@ pub fn film(
         plans.iter().enumerate().flat_map(|(c, p)| (0..p.panels.len()).map(move |k| (c, k))).collect();
     let panels = map_in_order(&jobs, threads, |&(c, k)| {
         let plan = &plans[c];
-        film_panel(&plan.panels[k], &plan.env, plan.push, runs, plan.episode_seed.unwrap_or(first_seed))
+        film_panel(&plan.panels[k], &plan.env, plan.push, runs, plan.episode_seed.unwrap_or(first_seed), plan.panel)
             .with_context(|| format!("filming {} (panel {})", plan.stem, k + 1))
     })?;
     let mut clips = Vec::new();
@@ -258,8 +279,9 @@ fn film_panel(
     push: Option<Push>,
     runs: &[(&Group, &Vec<&Run>)],
     episode_seed: u64,
+    size: (usize, usize),
 ) -> Result<Panel> {
-    let settings = RenderSettings { width: PANEL.0, height: PANEL.1, camera: Camera::Follow };
+    let settings = RenderSettings { width: size.0, height: size.1, camera: Camera::Follow };
     let spec = crate::envs::make(env)?.spec().clone();
     let episode_time = spec.max_episode_steps as f64 * spec.dt;
     let fps = MAX_FPS.min(MAX_FRAMES / episode_time);
@@ -297,7 +319,13 @@ fn film_panel(
 }
 
 fn write_clip(plan: &ClipPlan, panels: &[Panel], dir: &Path) -> Result<Clip> {
-    let (frames, fps) = tile_panels(panels)?;
+    let (mut frames, fps) = tile_panels(panels)?;
+    let mut duration = panels.iter().map(|p| p.seconds).fold(0.0, f64::max);
+    let last_fall = panels.iter().filter(|p| p.fell || p.unstable).map(|p| p.seconds).fold(f64::NAN, f64::max);
+    if plan.until_decided && last_fall + 1.0 < duration {
+        duration = last_fall + 1.0;
+        frames.truncate((duration * fps).round() as usize + 1);
+    }
     let name = |ext: &str| format!("{}.{ext}", plan.stem);
     let video = write_video(&dir.join(name("mp4")), &frames, fps)?;
     crate::render::video::write_poster(&dir.join(name("jpg")), &frames[frames.len() / 2])?;
@@ -318,7 +346,7 @@ fn write_clip(plan: &ClipPlan, panels: &[Panel], dir: &Path) -> Result<Clip> {
         video: format!("{VIDEO_DIR}/{}", name("mp4")),
         gif: format!("{VIDEO_DIR}/{}", name("gif")),
         poster: format!("{VIDEO_DIR}/{}", name("jpg")),
-        duration: panels.iter().map(|p| p.seconds).fold(0.0, f64::max),
+        duration,
         fps,
         bytes: (size(&video), size(&gif)),
         fell: panels.iter().map(|p| p.fell || p.unstable).collect(),
