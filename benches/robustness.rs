@@ -5,12 +5,15 @@
 //! Ant's suite (CrossQ at 300k, three seeds) into `benches/results/<date>-<machine>/ant/`.
 //!
 //! Knobs: LOCOBENCH_ROBUSTNESS_POLICIES (`label=reference[@budget]`, comma-separated, the same
-//! label once per seed of a row; default each walking algorithm's best row by its shipped policy:
-//! PPO, the robust PPO and TD3 at 1M), LOCOBENCH_ROBUSTNESS_EPISODES (50), LOCOBENCH_ROBUSTNESS_SEED (100: episodes
-//! no run trained on and no report or policy choice used), LOCOBENCH_ROBUSTNESS_AXES (all),
+//! label once per seed of a row; default each walking algorithm's best row by its shipped policy
+//! or run: PPO, the robust PPO and TD3 at 1M, and the robust PPO with a random centre of mass at
+//! 2M), LOCOBENCH_ROBUSTNESS_EPISODES (50), LOCOBENCH_ROBUSTNESS_SEED (100: episodes no run
+//! trained on and no report or policy choice used), LOCOBENCH_ROBUSTNESS_AXES (all),
 //! LOCOBENCH_ROBUSTNESS_CONTROLLER (best,matched), LOCOBENCH_ROBUSTNESS_THREADS (all cores),
-//! LOCOBENCH_ROBUSTNESS_OUT, LOCOBENCH_ROBUSTNESS_REUSE (an earlier suite's directory: its cells
-//! of the same contender, axis and level are kept instead of played again).
+//! LOCOBENCH_ROBUSTNESS_OUT (default `benches/results/<date>-<machine>/`, the machine named by its
+//! CPU, an AMD core's generation and its SIMD level), LOCOBENCH_ROBUSTNESS_REUSE (an earlier
+//! suite's directory: its cells of the same contender, axis and level are kept instead of played
+//! again, where the contender's label names the same policies).
 //!
 //! Run without `--bench` (as `cargo test --all-targets` does), it plays one axis for one policy
 //! on two episodes into a temporary directory.
@@ -37,13 +40,15 @@ fn main() -> Result<()> {
     let smoke = !std::env::args().any(|a| a == "--bench");
     let root = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
     // Each walking algorithm's best row on Minitaur, by its shipped seed: PPO at 1M (seed 0), the
-    // robust PPO at 1M, TD3 at 1M (seed 1). A row's other seeds can be added through
+    // robust PPO at 1M, the robust PPO with a random centre of mass at 2M (seed 2), TD3 at 1M
+    // (seed 1). A row's other seeds can be added through
     // LOCOBENCH_ROBUSTNESS_POLICIES (the same label once per seed).
     let env_name = var("LOCOBENCH_ROBUSTNESS_ENV").unwrap_or_else(|| "minitaur".into());
     let rows: &[&str] = match env_name.as_str() {
         "minitaur" => &[
             "ppo 1M=models/policies/minitaur-ppo",
             "ppo-robust 1M=models/policies/minitaur-ppo-robust",
+            "ppo-robust-com 2M=benches/results/minitaur/ppo-robust-com-seed2-2m@2000000",
             "td3 1M=models/policies/minitaur-td3",
         ],
         // Ant's best walking row: CrossQ at 300k, every committed seed.
@@ -97,7 +102,7 @@ fn main() -> Result<()> {
     // LOCOBENCH_ROBUSTNESS_REUSE: an earlier suite's directory whose matching cells are kept.
     let (reuse, from) = match var("LOCOBENCH_ROBUSTNESS_REUSE") {
         Some(dir) if !smoke => {
-            let (cells, meta) = output::reusable(std::path::Path::new(&dir), &suite)?;
+            let (cells, meta) = output::reusable(std::path::Path::new(&dir), &suite, &agents)?;
             (cells, Some((dir, meta.total_wall())))
         }
         _ => (Vec::new(), None),

@@ -6,9 +6,10 @@
 #      1M, shipped in models/policies/, retrain them with the commands in their READMEs) are
 #      evaluated and recorded, beside the Raibert/QP baseline controller at 0.35 m/s and at
 #      1.5 m/s, its fastest; the PPO policy is filmed beside the controller at its speed;
-#   4. the robust PPO policy (trained under shoves, rough ground, latency, sensor noise and
-#      slopes) and the PPO policy meet the controller in a short robustness suite (3 axes, 3
-#      episodes per level; `cargo bench --bench robustness` is the full one);
+#   4. the two robust PPO policies (trained under shoves, rough ground, latency, sensor noise and
+#      slopes, the second also with a random centre of mass) and the PPO policy meet the
+#      controller in a short robustness suite (3 axes, 3 episodes per level; `cargo bench --bench
+#      robustness` is the full one);
 #   5. a report evaluates every policy on the same held-out episodes, beside the controller
 #      across its speeds and under pushes, with the suite's section, and films each algorithm's
 #      best policy.
@@ -23,6 +24,7 @@ policy=models/policies/minitaur-sac
 td3_policy=models/policies/minitaur-td3
 ppo_policy=models/policies/minitaur-ppo
 robust_policy=models/policies/minitaur-ppo-robust
+robust_com_policy=models/policies/minitaur-ppo-robust-com
 rm -rf "$out"
 mkdir -p "$out"
 "$bin" envs
@@ -31,7 +33,7 @@ mkdir -p "$out"
 "$bin" eval --policy "$out/run-inverted-pendulum-sac" --episodes 10
 "$bin" sweep --env inverted-pendulum --algo td3,ddpg --seeds 2 --jobs 2 --out "$out/pendulum-sweep"
 "$bin" sweep status "$out/pendulum-sweep"
-for p in "$policy" "$td3_policy" "$ppo_policy" "$robust_policy"; do "$bin" eval --policy "$p" --episodes 10; done
+for p in "$policy" "$td3_policy" "$ppo_policy" "$robust_policy" "$robust_com_policy"; do "$bin" eval --policy "$p" --episodes 10; done
 "$bin" baseline --env minitaur --speed 0.35,1.5 --episodes 3 --seed 0
 "$bin" record --env minitaur --policy raibert --speed 0.35 --out "$out/minitaur-raibert.rrd"
 "$bin" record --policy "$policy" --out "$out/minitaur-sac.rrd"
@@ -40,9 +42,10 @@ for p in "$policy" "$td3_policy" "$ppo_policy" "$robust_policy"; do "$bin" eval 
 "$bin" record --policy "$ppo_policy" --side-by-side controller --caption --seed 100 \
   --video "$out/minitaur-ppo-vs-controller.mp4"
 "$bin" robustness --env minitaur --policy "ppo=$ppo_policy" --policy "ppo-robust=$robust_policy" \
+  --policy "ppo-robust-com=$robust_com_policy" \
   --controller 1.5 --axes push_lateral,terrain,latency --episodes 3 --seed 100 --out "$out/robustness"
 "$bin" report --runs "$out/run-inverted-pendulum-sac" "$out/pendulum-sweep" "$policy" "$td3_policy" "$ppo_policy" \
-  "$robust_policy" --out "$out/report" --episodes 3 --push-episodes 2 --videos --robustness "$out/robustness"
+  "$robust_policy" "$robust_com_policy" --out "$out/report" --episodes 3 --push-episodes 2 --videos --robustness "$out/robustness"
 echo
 echo "Report (open in a browser):   $(pwd)/$out/report/index.html  (Markdown: $out/report/README.md)"
 echo "Video (PPO beside the controller): $(pwd)/$out/minitaur-ppo-vs-controller.mp4"

@@ -239,6 +239,32 @@ fn payload_friction_and_slope_change_the_episode_model() {
     assert!(up < flat, "uphill {up} vs flat {flat}");
 }
 
+#[test]
+fn random_payload_and_centre_of_mass_are_drawn_per_episode_within_their_range() {
+    let mut plain = fixed(MinitaurOptions::default());
+    plain.reset(Some(1)).unwrap();
+    let m0 = plain.data().model().clone();
+    let base = (0..m0.body_mass().len()).max_by(|a, b| m0.body_mass()[*a].total_cmp(&m0.body_mass()[*b])).unwrap();
+    let opts = MinitaurOptions { random_payload_max: 2.0, random_com_shift_max: 0.1, ..Default::default() };
+    let mut e = fixed(opts.clone());
+    let mut draws = Vec::new();
+    for seed in 0..8 {
+        e.reset(Some(seed)).unwrap();
+        let m = e.data().model();
+        let payload = m.body_mass()[base] - m0.body_mass()[base];
+        let shift = m.body_ipos()[3 * base] - m0.body_ipos()[3 * base];
+        assert!((0.0..=2.0).contains(&payload) && (-0.1..=0.1).contains(&shift), "{payload} {shift}");
+        draws.push((payload, shift));
+    }
+    assert!(draws.iter().any(|d| d.1 > 0.0) && draws.iter().any(|d| d.1 < 0.0), "both ways: {draws:?}");
+    assert!(draws.windows(2).all(|w| w[0] != w[1]), "a new draw each episode: {draws:?}");
+    // The same seed draws the same world.
+    let mut again = fixed(opts);
+    again.reset(Some(3)).unwrap();
+    let m = again.data().model();
+    assert_eq!(m.body_mass()[base] - m0.body_mass()[base], draws[3].0);
+}
+
 trait TapReset {
     fn tap_reset(self) -> Self;
 }
@@ -362,6 +388,8 @@ fn perturbation_options_out_of_range_name_the_option() {
         (MinitaurOptions { noise_angle: -0.01, ..Default::default() }, "noise_angle"),
         (MinitaurOptions { battery_voltage: 0.5, ..Default::default() }, "battery_voltage"),
         (MinitaurOptions { random_push_max: 10.0, ..Default::default() }, "random_push_max"),
+        (MinitaurOptions { random_payload_max: -1.0, ..Default::default() }, "random_payload_max"),
+        (MinitaurOptions { com_shift: 0.2, random_com_shift_max: 0.2, ..Default::default() }, "random_com_shift_max"),
     ] {
         let e = Minitaur::new(opts).err().expect("refused").to_string();
         assert!(e.contains(name), "{e}");

@@ -53,6 +53,41 @@ fn a_small_suite_writes_every_cell_the_same_on_any_thread_count() {
     let text = |d: &std::path::Path| std::fs::read_to_string(d.join("robustness.csv")).unwrap();
     assert!(text(&a) == text(&b), "thread count changes nothing");
 
+    // --reuse keeps a cell only where its label still names the same policy: the same suite takes
+    // every cell; the label "ppo" moved to another policy plays that policy's cells again.
+    let reuse = |out: &std::path::Path, policy: &str| {
+        let a = a.to_str().unwrap();
+        let (ok, stdout, err) = locobench(&[
+            "robustness",
+            "--env",
+            "minitaur",
+            "--policy",
+            policy,
+            "--controller",
+            "1.0",
+            "--axes",
+            "payload,latency",
+            "--episodes",
+            "2",
+            "--seed",
+            "100",
+            "--threads",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+            "--reuse",
+            a,
+        ]);
+        assert!(ok, "{err}");
+        stdout
+    };
+    let same = reuse(&dir.path().join("same"), &format!("ppo={PPO}"));
+    assert!(same.contains("20 of the 20 cells were taken"), "{same}");
+    assert_eq!(text(&dir.path().join("same")), text(&a));
+    let td3 = concat!(env!("CARGO_MANIFEST_DIR"), "/models/policies/minitaur-td3");
+    let moved = reuse(&dir.path().join("moved"), &format!("ppo={td3}"));
+    assert!(moved.contains("10 of the 20 cells were taken"), "only the controller's: {moved}");
+
     // The report's section from it: summary, goal, a chart per axis.
     let report = dir.path().join("report");
     let (ok, _, err) = locobench(&[
@@ -84,6 +119,28 @@ fn a_small_suite_writes_every_cell_the_same_on_any_thread_count() {
         let caption = md.split(&format!("videos/{stem}.gif")).next().unwrap().rsplit("![").next().unwrap();
         assert!(caption.contains("left to right ppo (") && caption.contains("as the suite recorded them"), "{caption}");
         assert!(!caption.contains("The replay ended otherwise"), "{caption}");
+    }
+    // Every clip on the page lasts, in a player (frames / fps), the episode time it claims, to
+    // within a frame: a clip cut after the last fall keeps whole frames only.
+    let html = std::fs::read_to_string(report.join("index.html")).unwrap();
+    for tag in html.split("<video ").skip(1) {
+        let attr =
+            |name: &str| tag.split(&format!("{name}=\"")).nth(1).map(|v| v.split('"').next().unwrap().to_string());
+        let (Some(src), Some(duration), Some(fps)) = (attr("src"), attr("data-duration"), attr("data-fps")) else {
+            continue;
+        };
+        let (duration, fps): (f64, f64) = (duration.parse().unwrap(), fps.parse().unwrap());
+        let probe = std::process::Command::new("ffprobe")
+            .args(["-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries"])
+            .args(["stream=nb_read_frames", "-of", "csv=p=0"])
+            .arg(report.join(&src))
+            .output()
+            .expect("ffprobe (Debian's ffmpeg, installed by scripts/setup.sh)");
+        let frames: f64 = String::from_utf8_lossy(&probe.stdout).trim().parse().unwrap();
+        assert!(
+            (frames / fps - duration).abs() <= 1.0 / fps + 1e-3,
+            "{src}: {frames} frames at {fps} fps, {duration} s"
+        );
     }
 }
 

@@ -53,7 +53,7 @@ pub fn run(args: RobustnessArgs) -> Result<()> {
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let (reuse, from) = match &args.reuse {
         Some(dir) => {
-            let (cells, meta) = output::reusable(dir, &suite)?;
+            let (cells, meta) = output::reusable(dir, &suite, &agents)?;
             (cells, Some((dir.display().to_string(), meta.total_wall())))
         }
         None => (Vec::new(), None),

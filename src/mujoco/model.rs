@@ -327,6 +327,10 @@ impl Model {
     pub fn body_mass(&self) -> &[f64] {
         self.slice_f64(self.raw().body_mass, self.nbody())
     }
+    /// Each body's centre of mass in its own frame (`body_ipos`), `3 * nbody` values.
+    pub fn body_ipos(&self) -> &[f64] {
+        self.slice_f64(self.raw().body_ipos, 3 * self.nbody())
+    }
     /// Whether `body` hangs from its parent by a free joint (six degrees of freedom), so it can
     /// turn about the vertical; planar models (a slide-slide-hinge root) cannot.
     pub fn body_is_free(&self, body: usize) -> bool {

@@ -10,7 +10,9 @@ use anyhow::Result;
 use super::document::Document;
 use super::plots::{bands_svg, Band};
 use crate::evaluation::robustness::output::{read_dir, SuiteMeta};
-use crate::evaluation::robustness::summary::{along, survives_where_controller_falls, threshold, SURVIVAL_BAR};
+use crate::evaluation::robustness::summary::{
+    along, survives_where_controller_falls, threshold, walking_threshold, SURVIVAL_BAR, WALK_SHARE,
+};
 use crate::evaluation::robustness::{axes_of, Axis, Cell};
 use crate::evaluation::stats::Interval;
 
@@ -74,6 +76,18 @@ fn rate(i: Interval) -> String {
 fn threshold_cell(s: &SuiteData, policy: &str, axis: &Axis) -> String {
     let t = threshold(&s.cells, policy, axis);
     let below = t.first_below.map_or(String::new(), |(l, i)| format!("; {} at {}", rate(i), level(l, axis)));
+    // Where surviving and walking part: the level up to which it also keeps half its speed.
+    let w = walking_threshold(&s.cells, policy, axis);
+    let below = if w.level != t.level && t.level.is_some() {
+        let walks = match w.level {
+            Some(l) if l == axis.nominal => "nominal only".to_string(),
+            Some(l) => level(l, axis),
+            None => "not even nominal".to_string(),
+        };
+        format!("{below}; walking (at least {:.0}% of its nominal speed) up to {walks}", WALK_SHARE * 100.0)
+    } else {
+        below
+    };
     match (t.level, t.survival) {
         (Some(l), Some(i)) => {
             let beyond = if t.beyond_last { ", every level" } else { "" };
@@ -243,11 +257,14 @@ pub fn provenance(s: &SuiteData) -> String {
         "Every contender plays the same {} held-out episodes (protocol seed {}) at every level of every axis, \
          in the env's default options plus the axis's own; a row of several trained seeds plays every episode \
          once per seed. Survival is the share of episodes that walked to the time limit, with its 95% Wilson \
-         interval; episodes where the physics blew up are counted apart, not as falls. The controller reads the \
+         interval; episodes where the physics blew up are counted apart, not as falls. Surviving is not walking \
+         (a policy can stand still on ice): where a contender's 90% level differs from the last level at which it \
+         also keeps at least {:.0}% of its nominal mean speed, the summary table names both. The controller reads the \
          simulator's state (base pose and velocity, masses, gravity) where the policies read their {} observed \
          values{}. Measured on {} at commit {}, {:.0} s of wall time with {} threads: `{}`.",
         m.episodes,
         m.protocol_seed,
+        WALK_SHARE * 100.0,
         crate::envs::make(&m.env).map_or(0, |e| e.spec().observation_space.dim()),
         if s.axes.iter().any(|a| matches!(a.apply, crate::evaluation::robustness::axes::Apply::Options(_))) {
             ", so sensor noise reaches the controller only through the motor angles and velocities, and it knows a \

@@ -323,8 +323,11 @@ fn write_clip(plan: &ClipPlan, panels: &[Panel], dir: &Path) -> Result<Clip> {
     let mut duration = panels.iter().map(|p| p.seconds).fold(0.0, f64::max);
     let last_fall = panels.iter().filter(|p| p.fell || p.unstable).map(|p| p.seconds).fold(f64::NAN, f64::max);
     if plan.until_decided && last_fall + 1.0 < duration {
-        duration = last_fall + 1.0;
-        frames.truncate((duration * fps).round() as usize + 1);
+        // Whole frames only, and the duration the kept frames show: a browser plays n frames
+        // for n / fps seconds, so the clip must not claim a fraction of a frame more or less.
+        let kept = (((last_fall + 1.0) * fps).floor() as usize + 1).min(frames.len());
+        frames.truncate(kept);
+        duration = (kept - 1) as f64 / fps;
     }
     let name = |ext: &str| format!("{}.{ext}", plan.stem);
     let video = write_video(&dir.join(name("mp4")), &frames, fps)?;

@@ -80,15 +80,40 @@ pub(crate) fn cpu_model() -> String {
         .unwrap_or_else(|| "unknown".into())
 }
 
-/// The machine as a directory name for dated results: its CPU model's words in lower case and
-/// its SIMD level, e.g. `amd-epyc-7b13-avx2`.
+/// The machine as a directory name for dated results: its CPU model's words in lower case, an
+/// AMD core's generation when the model name hides it (a VM's "AMD EPYC"), and its SIMD level,
+/// e.g. `amd-epyc-7b13-avx2` or `amd-epyc-zen3-avx2`.
 pub fn machine_slug() -> String {
     let model = cpu_model().to_lowercase();
-    let words: Vec<&str> = model
+    let mut words: Vec<&str> = model
         .split(|c: char| !c.is_ascii_alphanumeric())
         .filter(|w| !w.is_empty() && !matches!(*w, "processor" | "core" | "cpu" | "with" | "radeon" | "graphics"))
         .collect();
+    let generation = cpuinfo_number("cpu family").zip(cpuinfo_number("model")).and_then(|(f, m)| amd_generation(f, m));
+    if let Some(g) = generation.filter(|_| model.contains("amd") && !words.iter().any(|w| w.contains("zen"))) {
+        words.push(g);
+    }
     format!("{}-{}", words.join("-"), simd_level())
+}
+
+/// A numeric field of /proc/cpuinfo's first processor.
+fn cpuinfo_number(field: &str) -> Option<u32> {
+    let text = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let line = text.lines().find(|l| l.split(':').next().is_some_and(|k| k.trim() == field))?;
+    line.split_once(':')?.1.trim().parse().ok()
+}
+
+/// The Zen generation of an AMD CPU family and model, by the ranges Linux assigns them
+/// (torvalds/linux, `arch/x86/kernel/cpu/amd.c`, `bsp_init_amd`).
+fn amd_generation(family: u32, model: u32) -> Option<&'static str> {
+    match (family, model) {
+        (0x17, 0x30..=0x4f | 0x60..=0x7f | 0x84..=0x87 | 0x90..=0x91 | 0xa0..=0xaf) => Some("zen2"),
+        (0x17, _) => Some("zen"),
+        (0x19, 0x00..=0x0f | 0x20..=0x5f) => Some("zen3"),
+        (0x19, 0x10..=0x1f | 0x60..=0xaf) => Some("zen4"),
+        (0x1a, _) => Some("zen5"),
+        _ => None,
+    }
 }
 
 /// avx512, avx2 or baseline: which of the exact kernel paths the CPU can run at its widest.
@@ -183,6 +208,15 @@ pub fn resume_caveat_for(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn amd_generations_follow_linuxs_family_and_model_ranges() {
+        assert_eq!(amd_generation(25, 1), Some("zen3"), "EPYC 7003 (Milan)");
+        assert_eq!(amd_generation(25, 0x11), Some("zen4"), "EPYC 9004 (Genoa)");
+        assert_eq!(amd_generation(23, 0x31), Some("zen2"), "EPYC 7002 (Rome)");
+        assert_eq!(amd_generation(26, 2), Some("zen5"));
+        assert_eq!(amd_generation(6, 85), None, "an Intel family");
+    }
 
     #[test]
     fn stretches_append_replace_later_ones_and_read_back() {

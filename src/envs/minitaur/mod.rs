@@ -74,6 +74,11 @@ pub struct MinitaurOptions {
     pub payload_mass: f64,
     /// Moves the base's centre of mass forward by this (m; negative: backward).
     pub com_shift: f64,
+    /// Each episode adds a payload drawn uniformly from 0 to this (kg).
+    pub random_payload_max: f64,
+    /// Each episode moves the base's centre of mass by a shift drawn uniformly from [-this, this]
+    /// (m), forward or backward.
+    pub random_com_shift_max: f64,
     /// Share of the motors' torque curve they deliver (1: all of it, up to 3.5 N m).
     pub motor_strength: f64,
     /// Battery voltage of every motor (V); 0 keeps PyBullet's: 16 V, or U(14.8, 16.8) when the
@@ -125,6 +130,8 @@ impl Default for MinitaurOptions {
             friction_scale: 1.0,
             payload_mass: 0.0,
             com_shift: 0.0,
+            random_payload_max: 0.0,
+            random_com_shift_max: 0.0,
             motor_strength: 1.0,
             battery_voltage: 0.0,
             latency: 0.0,

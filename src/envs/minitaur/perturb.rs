@@ -39,10 +39,12 @@ const PUSH_DURATION: usize = 10;
 
 /// Every perturbation option: what the held-out protocol resets to nominal, so a policy trained
 /// under perturbations is evaluated in the same world as every other.
-pub const OPTIONS: [&str; 14] = [
+pub const OPTIONS: [&str; 16] = [
     "friction_scale",
     "payload_mass",
     "com_shift",
+    "random_payload_max",
+    "random_com_shift_max",
     "motor_strength",
     "battery_voltage",
     "latency",
@@ -62,6 +64,19 @@ pub(crate) fn validate(o: &MinitaurOptions) -> Result<(), EnvError> {
     c.within("friction_scale", o.friction_scale, 0.0, 10.0)?;
     c.within("payload_mass", o.payload_mass, 0.0, 60.0)?;
     c.within("com_shift", o.com_shift, -0.3, 0.3)?;
+    c.within("random_payload_max", o.random_payload_max, 0.0, 60.0)?;
+    c.within("random_com_shift_max", o.random_com_shift_max, 0.0, 0.3)?;
+    // The fixed and the random part together stay within the single option's range.
+    for (name, fixed, random, limit) in [
+        ("random_com_shift_max", o.com_shift.abs(), o.random_com_shift_max, 0.3),
+        ("random_payload_max", o.payload_mass, o.random_payload_max, 60.0),
+    ] {
+        if fixed + random > limit {
+            let message =
+                format!("{name} {random} on top of the fixed {fixed} can exceed {limit}, the most the model takes");
+            return Err(EnvError::InvalidOption { env: "minitaur".into(), message });
+        }
+    }
     c.within("motor_strength", o.motor_strength, 0.0, 2.0)?;
     if o.battery_voltage != 0.0 {
         c.within("battery_voltage", o.battery_voltage, 1.0, 50.0)?;
@@ -172,6 +187,8 @@ pub(crate) fn edits_model(o: &MinitaurOptions) -> bool {
     o.friction_scale != 1.0
         || o.payload_mass != 0.0
         || o.com_shift != 0.0
+        || o.random_payload_max > 0.0
+        || o.random_com_shift_max > 0.0
         || o.terrain_step_height > 0.0
         || o.slope != 0.0
         || o.random_slope_max > 0.0
@@ -190,17 +207,26 @@ pub(crate) fn edit_model(
             f[0] *= o.friction_scale;
         }
     }
-    if o.payload_mass != 0.0 {
+    // Drawn only when randomised, so the other options' draws stay where they were.
+    let mut payload = o.payload_mass;
+    if o.random_payload_max > 0.0 {
+        payload += rng.random_range(0.0..=o.random_payload_max);
+    }
+    let mut com_shift = o.com_shift;
+    if o.random_com_shift_max > 0.0 {
+        com_shift += rng.random_range(-o.random_com_shift_max..=o.random_com_shift_max);
+    }
+    if payload != 0.0 {
         let mass = model.body_mass()[base_body];
-        let ratio = (mass + o.payload_mass) / mass;
-        model.body_mass_mut()[base_body] += o.payload_mass;
+        let ratio = (mass + payload) / mass;
+        model.body_mass_mut()[base_body] += payload;
         // The payload is spread like the base itself: its inertia grows with its mass.
         for i in &mut model.body_inertia_mut()[3 * base_body..3 * base_body + 3] {
             *i *= ratio;
         }
     }
-    if o.com_shift != 0.0 {
-        model.body_ipos_mut()[3 * base_body] += o.com_shift;
+    if com_shift != 0.0 {
+        model.body_ipos_mut()[3 * base_body] += com_shift;
     }
     let mut slope = o.slope;
     if o.random_slope_max > 0.0 {

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use super::axes::Axis;
 use super::plan::{plan, ControllerChoice};
 use super::suite::{to_csv, Cell, Contender, Suite};
-use super::summary::{survives_where_controller_falls, threshold};
+use super::summary::{survives_where_controller_falls, threshold, walking_threshold, WALK_SHARE};
 use crate::io::write_atomic;
 
 /// The cells' file.
@@ -165,9 +165,14 @@ pub fn read_dir(dir: &Path) -> Result<(Vec<Cell>, SuiteMeta)> {
 
 /// The cells of the suite in `dir`, to reuse in a suite with the same env, episodes and protocol
 /// seed (anything else is an error naming what differs). The cells are a function of those and
-/// of the contender, so a reused cell is the cell the new suite would play.
-pub fn reusable(dir: &Path, suite: &Suite) -> Result<(Vec<Cell>, SuiteMeta)> {
+/// of the contender, so a reused cell is the cell the new suite would play. A trained contender's
+/// cells are kept only where the earlier suite's label stood for the same policies as `agents`'
+/// (a label moved to another policy plays again); a controller's label carries its speed.
+pub fn reusable(dir: &Path, suite: &Suite, agents: &[Contender]) -> Result<(Vec<Cell>, SuiteMeta)> {
     let (cells, meta) = read_dir(dir)?;
+    let same_policies =
+        |label: &str| agents.iter().any(|a| a.label() == label && meta.contenders.iter().any(|d| *d == describe(a)));
+    let cells = cells.into_iter().filter(|c| c.kind == "controller" || same_policies(&c.policy)).collect();
     if meta.env != suite.env || meta.episodes != suite.protocol.episodes || meta.protocol_seed != suite.protocol.seed {
         anyhow::bail!(
             "{}: its suite ran {} with {} episodes at protocol seed {}, not {} with {} at seed {}: nothing to reuse",
@@ -212,7 +217,18 @@ pub fn summary_lines(cells: &[Cell], axes: &[Axis], controller: Option<&str>) ->
             let below = t.first_below.map_or(String::new(), |(l, s)| {
                 format!("; {:.2} [{:.2}, {:.2}] at {l} {}", s.estimate, s.low, s.high, axis.unit)
             });
-            let mut line = format!("  {p:<44} 90% up to {}{survival}{beyond}{below}", fmt_level(t.level, axis));
+            let w = walking_threshold(cells, p, axis);
+            let walking = if w.level != t.level && t.level.is_some() {
+                format!(
+                    "; walking (at least {:.0}% of its nominal speed) up to {}",
+                    WALK_SHARE * 100.0,
+                    fmt_level(w.level, axis)
+                )
+            } else {
+                String::new()
+            };
+            let mut line =
+                format!("  {p:<44} 90% up to {}{survival}{beyond}{below}{walking}", fmt_level(t.level, axis));
             if let Some(ctrl) = controller.filter(|c| c != p) {
                 if let Some((n, s)) = survives_where_controller_falls(cells, p, ctrl, axis) {
                     line.push_str(&format!(

@@ -31,15 +31,31 @@ pub struct Threshold {
     pub first_below: Option<(f64, Interval)>,
 }
 
+/// The share of its nominal speed a contender must keep at a level to count as walking there.
+pub const WALK_SHARE: f64 = 0.5;
+
 /// The 90% threshold of `policy` along `axis`.
 pub fn threshold(cells: &[Cell], policy: &str, axis: &Axis) -> Threshold {
+    threshold_by(cells, policy, axis, false)
+}
+
+/// As [`threshold`], where a level counts only if the contender also walks there: its mean
+/// forward speed is at least [`WALK_SHARE`] of its nominal speed. Survival alone rewards a policy
+/// that stands still on ice; this does not.
+pub fn walking_threshold(cells: &[Cell], policy: &str, axis: &Axis) -> Threshold {
+    threshold_by(cells, policy, axis, true)
+}
+
+fn threshold_by(cells: &[Cell], policy: &str, axis: &Axis, walking: bool) -> Threshold {
     let line = along(cells, policy, axis);
     let levels: Vec<f64> = axis.all_levels();
+    let nominal_speed = line.first().map_or(f64::NAN, |c| c.speed);
     let mut reached = None;
     let mut first_below = None;
     for (cell, level) in line.iter().zip(&levels) {
         let s = cell.survival();
-        if s.estimate >= SURVIVAL_BAR {
+        let walks = !walking || cell.speed >= WALK_SHARE * nominal_speed;
+        if s.estimate >= SURVIVAL_BAR && walks {
             reached = Some((*level, s));
         } else {
             first_below = Some((*level, s));
@@ -112,5 +128,22 @@ mod tests {
         assert_eq!(n, 36);
         assert_eq!(p, wilson(5 + 5 + 10, 36));
         assert!(survives_where_controller_falls(&cells, "c", "a", payload).is_some());
+    }
+
+    #[test]
+    fn walking_levels_also_keep_half_the_nominal_speed() {
+        let friction = MINITAUR_AXES.iter().find(|a| a.name == "friction_low").unwrap();
+        let at = |level: f64, speed: f64| {
+            let axis = if level == 1.0 { NOMINAL } else { "friction_low" };
+            let mut c = cell("a", axis, level, &"S".repeat(10));
+            c.speed = speed;
+            c
+        };
+        // Survives every level, but at 0.1 x it crawls at 0.7 of half its nominal 1.2 m/s.
+        let cells = vec![at(1.0, 1.2), at(0.3, 1.0), at(0.1, 0.6), at(0.03, 0.42), at(0.01, 0.1)];
+        assert_eq!(threshold(&cells, "a", friction).level, Some(0.01));
+        let w = walking_threshold(&cells, "a", friction);
+        assert_eq!(w.level, Some(0.1), "0.6 m/s is exactly half of 1.2");
+        assert_eq!(w.first_below.map(|b| b.0), Some(0.03));
     }
 }
