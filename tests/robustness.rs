@@ -8,13 +8,17 @@ use locobench::evaluation::robustness::output::read_dir;
 const PPO: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/models/policies/minitaur-ppo");
 
 fn suite(out: &std::path::Path, threads: &str) -> (bool, String, String) {
-    let policy = format!("ppo={PPO}");
-    locobench(&[
+    suite_of(&format!("ppo={PPO}"), out, threads, &[])
+}
+
+/// The small suite (payload and latency, 2 episodes, the controller at 1 m/s) for `policy`.
+fn suite_of(policy: &str, out: &std::path::Path, threads: &str, extra: &[&str]) -> (bool, String, String) {
+    let mut args = vec![
         "robustness",
         "--env",
         "minitaur",
         "--policy",
-        &policy,
+        policy,
         "--controller",
         "1.0",
         "--axes",
@@ -27,7 +31,9 @@ fn suite(out: &std::path::Path, threads: &str) -> (bool, String, String) {
         threads,
         "--out",
         out.to_str().unwrap(),
-    ])
+    ];
+    args.extend(extra);
+    locobench(&args)
 }
 
 #[test]
@@ -56,28 +62,7 @@ fn a_small_suite_writes_every_cell_the_same_on_any_thread_count() {
     // --reuse keeps a cell only where its label still names the same policy: the same suite takes
     // every cell; the label "ppo" moved to another policy plays that policy's cells again.
     let reuse = |out: &std::path::Path, policy: &str| {
-        let a = a.to_str().unwrap();
-        let (ok, stdout, err) = locobench(&[
-            "robustness",
-            "--env",
-            "minitaur",
-            "--policy",
-            policy,
-            "--controller",
-            "1.0",
-            "--axes",
-            "payload,latency",
-            "--episodes",
-            "2",
-            "--seed",
-            "100",
-            "--threads",
-            "2",
-            "--out",
-            out.to_str().unwrap(),
-            "--reuse",
-            a,
-        ]);
+        let (ok, stdout, err) = suite_of(policy, out, "2", &["--reuse", a.to_str().unwrap()]);
         assert!(ok, "{err}");
         stdout
     };
