@@ -110,6 +110,10 @@ fn sweep_then_report_evaluates_every_run_at_its_budget_beside_the_controller() {
         .filter(|n| n.ends_with(".svg"))
         .collect();
     assert_eq!(svgs.len(), 1 + 3 + 4, "evaluation, three speed charts, one training chart per group: {svgs:?}");
+    // The speed charts are shown from their files, so the page stays light.
+    for name in ["return", "cot", "falls"] {
+        assert!(html.contains(&format!("<img src=\"minitaur_speed_{name}.svg\"")), "{name} chart shown from its file");
+    }
     assert!(svgs.iter().all(|n| n.len() <= 40), "short file names: {svgs:?}");
     for n in svgs.iter().filter(|n| n.ends_with("_training.svg")) {
         assert!(html.contains(&format!("<a href=\"{n}\">")), "{n} linked, not embedded");
