@@ -47,6 +47,28 @@ pub(super) fn source(path: &Path) -> String {
     format!("the newest benches/results/<date>-<machine>/{file}")
 }
 
+/// `text` with every dated result directory it names (`benches/results/YYYY-MM-DD-<machine>`)
+/// written `benches/results/<date>-<machine>`, for text quoted from a result file (a suite's
+/// command and notes name the earlier suite they reused): docs carry no dates.
+pub(super) fn undated(text: &str) -> String {
+    const PREFIX: &str = "benches/results/";
+    let mut out = String::with_capacity(text.len());
+    let mut rest = text;
+    while let Some(at) = rest.find(PREFIX) {
+        let (before, after) = rest.split_at(at + PREFIX.len());
+        out.push_str(before);
+        let name_end = after.find(|c: char| c == '/' || c.is_whitespace() || c == '`').unwrap_or(after.len());
+        if is_dated(&after[..name_end]) {
+            out.push_str("<date>");
+            rest = &after[10..];
+        } else {
+            rest = after;
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
 /// "From <source> (<the file's comment lines>)." : the first line of a section quoting a CSV.
 pub(super) fn quoting(path: &Path) -> Result<String> {
     Ok(format!("From {} ({}).", source(path), comments(path)?.join("; ")))
@@ -352,6 +374,14 @@ mod tests {
         // one env: 1e9 / 50000 = 20000/s; 16 copies: 16e9 / 800000 = 20000/s and 16e9 / 500000 = 32000/s
         assert!(text.contains("| hopper | 20000 | 16 | 20000 | 32000 | 0.80 |"), "{text}");
         assert!(text.contains("machine: test"), "{text}");
+    }
+
+    #[test]
+    fn dated_directories_lose_their_date_and_keep_their_machine() {
+        assert_eq!(
+            undated("REUSE=benches/results/2026-11-27-epyc-zen3-avx2 cargo bench; in benches/results/2026-11-27-x/ant, benches/results/minitaur/ppo"),
+            "REUSE=benches/results/<date>-epyc-zen3-avx2 cargo bench; in benches/results/<date>-x/ant, benches/results/minitaur/ppo"
+        );
     }
 
     #[test]

@@ -6,7 +6,7 @@ use std::path::Path;
 
 use anyhow::Result;
 
-use super::benchmarks::{newest, source};
+use super::benchmarks::{newest, source, undated};
 use crate::report::robustness::{goal_lines, provenance, summary_table, SuiteData};
 
 /// The newest suite of `env` as Markdown: Minitaur's sits in the dated directory itself, another
@@ -20,7 +20,7 @@ pub(crate) fn summary(results: &Path, env: &str) -> Result<String> {
     } else {
         format!("the newest benches/results/<date>-<machine>/{env}/{file}")
     };
-    let mut out = format!("From {from}. {}\n\n", provenance(&suite));
+    let mut out = format!("From {from}. {}\n\n", undated(&provenance(&suite)));
     let (header, rows) = summary_table(&suite);
     let _ = writeln!(out, "| {} |\n|{}", header.join(" | "), "---|".repeat(header.len()));
     for row in rows {
