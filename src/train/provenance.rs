@@ -69,15 +69,14 @@ impl Stretch {
 
 /// The CPU's model name, or "unknown".
 pub(crate) fn cpu_model() -> String {
-    std::fs::read_to_string("/proc/cpuinfo")
-        .ok()
-        .and_then(|text| {
-            text.lines()
-                .find(|l| l.starts_with("model name"))
-                .and_then(|l| l.split_once(':'))
-                .map(|(_, name)| name.trim().to_string())
-        })
-        .unwrap_or_else(|| "unknown".into())
+    cpuinfo_field("model name").unwrap_or_else(|| "unknown".into())
+}
+
+/// A field of /proc/cpuinfo's first processor, trimmed.
+fn cpuinfo_field(field: &str) -> Option<String> {
+    let text = std::fs::read_to_string("/proc/cpuinfo").ok()?;
+    let (_, value) = text.lines().filter_map(|l| l.split_once(':')).find(|(key, _)| key.trim() == field)?;
+    Some(value.trim().to_string())
 }
 
 /// The machine as a directory name for dated results: its CPU model's words in lower case, an
@@ -89,18 +88,12 @@ pub fn machine_slug() -> String {
         .split(|c: char| !c.is_ascii_alphanumeric())
         .filter(|w| !w.is_empty() && !matches!(*w, "processor" | "core" | "cpu" | "with" | "radeon" | "graphics"))
         .collect();
-    let generation = cpuinfo_number("cpu family").zip(cpuinfo_number("model")).and_then(|(f, m)| amd_generation(f, m));
+    let number = |field| cpuinfo_field(field).and_then(|v| v.parse().ok());
+    let generation = number("cpu family").zip(number("model")).and_then(|(f, m)| amd_generation(f, m));
     if let Some(g) = generation.filter(|_| model.contains("amd") && !words.iter().any(|w| w.contains("zen"))) {
         words.push(g);
     }
     format!("{}-{}", words.join("-"), simd_level())
-}
-
-/// A numeric field of /proc/cpuinfo's first processor.
-fn cpuinfo_number(field: &str) -> Option<u32> {
-    let text = std::fs::read_to_string("/proc/cpuinfo").ok()?;
-    let line = text.lines().find(|l| l.split(':').next().is_some_and(|k| k.trim() == field))?;
-    line.split_once(':')?.1.trim().parse().ok()
 }
 
 /// The Zen generation of an AMD CPU family and model, by the ranges Linux assigns them

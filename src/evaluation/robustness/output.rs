@@ -170,9 +170,6 @@ pub fn read_dir(dir: &Path) -> Result<(Vec<Cell>, SuiteMeta)> {
 /// (a label moved to another policy plays again); a controller's label carries its speed.
 pub fn reusable(dir: &Path, suite: &Suite, agents: &[Contender]) -> Result<(Vec<Cell>, SuiteMeta)> {
     let (cells, meta) = read_dir(dir)?;
-    let same_policies =
-        |label: &str| agents.iter().any(|a| a.label() == label && meta.contenders.iter().any(|d| *d == describe(a)));
-    let cells = cells.into_iter().filter(|c| c.kind == "controller" || same_policies(&c.policy)).collect();
     if meta.env != suite.env || meta.episodes != suite.protocol.episodes || meta.protocol_seed != suite.protocol.seed {
         anyhow::bail!(
             "{}: its suite ran {} with {} episodes at protocol seed {}, not {} with {} at seed {}: nothing to reuse",
@@ -185,6 +182,9 @@ pub fn reusable(dir: &Path, suite: &Suite, agents: &[Contender]) -> Result<(Vec<
             suite.protocol.seed
         );
     }
+    let same_policies =
+        |label: &str| agents.iter().any(|a| a.label() == label && meta.contenders.iter().any(|d| *d == describe(a)));
+    let cells = cells.into_iter().filter(|c| c.kind == "controller" || same_policies(&c.policy)).collect();
     Ok((cells, meta))
 }
 
