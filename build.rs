@@ -12,7 +12,8 @@ fn fail(msg: &str) -> ! {
 }
 
 /// The commit the binary is built from, for run directories' config.toml and provenance.csv
-/// (`LOCOBENCH_GIT_COMMIT`; absent outside a git checkout). Rebuilt when HEAD moves.
+/// (`LOCOBENCH_GIT_COMMIT`; absent outside a git checkout). Rebuilt when HEAD moves or the
+/// source changes.
 fn record_git_commit() {
     let git = |args: &[&str]| {
         std::process::Command::new("git")
@@ -28,8 +29,18 @@ fn record_git_commit() {
     for path in watched.iter().filter(|p| p.exists()) {
         println!("cargo:rerun-if-changed={}", path.display());
     }
+    // What goes into the binary: an edit there since the commit marks it `-dirty`, so results
+    // made with uncommitted code say so. Cargo reruns this script when any of them changes.
+    let built_from = ["src", "build.rs", "Cargo.toml", "Cargo.lock", "models"];
+    for path in built_from {
+        println!("cargo:rerun-if-changed={path}");
+    }
     if let Some(commit) = git(&["rev-parse", "HEAD"]) {
-        println!("cargo:rustc-env=LOCOBENCH_GIT_COMMIT={commit}");
+        let mut diff = vec!["diff", "--quiet", "HEAD", "--"];
+        diff.extend(built_from);
+        let clean = std::process::Command::new("git").args(&diff).status().map(|s| s.success()).unwrap_or(true);
+        let dirty = if clean { "" } else { "-dirty" };
+        println!("cargo:rustc-env=LOCOBENCH_GIT_COMMIT={commit}{dirty}");
     }
 }
 

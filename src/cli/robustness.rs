@@ -7,7 +7,7 @@ use locobench::evaluation::{Protocol, DEFAULT_EPISODES};
 
 #[derive(clap::Args, Debug)]
 pub struct RobustnessArgs {
-    /// The env (minitaur: every axis; ant: the pushes).
+    /// The env (minitaur: 13 axes; ant: 9).
     #[arg(long, default_value = "minitaur")]
     pub env: String,
     /// A trained policy as LABEL=REFERENCE, or LABEL=REFERENCE@BUDGET for a committed result

@@ -1,11 +1,14 @@
 //! Ant as Gymnasium v5 defines it: observation qpos[2:] + qvel + clipped cfrc_ext of bodies 1..
-//! (105), reward forward + healthy - ctrl_cost - contact_cost, terminates when unhealthy.
+//! (105), reward forward + healthy - ctrl_cost - contact_cost, terminates when unhealthy. It also
+//! takes the world perturbations of `world` (friction, payload, motors, latency, slopes), off by
+//! default.
 use serde::{Deserialize, Serialize};
 
 use super::mujoco_env::MujocoEnv;
 use super::options::read_by_name;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{legged_step, locomotion_metrics, planar_position, LeggedWeights, Task, TaskStep};
+use super::world::World;
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
@@ -35,6 +38,19 @@ pub struct AntOptions {
     pub max_episode_steps: usize,
     /// Physics steps per `step`.
     pub frame_skip: usize,
+    /// World perturbations (not Gymnasium's; `world::World`), nominal by default: every geom's
+    /// sliding friction times this,
+    pub friction_scale: f64,
+    /// mass added to the torso (kg),
+    pub payload_mass: f64,
+    /// the torso's centre of mass moved forward (m),
+    pub com_shift: f64,
+    /// every motor's gear times this,
+    pub motor_strength: f64,
+    /// delay from an action to the motors (s, whole physics steps of 0.01 s),
+    pub latency: f64,
+    /// and a slope along +x (degrees, up positive).
+    pub slope: f64,
 }
 
 impl Default for AntOptions {
@@ -50,12 +66,19 @@ impl Default for AntOptions {
             reset_noise_scale: 0.1,
             max_episode_steps: 1000,
             frame_skip: 5,
+            friction_scale: 1.0,
+            payload_mass: 0.0,
+            com_shift: 0.0,
+            motor_strength: 1.0,
+            latency: 0.0,
+            slope: 0.0,
         }
     }
 }
 
 pub struct AntTask {
     weights: LeggedWeights,
+    world: World,
     opts: AntOptions,
     torso: usize,
 }
@@ -97,11 +120,15 @@ impl Task for AntTask {
     const REWARD_TERMS: &'static [&'static str] = &["forward", "healthy", "ctrl_cost", "contact_cost"];
 
     fn new(opts: AntOptions, model: &Model) -> Result<Self, EnvError> {
-        Ok(AntTask { weights: read_by_name(&opts), opts, torso: model.body_id("torso")? })
+        Ok(AntTask { weights: read_by_name(&opts), world: read_by_name(&opts), opts, torso: model.body_id("torso")? })
     }
 
     fn options(&self) -> &Self::Options {
         &self.opts
+    }
+
+    fn world(&self) -> Option<(&World, usize)> {
+        Some((&self.world, self.torso))
     }
 
     fn observation_dim(&self, m: &Model) -> usize {

@@ -24,6 +24,7 @@ mod simulation;
 mod task;
 mod vector;
 mod walker2d;
+pub mod world;
 
 pub use ant::{Ant, AntOptions};
 pub use error::EnvError;

@@ -157,10 +157,13 @@ impl EnvConfig {
     /// world every other policy meets; `--option` puts a perturbation back.
     pub fn for_evaluation(&self) -> EnvConfig {
         let mut out = self.clone();
-        if self.name == "minitaur" {
-            for key in super::minitaur::perturb::OPTIONS {
-                out.options.remove(key);
-            }
+        let perturbations: &[&str] = match self.name.as_str() {
+            "minitaur" => &super::minitaur::perturb::OPTIONS,
+            "ant" => &super::world::OPTIONS,
+            _ => &[],
+        };
+        for key in perturbations {
+            out.options.remove(*key);
         }
         out
     }

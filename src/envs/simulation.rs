@@ -6,6 +6,7 @@ use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::{Distribution, StandardNormal, Uniform};
 
+use super::world::Delay;
 use super::{clip_action, EnvError, EnvSpec, EpisodeClock, Info, Step};
 use crate::mujoco::{take_warnings, Data, Model};
 
@@ -64,11 +65,6 @@ pub struct Simulation {
 }
 
 impl Simulation {
-    pub(crate) fn from_xml(xml: &str) -> Result<Simulation, EnvError> {
-        let model = Arc::new(Model::from_xml_str(xml)?);
-        Self::from_model(model)
-    }
-
     pub(crate) fn from_model(model: Arc<Model>) -> Result<Simulation, EnvError> {
         let data = Data::new(&model)?;
         Ok(Simulation { model, data, last_mechanical_energy: 0.0, velocity_before: Vec::new() })
@@ -87,10 +83,21 @@ impl Simulation {
     /// Sets `ctrl` and runs `frames` MuJoCo steps, stopping at the first sign of instability.
     pub(crate) fn advance(&mut self, ctrl: &[f64], frames: usize) -> Result<Advance, EnvError> {
         self.data.set_ctrl(ctrl)?;
+        self.advance_with(frames, |_, _| Ok(()))
+    }
+
+    /// Runs `frames` MuJoCo steps, calling `before(j, data)` ahead of step `j` (to change the
+    /// controls mid-step, as a delayed command does), stopping at the first sign of instability.
+    pub(crate) fn advance_with(
+        &mut self,
+        frames: usize,
+        mut before: impl FnMut(usize, &mut Data) -> Result<(), EnvError>,
+    ) -> Result<Advance, EnvError> {
         let mut out = Advance::default();
         let timestep = self.model.timestep();
         self.last_mechanical_energy = 0.0;
-        for _ in 0..frames {
+        for j in 0..frames {
+            before(j, &mut self.data)?;
             self.velocity_before.clear();
             self.velocity_before.extend_from_slice(self.data.qvel());
             if self.step_once()? {
@@ -198,9 +205,25 @@ impl EnvCore {
         Ok(StepStart { action, clipped })
     }
 
-    /// Runs the physics for one control step.
-    pub(crate) fn advance(&mut self, start: &StepStart, frames: usize) -> Result<StepOutcome, EnvError> {
-        let adv = self.sim.advance(&start.action, frames)?;
+    /// Runs the physics for one control step; with a delay line, the actuators act on the
+    /// command that has reached them at each physics step (none yet: the controls stay as reset).
+    pub(crate) fn advance(
+        &mut self,
+        start: &StepStart,
+        frames: usize,
+        delay: Option<&mut Delay<Vec<f64>>>,
+    ) -> Result<StepOutcome, EnvError> {
+        let adv = match delay {
+            None => self.sim.advance(&start.action, frames)?,
+            Some(delay) => {
+                let step = self.clock.steps;
+                delay.send(step, start.action.clone());
+                self.sim.advance_with(frames, |j, data| match delay.acting(step * frames + j) {
+                    Some(command) => Ok(data.set_ctrl(command)?),
+                    None => Ok(()),
+                })?
+            }
+        };
         if adv.unstable {
             self.clock.finish_if(true);
             return Ok(StepOutcome::BlewUp(unstable_step(&self.last_obs, &self.spec, start.clipped, adv.warnings)));

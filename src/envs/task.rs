@@ -3,6 +3,7 @@
 //! [`super::mujoco_env::MujocoEnv`] carries everything else (reset noise, action checks,
 //! frame skip, instability detection, the time limit) once for every task.
 use super::simulation::{Simulation, VelocityNoise};
+use super::world::World;
 use super::{BoxSpace, EnvError};
 use crate::mujoco::Model;
 
@@ -57,6 +58,11 @@ pub trait Task: Send + Sized + 'static {
     /// Diagnostics at reset (positions).
     fn reset_metrics(&self, _sim: &Simulation) -> Vec<(&'static str, f64)> {
         Vec::new()
+    }
+    /// The world perturbations the task takes (`world::World`, read from its options) and the
+    /// body that carries a payload; None (the default) for a task without them.
+    fn world(&self) -> Option<(&World, usize)> {
+        None
     }
     /// What the reward needs from the state before the physics runs (e.g. the x position).
     fn before(&self, sim: &Simulation) -> Self::Before;

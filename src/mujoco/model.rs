@@ -348,6 +348,10 @@ impl Model {
     pub fn actuator_ctrlrange(&self) -> &[f64] {
         self.slice_f64(self.raw().actuator_ctrlrange, 2 * self.nu())
     }
+    /// Each actuator's transmission gear (`nu x 6`; a motor's torque is `gear[0] * ctrl`).
+    pub fn actuator_gear(&self) -> &[f64] {
+        self.slice_f64(self.raw().actuator_gear, 6 * self.nu())
+    }
     /// Whether each actuator's control is clamped to its range.
     pub fn actuator_ctrllimited(&self) -> Vec<bool> {
         let r = self.raw();
@@ -475,6 +479,12 @@ impl Model {
         let n = 3 * self.nbody();
         // SAFETY: `body_inertia` has `3 * nbody` entries and `&mut self` makes the slice the only access.
         unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().body_inertia, n) }
+    }
+    /// Each actuator's gear (`nu x 6`), writable (weaker motors).
+    pub fn actuator_gear_mut(&mut self) -> &mut [f64] {
+        let n = 6 * self.nu();
+        // SAFETY: `actuator_gear` has `6 * nu` entries and `&mut self` makes the slice the only access.
+        unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().actuator_gear, n) }
     }
     /// Sets the gravity vector (world coordinates, m/s^2).
     pub fn set_gravity(&mut self, g: [f64; 3]) {

@@ -273,7 +273,7 @@ pub(crate) fn machine_of(run: &Run, budget: u64) -> String {
                 .iter()
                 .filter(|s| s.from_step < budget.max(1))
                 .map(|s| {
-                    let commit: String = s.git_commit.chars().take(8).collect();
+                    let commit = crate::train::provenance::short_commit(&s.git_commit, 8);
                     format!("{} ({}, {} kernels) @ {commit}", s.cpu_model, s.simd, s.kernel_path)
                 })
                 .collect();

@@ -273,7 +273,7 @@ pub fn provenance(s: &SuiteData) -> String {
             ""
         },
         m.machine,
-        &m.git_commit[..m.git_commit.len().min(12)],
+        crate::train::provenance::short_commit(&m.git_commit, 12),
         m.wall_seconds,
         m.threads,
         m.command

@@ -198,8 +198,22 @@ pub fn resume_caveat_for(
     Ok(resume_caveat(rows.last(), &Stretch::here(0, threads, super::git_commit().as_deref()).on(device)))
 }
 
+/// A commit shortened to `n` hex digits for display, keeping a `-dirty` mark (built with
+/// uncommitted changes to the source).
+pub fn short_commit(commit: &str, n: usize) -> String {
+    let (hash, dirty) = commit.strip_suffix("-dirty").map_or((commit, ""), |h| (h, "-dirty"));
+    format!("{}{dirty}", &hash[..hash.len().min(n)])
+}
+
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn a_short_commit_keeps_the_dirty_mark() {
+        assert_eq!(super::short_commit("0123456789abcdef", 8), "01234567");
+        assert_eq!(super::short_commit("0123456789abcdef-dirty", 12), "0123456789ab-dirty");
+        assert_eq!(super::short_commit("unknown", 12), "unknown");
+    }
+
     use super::*;
 
     #[test]

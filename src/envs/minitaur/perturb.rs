@@ -9,7 +9,6 @@
 //! from control step 100, every 200 steps, a horizontal force in a random direction for 10 steps.
 //! Its size is given here as the velocity change it would give the whole robot, as the
 //! evaluation's pushes are.
-use std::collections::VecDeque;
 use std::f64::consts::PI;
 
 use rand::Rng;
@@ -18,6 +17,8 @@ use rand_distr::{Distribution, StandardNormal};
 
 use super::MinitaurOptions;
 use crate::envs::options::Check;
+pub(crate) use crate::envs::world::Delay;
+use crate::envs::world::{delay_steps, edit_body_and_ground};
 use crate::envs::EnvError;
 use crate::mujoco::Model;
 
@@ -202,11 +203,6 @@ pub(crate) fn edit_model(
     base_body: usize,
     rng: &mut ChaCha8Rng,
 ) -> Result<Terrain, EnvError> {
-    if o.friction_scale != 1.0 {
-        for f in model.geom_friction_mut().chunks_exact_mut(3) {
-            f[0] *= o.friction_scale;
-        }
-    }
     // Drawn only when randomised, so the other options' draws stay where they were.
     let mut payload = o.payload_mass;
     if o.random_payload_max > 0.0 {
@@ -216,27 +212,11 @@ pub(crate) fn edit_model(
     if o.random_com_shift_max > 0.0 {
         com_shift += rng.random_range(-o.random_com_shift_max..=o.random_com_shift_max);
     }
-    if payload != 0.0 {
-        let mass = model.body_mass()[base_body];
-        let ratio = (mass + payload) / mass;
-        model.body_mass_mut()[base_body] += payload;
-        // The payload is spread like the base itself: its inertia grows with its mass.
-        for i in &mut model.body_inertia_mut()[3 * base_body..3 * base_body + 3] {
-            *i *= ratio;
-        }
-    }
-    if com_shift != 0.0 {
-        model.body_ipos_mut()[3 * base_body] += com_shift;
-    }
     let mut slope = o.slope;
     if o.random_slope_max > 0.0 {
         slope += rng.random_range(-o.random_slope_max..=o.random_slope_max);
     }
-    if slope != 0.0 {
-        // A uniform slope up along +x is flat ground under gravity tilted back by the slope's angle.
-        let (g, theta) = (-model.gravity()[2], slope.to_radians());
-        model.set_gravity([-g * theta.sin(), 0.0, -g * theta.cos()]);
-    }
+    edit_body_and_ground(model, base_body, o.friction_scale, payload, com_shift, slope);
     if o.terrain_step_height > 0.0 {
         let terrain = Terrain::draw(rng, o.terrain_step_height);
         terrain.write(model);
@@ -247,45 +227,11 @@ pub(crate) fn edit_model(
 
 /// Physics steps of delay for one episode: the fixed latency plus its random part.
 pub(crate) fn latency_steps(o: &MinitaurOptions, rng: &mut ChaCha8Rng, sim_dt: f64) -> usize {
-    let fixed = (o.latency / sim_dt).round() as usize;
+    let fixed = delay_steps(o.latency, sim_dt);
     if o.random_latency_max > 0.0 {
-        fixed + rng.random_range(0..=(o.random_latency_max / sim_dt).round() as usize)
+        fixed + rng.random_range(0..=delay_steps(o.random_latency_max, sim_dt))
     } else {
         fixed
-    }
-}
-
-/// The commands sent at each control step, so that a physics step `d` steps later applies the
-/// one that had reached the motors by then.
-#[derive(Debug, Clone)]
-pub(crate) struct Delay<C> {
-    delay: usize,
-    repeat: usize,
-    first: usize,
-    sent: VecDeque<C>,
-}
-
-impl<C> Delay<C> {
-    pub fn new(delay: usize, repeat: usize) -> Delay<C> {
-        Delay { delay, repeat, first: 0, sent: VecDeque::new() }
-    }
-
-    /// Records the command of control step `step` (0, 1, 2, ... in order).
-    pub fn send(&mut self, step: usize, command: C) {
-        self.sent.push_back(command);
-        // Keep the commands a physics step of this control step or later can still need.
-        let oldest_needed = (step * self.repeat).saturating_sub(self.delay) / self.repeat;
-        while self.first < oldest_needed {
-            self.sent.pop_front();
-            self.first += 1;
-        }
-    }
-
-    /// The command acting at physics step `t` of the episode (counted from its first action);
-    /// None before the first command has arrived.
-    pub fn acting(&self, t: usize) -> Option<&C> {
-        let t = t.checked_sub(self.delay)?;
-        self.sent.get((t / self.repeat).checked_sub(self.first)?)
     }
 }
 
@@ -351,25 +297,6 @@ impl RandomPushes {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn a_delay_applies_each_command_the_given_physics_steps_late() {
-        // 5 physics steps per control step, 7 steps of delay: control step c's command acts
-        // from physics step 5c + 7 on.
-        let mut d = Delay::new(7, 5);
-        let mut acting = Vec::new();
-        for step in 0..4 {
-            d.send(step, step);
-            for j in 0..5 {
-                acting.push(d.acting(step * 5 + j).copied());
-            }
-        }
-        let expect: Vec<Option<usize>> = (0..20).map(|t: usize| t.checked_sub(7).map(|u| u / 5)).collect();
-        assert_eq!(acting, expect);
-        let mut none = Delay::new(0, 5);
-        none.send(0, 'a');
-        assert_eq!(none.acting(0), Some(&'a'));
-    }
 
     #[test]
     fn tiles_are_flat_topped_and_the_start_is_flat() {

@@ -123,8 +123,11 @@ pub const MINITAUR_AXES: &[Axis] = &[
     ),
 ];
 
-/// Ant's axes: the pushes (its env has none of Minitaur's perturbation options), up to 16 m/s: the
-/// controller survived more than 90% of the pushes at 8 m/s.
+/// Ant's axes: the pushes, up to 16 m/s (the controller survived more than 90% of the pushes
+/// at 8 m/s), and the world options of `envs::world` (friction, payload, centre of mass, motor
+/// strength, latency, slopes). Minitaur's battery, sensor noise and terrain have no counterpart
+/// in Gymnasium's Ant: it has no motor model, and its controller reads the simulator's state, so
+/// sensor noise would reach only the policies.
 pub const ANT_AXES: &[Axis] = &[
     axis(
         "push_lateral",
@@ -142,6 +145,41 @@ pub const ANT_AXES: &[Axis] = &[
         &[0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 16.0],
         Apply::Push(Frontal),
     ),
+    axis(
+        "friction_low",
+        "ground friction (scale, low)",
+        "x",
+        1.0,
+        &[0.3, 0.1, 0.03, 0.01],
+        Apply::Options(&[("friction_scale", 1.0)]),
+    ),
+    axis(
+        "payload",
+        "payload on the torso",
+        "kg",
+        0.0,
+        &[2.0, 4.0, 8.0, 16.0, 32.0, 60.0],
+        Apply::Options(&[("payload_mass", 1.0)]),
+    ),
+    axis(
+        "com_shift",
+        "torso centre of mass moved forward",
+        "m",
+        0.0,
+        &[0.05, 0.1, 0.2, 0.3],
+        Apply::Options(&[("com_shift", 1.0)]),
+    ),
+    axis(
+        "motor_strength",
+        "motor strength (share of torque)",
+        "x",
+        1.0,
+        &[0.8, 0.6, 0.4, 0.2],
+        Apply::Options(&[("motor_strength", 1.0)]),
+    ),
+    axis("latency", "control latency", "s", 0.0, &[0.01, 0.02, 0.05, 0.1], Apply::Options(&[("latency", 1.0)])),
+    axis("slope_up", "slope up", "deg", 0.0, &[5.0, 10.0, 20.0, 30.0], Apply::Options(&[("slope", 1.0)])),
+    axis("slope_down", "slope down", "deg", 0.0, &[5.0, 10.0, 20.0, 30.0], Apply::Options(&[("slope", -1.0)])),
 ];
 
 /// The axes of `env`'s suite; an error for an env without one.
@@ -212,14 +250,19 @@ mod tests {
     use super::*;
 
     #[test]
-    fn every_minitaur_level_builds_and_levels_grow_in_severity() {
-        let base = EnvConfig::new("minitaur");
-        for axis in MINITAUR_AXES {
+    fn every_level_builds_and_levels_grow_in_severity() {
+        for (env, axes) in [("minitaur", MINITAUR_AXES), ("ant", ANT_AXES)] {
+            check_levels(&EnvConfig::new(env), axes);
+        }
+    }
+
+    fn check_levels(base: &EnvConfig, axes: &[Axis]) {
+        for axis in axes {
             let levels = axis.all_levels();
             let distance: Vec<f64> = levels.iter().map(|l| (l - axis.nominal).abs()).collect();
             assert!(distance.windows(2).all(|w| w[0] < w[1]), "{}: {levels:?}", axis.name);
             for level in levels {
-                axis.at(&base, level).unwrap();
+                axis.at(base, level).unwrap();
             }
         }
     }
@@ -240,6 +283,9 @@ mod tests {
         assert!(payload.at(&base, f64::NAN).is_err());
         let push = select("minitaur", &["push_lateral".into()]).unwrap()[0];
         assert!(push.at(&base, -1.0).is_err());
-        assert_eq!(select("ant", &["all".into()]).unwrap().len(), 2);
+        assert_eq!(select("ant", &["all".into()]).unwrap().len(), ANT_AXES.len());
+        let ant = EnvConfig::new("ant");
+        let motors = select("ant", &["motor_strength".into()]).unwrap()[0];
+        assert!(motors.at(&ant, -0.5).unwrap_err().to_string().contains("motor_strength"));
     }
 }
