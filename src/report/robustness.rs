@@ -11,7 +11,7 @@ use super::document::Document;
 use super::plots::{bands_svg, Band};
 use crate::evaluation::robustness::output::{read_dir, SuiteMeta};
 use crate::evaluation::robustness::summary::{
-    along, survives_where_controller_falls, threshold, walking_threshold, SURVIVAL_BAR, WALK_SHARE,
+    along, survives_where_controller_falls, threshold, walking_note, SURVIVAL_BAR, WALK_SHARE,
 };
 use crate::evaluation::robustness::{axes_of, Axis, Cell};
 use crate::evaluation::stats::Interval;
@@ -76,17 +76,9 @@ fn rate(i: Interval) -> String {
 fn threshold_cell(s: &SuiteData, policy: &str, axis: &Axis) -> String {
     let t = threshold(&s.cells, policy, axis);
     let below = t.first_below.map_or(String::new(), |(l, i)| format!("; {} at {}", rate(i), level(l, axis)));
-    // Where surviving and walking part: the level up to which it also keeps half its speed.
-    let w = walking_threshold(&s.cells, policy, axis);
-    let below = if w.level != t.level && t.level.is_some() {
-        let walks = match w.level {
-            Some(l) if l == axis.nominal => "nominal only".to_string(),
-            Some(l) => level(l, axis),
-            None => "not even nominal".to_string(),
-        };
-        format!("{below}; walking (at least {:.0}% of its nominal speed) up to {walks}", WALK_SHARE * 100.0)
-    } else {
-        below
+    let below = match walking_note(&s.cells, policy, axis, |l| level(l, axis)) {
+        Some(note) => format!("{below}; {note}"),
+        None => below,
     };
     match (t.level, t.survival) {
         (Some(l), Some(i)) => {

@@ -11,7 +11,7 @@ use serde::{Deserialize, Serialize};
 use super::axes::Axis;
 use super::plan::{plan, ControllerChoice};
 use super::suite::{to_csv, Cell, Contender, Suite};
-use super::summary::{survives_where_controller_falls, threshold, walking_threshold, WALK_SHARE};
+use super::summary::{survives_where_controller_falls, threshold, walking_note};
 use crate::io::write_atomic;
 
 /// The cells' file.
@@ -217,16 +217,8 @@ pub fn summary_lines(cells: &[Cell], axes: &[Axis], controller: Option<&str>) ->
             let below = t.first_below.map_or(String::new(), |(l, s)| {
                 format!("; {:.2} [{:.2}, {:.2}] at {l} {}", s.estimate, s.low, s.high, axis.unit)
             });
-            let w = walking_threshold(cells, p, axis);
-            let walking = if w.level != t.level && t.level.is_some() {
-                format!(
-                    "; walking (at least {:.0}% of its nominal speed) up to {}",
-                    WALK_SHARE * 100.0,
-                    fmt_level(w.level, axis)
-                )
-            } else {
-                String::new()
-            };
+            let walking = walking_note(cells, p, axis, |l| format!("{l} {}", axis.unit))
+                .map_or(String::new(), |n| format!("; {n}"));
             let mut line =
                 format!("  {p:<44} 90% up to {}{survival}{beyond}{below}{walking}", fmt_level(t.level, axis));
             if let Some(ctrl) = controller.filter(|c| c != p) {

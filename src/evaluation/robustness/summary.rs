@@ -46,6 +46,22 @@ pub fn walking_threshold(cells: &[Cell], policy: &str, axis: &Axis) -> Threshold
     threshold_by(cells, policy, axis, true)
 }
 
+/// Where surviving and walking part: "walking (at least 50% of its nominal speed) up to X", the
+/// level up to which `policy` also keeps half its nominal speed, written by `level`. None where
+/// that is its 90% survival level, or where even nominal is below the bar.
+pub fn walking_note(cells: &[Cell], policy: &str, axis: &Axis, level: impl Fn(f64) -> String) -> Option<String> {
+    let (survives, walks) = (threshold(cells, policy, axis).level, walking_threshold(cells, policy, axis).level);
+    if walks == survives || survives.is_none() {
+        return None;
+    }
+    let up_to = match walks {
+        Some(l) if l == axis.nominal => "nominal only".to_string(),
+        Some(l) => level(l),
+        None => "not even nominal".to_string(),
+    };
+    Some(format!("walking (at least {:.0}% of its nominal speed) up to {up_to}", WALK_SHARE * 100.0))
+}
+
 fn threshold_by(cells: &[Cell], policy: &str, axis: &Axis, walking: bool) -> Threshold {
     let line = along(cells, policy, axis);
     let levels: Vec<f64> = axis.all_levels();
@@ -145,5 +161,14 @@ mod tests {
         let w = walking_threshold(&cells, "a", friction);
         assert_eq!(w.level, Some(0.1), "0.6 m/s is exactly half of 1.2");
         assert_eq!(w.first_below.map(|b| b.0), Some(0.03));
+        let note = walking_note(&cells, "a", friction, |l| format!("{l} x")).unwrap();
+        assert_eq!(note, "walking (at least 50% of its nominal speed) up to 0.1 x");
+        // Where walking and surviving end at the same level there is nothing to add.
+        let steady = vec![at(1.0, 1.2), at(0.3, 1.0), at(0.1, 0.9), at(0.03, 0.8), at(0.01, 0.7)];
+        assert_eq!(walking_note(&steady, "a", friction, |l| format!("{l} x")), None);
+        // Surviving ice at a crawl from the first level on: it walks only at nominal.
+        let crawl = vec![at(1.0, 1.2), at(0.3, 0.5), at(0.1, 0.5), at(0.03, 0.5), at(0.01, 0.5)];
+        let note = walking_note(&crawl, "a", friction, |l| format!("{l} x")).unwrap();
+        assert!(note.ends_with("up to nominal only"), "{note}");
     }
 }
