@@ -47,6 +47,7 @@ fn payload_friction_motors_and_slope_edit_the_model() {
     let m = env.data().model();
     assert!((m.body_mass()[torso] - m0.body_mass()[torso] - 2.0).abs() < 1e-12);
     assert!((m.body_ipos()[3 * torso] - m0.body_ipos()[3 * torso] - 0.1).abs() < 1e-12);
+    assert!(m0.body_sameframe()[torso] && !m.body_sameframe()[torso]);
     for (f, f0) in m.geom_friction().chunks(3).zip(m0.geom_friction().chunks(3)) {
         assert!((f[0] - 0.1 * f0[0]).abs() < 1e-12 && f[1] == f0[1]);
     }
@@ -104,6 +105,10 @@ fn a_payload_and_a_slope_change_the_motion() {
     // Heavier torso sits lower (observation 0 is the torso height).
     let mean_z = |o: &[Vec<f64>]| o.iter().map(|v| v[0]).sum::<f64>() / o.len() as f64;
     assert!(mean_z(&heavy) < mean_z(&plain), "{} vs {}", mean_z(&heavy), mean_z(&plain));
+    // A centre of mass moved forward changes the motion (MuJoCo ignores body_ipos for a body
+    // compiled with its inertial frame on its own frame, unless that flag is cleared).
+    let shifted = rollout(&mut ant(AntOptions { com_shift: 0.2, ..Default::default() }), &a, 2);
+    assert_ne!(shifted, plain);
     // Standing still on a steep slope down along +x, the ant slides forward.
     let mut env = ant(AntOptions { slope: -25.0, friction_scale: 0.2, ..Default::default() });
     env.reset(Some(0)).unwrap();

@@ -237,6 +237,9 @@ fn payload_friction_and_slope_change_the_episode_model() {
     let up = walk(&mut fixed(MinitaurOptions { slope: 15.0, ..Default::default() }).tap_reset());
     let flat = walk(&mut fixed(MinitaurOptions::default()).tap_reset());
     assert!(up < flat, "uphill {up} vs flat {flat}");
+    // A centre of mass moved forward changes the gait's course too.
+    let forward = walk(&mut fixed(MinitaurOptions { com_shift: 0.1, ..Default::default() }).tap_reset());
+    assert_ne!(forward, flat);
 }
 
 #[test]

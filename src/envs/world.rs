@@ -100,7 +100,7 @@ pub(crate) fn edit_body_and_ground(
         }
     }
     if com_shift != 0.0 {
-        model.body_ipos_mut()[3 * body] += com_shift;
+        model.shift_body_com(body, [com_shift, 0.0, 0.0]);
     }
     if slope != 0.0 {
         let (g, theta) = (-model.gravity()[2], slope.to_radians());

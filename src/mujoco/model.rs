@@ -468,11 +468,28 @@ impl Model {
         // SAFETY: `geom_friction` has `3 * ngeom` entries and `&mut self` makes the slice the only access.
         unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().geom_friction, n) }
     }
-    /// Each body's centre of mass in its own frame (`body_ipos`), writable (a shifted payload).
-    pub fn body_ipos_mut(&mut self) -> &mut [f64] {
-        let n = 3 * self.nbody();
-        // SAFETY: `body_ipos` has `3 * nbody` entries and `&mut self` makes the slice the only access.
-        unsafe { std::slice::from_raw_parts_mut(self.ptr.as_mut().body_ipos, n) }
+    /// Moves `body`'s centre of mass by `offset` in its own frame (`body_ipos`). A body whose
+    /// inertial frame the compiler found to coincide with its frame (`body_sameframe`) has its
+    /// centre of mass taken from the body frame and its `body_ipos` ignored, so that flag is
+    /// cleared too.
+    pub fn shift_body_com(&mut self, body: usize, offset: [f64; 3]) {
+        assert!(body < self.nbody(), "body {body} out of range");
+        // SAFETY: `body_ipos` has `3 * nbody` entries and `body_sameframe` `nbody`; `body` is in
+        // range and `&mut self` makes these the only accesses.
+        unsafe {
+            let raw = self.ptr.as_mut();
+            let ipos = std::slice::from_raw_parts_mut(raw.body_ipos.add(3 * body), 3);
+            for (p, o) in ipos.iter_mut().zip(offset) {
+                *p += o;
+            }
+            *raw.body_sameframe.add(body) = 0;
+        }
+    }
+    /// Whether each body's inertial frame coincides with its frame (`body_sameframe`).
+    pub fn body_sameframe(&self) -> Vec<bool> {
+        let r = self.raw();
+        // SAFETY: `body_sameframe` has `nbody` entries.
+        unsafe { std::slice::from_raw_parts(r.body_sameframe, self.nbody()) }.iter().map(|&b| b != 0).collect()
     }
     /// Each body's principal moments of inertia (`body_inertia`), writable.
     pub fn body_inertia_mut(&mut self) -> &mut [f64] {
