@@ -84,6 +84,19 @@ def test_perturbations_are_options_and_change_the_world():
     assert np.array_equal(nominal, run())
     assert not np.array_equal(nominal, run(payload_mass=2.0, friction_scale=0.3))
 
+    # Ant takes the world options it has a counterpart for; nominal values are Gymnasium's Ant.
+    def ant(**options):
+        env = gym.make("locobench/Ant-v5", **options)
+        env.reset(seed=3)
+        action = np.full(8, 0.5)
+        return np.stack([env.step(action)[0] for _ in range(20)])
+
+    plain = ant()
+    assert np.array_equal(plain, ant(motor_strength=1.0, latency=0.0, slope=0.0))
+    assert not np.array_equal(plain, ant(motor_strength=0.5, com_shift=0.1))
+    with pytest.raises(ValueError, match="latency"):
+        gym.make("locobench/Ant-v5", latency=2.0)
+
 
 def test_bad_actions_raise_and_leave_the_episode_intact():
     env = gym.make("locobench/HalfCheetah-v5").unwrapped
