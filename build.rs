@@ -36,10 +36,10 @@ fn record_git_commit() {
         println!("cargo:rerun-if-changed={path}");
     }
     if let Some(commit) = git(&["rev-parse", "HEAD"]) {
-        let mut diff = vec!["diff", "--quiet", "HEAD", "--"];
-        diff.extend(built_from);
-        let clean = std::process::Command::new("git").args(&diff).status().map(|s| s.success()).unwrap_or(true);
-        let dirty = if clean { "" } else { "-dirty" };
+        // Modified, staged or new (untracked) files alike.
+        let mut status = vec!["status", "--porcelain", "--"];
+        status.extend(built_from);
+        let dirty = if git(&status).is_some_and(|changes| !changes.is_empty()) { "-dirty" } else { "" };
         println!("cargo:rustc-env=LOCOBENCH_GIT_COMMIT={commit}{dirty}");
     }
 }
