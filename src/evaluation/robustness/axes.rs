@@ -49,19 +49,48 @@ const fn axis(
 /// (rad/s) and orientation (rad about each axis).
 const NOISE: &[(&str, f64)] = &[("noise_angle", 0.05), ("noise_velocity", 1.0), ("noise_orientation", 0.05)];
 
+/// The axes both robots have, each with the robot's own levels (and, for the body, its name).
+const fn push_lateral(levels: &'static [f64]) -> Axis {
+    axis("push_lateral", "sideways push", "m/s", 0.0, levels, Apply::Push(Lateral))
+}
+const fn push_frontal(levels: &'static [f64]) -> Axis {
+    axis("push_frontal", "push along the heading", "m/s", 0.0, levels, Apply::Push(Frontal))
+}
+const fn friction_low(levels: &'static [f64]) -> Axis {
+    axis("friction_low", "ground friction (scale, low)", "x", 1.0, levels, Apply::Options(&[("friction_scale", 1.0)]))
+}
+const fn payload(label: &'static str, levels: &'static [f64]) -> Axis {
+    axis("payload", label, "kg", 0.0, levels, Apply::Options(&[("payload_mass", 1.0)]))
+}
+const fn com_shift(label: &'static str, levels: &'static [f64]) -> Axis {
+    axis("com_shift", label, "m", 0.0, levels, Apply::Options(&[("com_shift", 1.0)]))
+}
+const fn motor_strength(levels: &'static [f64]) -> Axis {
+    axis(
+        "motor_strength",
+        "motor strength (share of torque)",
+        "x",
+        1.0,
+        levels,
+        Apply::Options(&[("motor_strength", 1.0)]),
+    )
+}
+const fn latency(levels: &'static [f64]) -> Axis {
+    axis("latency", "control latency", "s", 0.0, levels, Apply::Options(&[("latency", 1.0)]))
+}
+const fn slope_up(levels: &'static [f64]) -> Axis {
+    axis("slope_up", "slope up", "deg", 0.0, levels, Apply::Options(&[("slope", 1.0)]))
+}
+const fn slope_down(levels: &'static [f64]) -> Axis {
+    axis("slope_down", "slope down", "deg", 0.0, levels, Apply::Options(&[("slope", -1.0)]))
+}
+
 /// Minitaur's axes, levels from mild to where the policies measured mostly fail (a contender that
 /// survives an axis's last level is marked so in the suite's tables).
 pub const MINITAUR_AXES: &[Axis] = &[
-    axis("push_lateral", "sideways push", "m/s", 0.0, &[0.25, 0.5, 1.0, 1.5], Apply::Push(Lateral)),
-    axis("push_frontal", "push along the heading", "m/s", 0.0, &[0.5, 1.5, 2.5, 4.0, 6.0, 8.0], Apply::Push(Frontal)),
-    axis(
-        "friction_low",
-        "ground friction (scale, low)",
-        "x",
-        1.0,
-        &[0.3, 0.1, 0.03, 0.01, 0.003, 0.001],
-        Apply::Options(&[("friction_scale", 1.0)]),
-    ),
+    push_lateral(&[0.25, 0.5, 1.0, 1.5]),
+    push_frontal(&[0.5, 1.5, 2.5, 4.0, 6.0, 8.0]),
+    friction_low(&[0.3, 0.1, 0.03, 0.01, 0.003, 0.001]),
     axis(
         "friction_high",
         "ground friction (scale, high)",
@@ -70,32 +99,11 @@ pub const MINITAUR_AXES: &[Axis] = &[
         &[1.5, 2.0, 4.0, 8.0],
         Apply::Options(&[("friction_scale", 1.0)]),
     ),
-    axis("payload", "payload on the base", "kg", 0.0, &[1.0, 2.0, 4.0, 6.0], Apply::Options(&[("payload_mass", 1.0)])),
-    axis(
-        "com_shift",
-        "base centre of mass moved forward",
-        "m",
-        0.0,
-        &[0.03, 0.06, 0.12, 0.2],
-        Apply::Options(&[("com_shift", 1.0)]),
-    ),
-    axis(
-        "motor_strength",
-        "motor strength (share of torque)",
-        "x",
-        1.0,
-        &[0.8, 0.6, 0.45, 0.3],
-        Apply::Options(&[("motor_strength", 1.0)]),
-    ),
+    payload("payload on the base", &[1.0, 2.0, 4.0, 6.0]),
+    com_shift("base centre of mass moved forward", &[0.03, 0.06, 0.12, 0.2]),
+    motor_strength(&[0.8, 0.6, 0.45, 0.3]),
     axis("battery", "battery voltage", "V", 16.0, &[12.0, 9.0, 6.0, 3.0], Apply::Options(&[("battery_voltage", 1.0)])),
-    axis(
-        "latency",
-        "control latency",
-        "s",
-        0.0,
-        &[0.002, 0.004, 0.01, 0.02, 0.04],
-        Apply::Options(&[("latency", 1.0)]),
-    ),
+    latency(&[0.002, 0.004, 0.01, 0.02, 0.04]),
     axis(
         "sensor_noise",
         "sensor noise (x 0.05 rad, 1 rad/s, 0.05 rad)",
@@ -112,15 +120,8 @@ pub const MINITAUR_AXES: &[Axis] = &[
         &[0.005, 0.01, 0.02, 0.04, 0.07],
         Apply::Options(&[("terrain_step_height", 1.0)]),
     ),
-    axis("slope_up", "slope up", "deg", 0.0, &[5.0, 10.0, 15.0, 22.0, 30.0], Apply::Options(&[("slope", 1.0)])),
-    axis(
-        "slope_down",
-        "slope down",
-        "deg",
-        0.0,
-        &[2.5, 5.0, 10.0, 15.0, 22.0, 30.0],
-        Apply::Options(&[("slope", -1.0)]),
-    ),
+    slope_up(&[5.0, 10.0, 15.0, 22.0, 30.0]),
+    slope_down(&[2.5, 5.0, 10.0, 15.0, 22.0, 30.0]),
 ];
 
 /// Ant's axes: the pushes, up to 16 m/s (the controller survived more than 90% of the pushes
@@ -129,57 +130,15 @@ pub const MINITAUR_AXES: &[Axis] = &[
 /// in Gymnasium's Ant: it has no motor model, and its controller reads the simulator's state, so
 /// sensor noise would reach only the policies.
 pub const ANT_AXES: &[Axis] = &[
-    axis(
-        "push_lateral",
-        "sideways push",
-        "m/s",
-        0.0,
-        &[0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 16.0],
-        Apply::Push(Lateral),
-    ),
-    axis(
-        "push_frontal",
-        "push along the heading",
-        "m/s",
-        0.0,
-        &[0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 16.0],
-        Apply::Push(Frontal),
-    ),
-    axis(
-        "friction_low",
-        "ground friction (scale, low)",
-        "x",
-        1.0,
-        &[0.3, 0.1, 0.03, 0.01],
-        Apply::Options(&[("friction_scale", 1.0)]),
-    ),
-    axis(
-        "payload",
-        "payload on the torso",
-        "kg",
-        0.0,
-        &[2.0, 4.0, 8.0, 16.0, 32.0, 60.0],
-        Apply::Options(&[("payload_mass", 1.0)]),
-    ),
-    axis(
-        "com_shift",
-        "torso centre of mass moved forward",
-        "m",
-        0.0,
-        &[0.05, 0.1, 0.2, 0.3],
-        Apply::Options(&[("com_shift", 1.0)]),
-    ),
-    axis(
-        "motor_strength",
-        "motor strength (share of torque)",
-        "x",
-        1.0,
-        &[0.8, 0.6, 0.4, 0.2],
-        Apply::Options(&[("motor_strength", 1.0)]),
-    ),
-    axis("latency", "control latency", "s", 0.0, &[0.01, 0.02, 0.05, 0.1], Apply::Options(&[("latency", 1.0)])),
-    axis("slope_up", "slope up", "deg", 0.0, &[5.0, 10.0, 20.0, 30.0], Apply::Options(&[("slope", 1.0)])),
-    axis("slope_down", "slope down", "deg", 0.0, &[5.0, 10.0, 20.0, 30.0], Apply::Options(&[("slope", -1.0)])),
+    push_lateral(&[0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 16.0]),
+    push_frontal(&[0.5, 1.0, 2.0, 3.0, 5.0, 8.0, 12.0, 16.0]),
+    friction_low(&[0.3, 0.1, 0.03, 0.01]),
+    payload("payload on the torso", &[2.0, 4.0, 8.0, 16.0, 32.0, 60.0]),
+    com_shift("torso centre of mass moved forward", &[0.05, 0.1, 0.2, 0.3]),
+    motor_strength(&[0.8, 0.6, 0.4, 0.2]),
+    latency(&[0.01, 0.02, 0.05, 0.1]),
+    slope_up(&[5.0, 10.0, 20.0, 30.0]),
+    slope_down(&[5.0, 10.0, 20.0, 30.0]),
 ];
 
 /// The axes of `env`'s suite; an error for an env without one.
