@@ -251,7 +251,8 @@ pub fn provenance(s: &SuiteData) -> String {
          once per seed. Survival is the share of episodes that walked to the time limit, with its 95% Wilson \
          interval; episodes where the physics blew up are counted apart, not as falls. Surviving is not walking \
          (a policy can stand still on ice): where a contender's 90% level differs from the last level at which it \
-         also keeps at least {:.0}% of its nominal mean speed, the summary table names both. The controller reads the \
+         also keeps at least {:.0}% of its nominal mean speed, the summary table names both, and for a contender \
+         below the bar even nominally it gives the level up to which that speed is kept. The controller reads the \
          simulator's state (base pose and velocity, masses, gravity) where the policies read their {} observed \
          values{}. Measured on {} at commit {}, {:.0} s of wall time with {} threads: `{}`.",
         m.episodes,

@@ -740,8 +740,8 @@ pub(crate) fn gaits(
     doc.heading(2, "Gaits");
     doc.paragraph(format!(
         "Per algorithm, its best row's policy (the row with the highest lower 95% bound of its mean return; the \
-         seed with the row's median return) on the first held-out episode{}. Captions in the frame: step, return and mean forward speed so far. The GIFs show at most the \
-         first {} s at {} frames/s (a push clip's start a second before the push); the videos show the whole episode.",
+         seed with the row's median return) on the first held-out episode{}. Captions in the frame: step, return and mean forward speed so far. The GIFs show at most \
+         {} s at {} frames/s (the first seconds, or from a second before the push); the videos show the whole episode.",
         if section.is_some() {
             ", beside the controller commanded to the row's speed, and the pair under a push"
         } else {

@@ -34,9 +34,10 @@ const MAX_FPS: f64 = 25.0;
 const MAX_FRAMES: f64 = 300.0;
 
 /// The GIF copy: at most this many frames per second and seconds (a push clip's seconds start a
-/// second before the push).
+/// second before the push; a clip where a panel falls ends them just after its first fall). GIFs
+/// compress far worse than H.264, so they are kept short: the MP4 shows the whole episode.
 pub(crate) const GIF_FPS: f64 = 6.0;
-pub(crate) const GIF_SECONDS: f64 = 5.0;
+pub(crate) const GIF_SECONDS: f64 = 3.0;
 
 /// The push filmed (velocity change, m/s): the second level of the push table.
 pub const FILMED_PUSH: f64 = super::controller::PUSH_LEVELS[1];
@@ -318,6 +319,19 @@ fn film_panel(
     }
 }
 
+/// The frames of a `len`-frame clip at `fps` that its GIF shows: at most [`GIF_SECONDS`], from a
+/// second before the push (the first frame a panel's caption marks it in), or else up to half a
+/// second after the first fall, or else from the start.
+fn gif_window(push: Option<f64>, first_fall: Option<f64>, fps: f64, len: usize) -> std::ops::Range<usize> {
+    let start = match (push, first_fall) {
+        (Some(push), _) => push - 1.0,
+        (None, Some(fall)) => fall + 0.5 - GIF_SECONDS,
+        (None, None) => 0.0,
+    };
+    let first = ((start.max(0.0) * fps) as usize).min(len.saturating_sub(1));
+    first..(first + (GIF_SECONDS * fps) as usize).min(len)
+}
+
 fn write_clip(plan: &ClipPlan, panels: &[Panel], dir: &Path) -> Result<Clip> {
     let (mut frames, fps) = tile_panels(panels)?;
     let mut duration = panels.iter().map(|p| p.seconds).fold(0.0, f64::max);
@@ -332,15 +346,12 @@ fn write_clip(plan: &ClipPlan, panels: &[Panel], dir: &Path) -> Result<Clip> {
     let name = |ext: &str| format!("{}.{ext}", plan.stem);
     let video = write_video(&dir.join(name("mp4")), &frames, fps)?;
     crate::render::video::write_poster(&dir.join(name("jpg")), &frames[frames.len() / 2])?;
-    // The GIF: every k-th frame, for at most GIF_SECONDS from the start or from a second before
-    // the push (the first frame a panel's caption marks it in).
     let every = (fps / GIF_FPS).ceil().max(1.0) as usize;
-    let start = panels.iter().filter_map(|p| p.push_time).fold(f64::INFINITY, f64::min);
-    let start = if start.is_finite() { (start - 1.0).max(0.0) } else { 0.0 };
-    let first = (start * fps) as usize;
-    let last = (first + (GIF_SECONDS * fps) as usize).min(frames.len());
+    let push = panels.iter().filter_map(|p| p.push_time).reduce(f64::min);
+    let first_fall = panels.iter().filter(|p| p.fell || p.unstable).map(|p| p.seconds).reduce(f64::min);
     // At half the size: a GIF's frames compress far worse than a video's.
-    let gif_frames: Vec<_> = frames[first..last].iter().step_by(every).map(|f| f.half()).collect();
+    let gif_frames: Vec<_> =
+        frames[gif_window(push, first_fall, fps, frames.len())].iter().step_by(every).map(|f| f.half()).collect();
     let gif = write_video(&dir.join(name("gif")), &gif_frames, fps / every as f64)?;
     let size = |p: &Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
     Ok(Clip {
@@ -354,4 +365,21 @@ fn write_clip(plan: &ClipPlan, panels: &[Panel], dir: &Path) -> Result<Clip> {
         bytes: (size(&video), size(&gif)),
         fell: panels.iter().map(|p| p.fell || p.unstable).collect(),
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn gif_window_starts_before_a_push_ends_after_a_fall_or_starts_at_the_start() {
+        // 25 frames/s, 250 frames (10 s): a GIF is 3 s, 75 frames.
+        assert_eq!(gif_window(None, None, 25.0, 250), 0..75);
+        assert_eq!(gif_window(Some(4.0), Some(6.0), 25.0, 250), 75..150, "a second before the push at 4 s");
+        assert_eq!(gif_window(None, Some(6.0), 25.0, 250), 87..162, "from 3.5 s to half a second after the fall");
+        assert_eq!(gif_window(None, Some(1.0), 25.0, 250), 0..75, "a fall within the first seconds");
+        assert_eq!(gif_window(Some(0.5), None, 25.0, 250), 0..75);
+        assert_eq!(gif_window(None, Some(9.9), 25.0, 40), 39..40, "never past the last frame");
+        assert_eq!(gif_window(None, None, 25.0, 10), 0..10, "a clip shorter than a GIF");
+    }
 }

@@ -34,35 +34,59 @@ pub struct Threshold {
 /// The share of its nominal speed a contender must keep at a level to count as walking there.
 pub const WALK_SHARE: f64 = 0.5;
 
+/// What a level must show to count as reached along an axis.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Bar {
+    /// Survival of at least [`SURVIVAL_BAR`].
+    Survival,
+    /// That, and a mean forward speed of at least [`WALK_SHARE`] of the nominal speed.
+    SurvivalAndSpeed,
+    /// The speed alone, whatever the survival.
+    Speed,
+}
+
 /// The 90% threshold of `policy` along `axis`.
 pub fn threshold(cells: &[Cell], policy: &str, axis: &Axis) -> Threshold {
-    threshold_by(cells, policy, axis, false)
+    threshold_by(cells, policy, axis, Bar::Survival)
 }
 
 /// As [`threshold`], where a level counts only if the contender also walks there: its mean
 /// forward speed is at least [`WALK_SHARE`] of its nominal speed. Survival alone rewards a policy
 /// that stands still on ice; this does not.
 pub fn walking_threshold(cells: &[Cell], policy: &str, axis: &Axis) -> Threshold {
-    threshold_by(cells, policy, axis, true)
+    threshold_by(cells, policy, axis, Bar::SurvivalAndSpeed)
+}
+
+/// The most severe level up to which `policy` keeps at least [`WALK_SHARE`] of its nominal mean
+/// speed, whatever its survival: what is left to compare for a contender that falls too often
+/// even nominally to have a 90% level (Gymnasium's Ant, whose fall rule is its torso height,
+/// seldom counts a stalled robot as fallen, so there speed is the telling measure).
+pub fn speed_threshold(cells: &[Cell], policy: &str, axis: &Axis) -> Threshold {
+    threshold_by(cells, policy, axis, Bar::Speed)
 }
 
 /// Where surviving and walking part: "walking (at least 50% of its nominal speed) up to X", the
 /// level up to which `policy` also keeps half its nominal speed, written by `level`. None where
-/// that is its 90% survival level, or where even nominal is below the bar.
+/// that is its 90% survival level. Where even nominal is below the survival bar: "keeps at least
+/// 50% of its nominal speed up to X", from [`speed_threshold`].
 pub fn walking_note(cells: &[Cell], policy: &str, axis: &Axis, level: impl Fn(f64) -> String) -> Option<String> {
-    let (survives, walks) = (threshold(cells, policy, axis).level, walking_threshold(cells, policy, axis).level);
-    if walks == survives || survives.is_none() {
-        return None;
-    }
-    let up_to = match walks {
+    let up_to = |reached: Option<f64>| match reached {
         Some(l) if l == axis.nominal => "nominal only".to_string(),
         Some(l) => level(l),
         None => "not even nominal".to_string(),
     };
-    Some(format!("walking (at least {:.0}% of its nominal speed) up to {up_to}", WALK_SHARE * 100.0))
+    let share = WALK_SHARE * 100.0;
+    let survives = threshold(cells, policy, axis).level;
+    if survives.is_none() {
+        let keeps = speed_threshold(cells, policy, axis);
+        let every = if keeps.beyond_last { ", every level" } else { "" };
+        return Some(format!("keeps at least {share:.0}% of its nominal speed up to {}{every}", up_to(keeps.level)));
+    }
+    let walks = walking_threshold(cells, policy, axis).level;
+    (walks != survives).then(|| format!("walking (at least {share:.0}% of its nominal speed) up to {}", up_to(walks)))
 }
 
-fn threshold_by(cells: &[Cell], policy: &str, axis: &Axis, walking: bool) -> Threshold {
+fn threshold_by(cells: &[Cell], policy: &str, axis: &Axis, bar: Bar) -> Threshold {
     let line = along(cells, policy, axis);
     let levels: Vec<f64> = axis.all_levels();
     let nominal_speed = line.first().map_or(f64::NAN, |c| c.speed);
@@ -70,8 +94,9 @@ fn threshold_by(cells: &[Cell], policy: &str, axis: &Axis, walking: bool) -> Thr
     let mut first_below = None;
     for (cell, level) in line.iter().zip(&levels) {
         let s = cell.survival();
-        let walks = !walking || cell.speed >= WALK_SHARE * nominal_speed;
-        if s.estimate >= SURVIVAL_BAR && walks {
+        let survives = bar == Bar::Speed || s.estimate >= SURVIVAL_BAR;
+        let walks = bar == Bar::Survival || cell.speed >= WALK_SHARE * nominal_speed;
+        if survives && walks {
             reached = Some((*level, s));
         } else {
             first_below = Some((*level, s));
@@ -169,6 +194,34 @@ mod tests {
         // Surviving ice at a crawl from the first level on: it walks only at nominal.
         let crawl = vec![at(1.0, 1.2), at(0.3, 0.5), at(0.1, 0.5), at(0.03, 0.5), at(0.01, 0.5)];
         let note = walking_note(&crawl, "a", friction, |l| format!("{l} x")).unwrap();
+        assert!(note.ends_with("up to nominal only"), "{note}");
+    }
+
+    #[test]
+    fn below_the_survival_bar_the_note_gives_the_speed_kept() {
+        let friction = MINITAUR_AXES.iter().find(|a| a.name == "friction_low").unwrap();
+        let at = |level: f64, speed: f64| {
+            let axis = if level == 1.0 { NOMINAL } else { "friction_low" };
+            // 8 of 10 survive: below the 90% bar at every level, nominal included.
+            let mut c = cell("a", axis, level, "SSSSSSSSFF");
+            c.speed = speed;
+            c
+        };
+        let cells = vec![at(1.0, 3.0), at(0.3, 2.9), at(0.1, 2.0), at(0.03, 1.5), at(0.01, 1.4)];
+        assert_eq!(threshold(&cells, "a", friction).level, None);
+        assert_eq!(walking_threshold(&cells, "a", friction).level, None);
+        let kept = speed_threshold(&cells, "a", friction);
+        assert_eq!(kept.level, Some(0.03), "1.5 m/s is exactly half of 3");
+        assert_eq!(kept.first_below.map(|b| b.0), Some(0.01));
+        let note = walking_note(&cells, "a", friction, |l| format!("{l} x")).unwrap();
+        assert_eq!(note, "keeps at least 50% of its nominal speed up to 0.03 x");
+        let mut fast = vec![at(1.0, 3.0)];
+        fast.extend(friction.levels.iter().map(|l| at(*l, 1.5)));
+        let last = friction.levels.last().unwrap();
+        let note = walking_note(&fast, "a", friction, |l| format!("{l} x")).unwrap();
+        assert_eq!(note, format!("keeps at least 50% of its nominal speed up to {last} x, every level"));
+        let stalled = vec![at(1.0, 3.0), at(0.3, 1.0)];
+        let note = walking_note(&stalled, "a", friction, |l| format!("{l} x")).unwrap();
         assert!(note.ends_with("up to nominal only"), "{note}");
     }
 }
