@@ -120,13 +120,18 @@ def cpu():
 
 def main():
     steps = int(sys.argv[1]) if len(sys.argv) > 1 else 20000
+    if locobench._core.BUILD_PROFILE != "release":
+        sys.exit(f"python/bench_speed.py: locobench's extension ({locobench._core.__file__}) is a "
+                 f"{locobench._core.BUILD_PROFILE} build, whose Rust code is unoptimised (python/test.sh installs one); "
+                 "install a release build first: bash python/install.sh VENV")
     commit = subprocess.run(["git", "rev-parse", "--short=10", "HEAD"], capture_output=True, text=True).stdout.strip()
     if subprocess.run(["git", "diff", "--quiet", "HEAD", "--", "src", "python", "Cargo.toml"]).returncode != 0:
         commit += "+dirty"
     flags = open("/proc/cpuinfo").read()
     simd = "avx512" if "avx512f" in flags else "avx2" if "avx2" in flags else "sse"
     note = os.environ.get("LOCOBENCH_BENCH_NOTE", "")
-    print(f"# machine: {cpu()} ({simd}), {os.cpu_count()} cores; commit {commit}; python {platform.python_version()}, "
+    print(f"# machine: {cpu()} ({simd}), {os.cpu_count()} cores; commit {commit}; release build; "
+          f"python {platform.python_version()}, "
           f"gymnasium {gym.__version__}; command: python python/bench_speed.py {steps}" + (f"; {note}" if note else ""))
     print("env,locobench_gym_steps_per_s,locobench_raw_steps_per_s,locobench_rust_steps_per_s,binding_overhead_us,"
           "gymnasium_steps_per_s,vec8_1_thread_steps_per_s,vec8_2_threads_steps_per_s,"

@@ -721,6 +721,9 @@ fn _core(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_class::<PyVecEnv>()?;
     m.add_function(wrap_pyfunction!(episode_seed, m)?)?;
     m.add("CUDA_BUILT", locobench::device::ComputeDevice::CUDA_BUILT)?;
+    // "dev" (python/test.sh's build: our crates unoptimised) or "release", so that a speed
+    // measurement can refuse a dev build.
+    m.add("BUILD_PROFILE", if cfg!(debug_assertions) { "dev" } else { "release" })?;
     m.add_class::<PyController>()?;
     m.add_class::<PyTrainedPolicy>()?;
     m.add_class::<PyRenderer>()?;

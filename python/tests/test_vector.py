@@ -151,3 +151,16 @@ def test_bad_input_is_refused_with_a_message():
         locobench.LocobenchVectorEnv("hopper", num_envs=2, threads=0)
     with pytest.raises(ValueError, match="no_such_option"):
         locobench.LocobenchVectorEnv("hopper", num_envs=2, no_such_option=1)
+
+
+@pytest.mark.skipif(locobench._core.BUILD_PROFILE == "release", reason="a release build runs the whole benchmark")
+def test_the_speed_benchmark_refuses_a_dev_build():
+    import pathlib
+    import subprocess
+    import sys
+
+    root = pathlib.Path(__file__).resolve().parents[2]
+    assert locobench._core.BUILD_PROFILE == "dev"
+    out = subprocess.run([sys.executable, str(root / "python/bench_speed.py"), "10"], capture_output=True, text=True)
+    assert out.returncode != 0 and out.stdout == ""
+    assert "is a dev build" in out.stderr and "bash python/install.sh" in out.stderr, out.stderr
