@@ -741,7 +741,8 @@ pub(crate) fn gaits(
     doc.paragraph(format!(
         "Per algorithm, its best row's policy (the row with the highest lower 95% bound of its mean return; the \
          seed with the row's median return) on the first held-out episode{}. Captions in the frame: step, return and mean forward speed so far. The GIFs show at most \
-         {} s at {} frames/s (the first seconds, or from a second before the push); the videos show the whole episode.",
+         {} s at {} frames/s (from a second before the push, or else ending half a second after a fall, or else the first \
+         seconds); the videos show the whole episode.",
         if section.is_some() {
             ", beside the controller commanded to the row's speed, and the pair under a push"
         } else {
