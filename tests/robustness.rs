@@ -50,6 +50,8 @@ fn a_small_suite_writes_every_cell_the_same_on_any_thread_count() {
     assert_eq!(meta.episodes, 2);
     assert_eq!(meta.protocol_seed, 100);
     assert!(meta.command.contains("robustness") && meta.wall_seconds > 0.0);
+    // Each cell names the commit of the binary that played it: here, this one.
+    assert!(cells.iter().all(|c| c.commit == meta.git_commit && !c.commit.is_empty()));
     // A heavier payload never helps the controller's survival on the same episodes.
     let ctrl: Vec<_> = cells.iter().filter(|c| c.kind == "controller" && c.axis == "payload").collect();
     assert_eq!(ctrl.len(), 4);
@@ -72,6 +74,19 @@ fn a_small_suite_writes_every_cell_the_same_on_any_thread_count() {
     let td3 = concat!(env!("CARGO_MANIFEST_DIR"), "/models/policies/minitaur-td3");
     let moved = reuse(&dir.path().join("moved"), &format!("ppo={td3}"));
     assert!(moved.contains("10 of the 20 cells were taken"), "only the controller's: {moved}");
+
+    // A suite written before cells carried their commit is still read and reused; its cells say
+    // they were played at its commit or an earlier one.
+    let legacy = dir.path().join("legacy");
+    std::fs::create_dir(&legacy).unwrap();
+    std::fs::copy(a.join("robustness.toml"), legacy.join("robustness.toml")).unwrap();
+    let old: String = text(&a).lines().map(|l| l.rsplit_once(',').unwrap().0.to_string() + "\n").collect();
+    std::fs::write(legacy.join("robustness.csv"), old).unwrap();
+    let (ok, _, err) =
+        suite_of(&format!("ppo={PPO}"), &dir.path().join("from-legacy"), "2", &["--reuse", legacy.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let (carried, _) = read_dir(&dir.path().join("from-legacy")).unwrap();
+    assert!(carried.iter().all(|c| c.commit == format!("<={}", meta.git_commit)), "{:?}", carried[0].commit);
 
     // The report's section from it: summary, goal, a chart per axis.
     let report = dir.path().join("report");

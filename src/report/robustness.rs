@@ -277,7 +277,28 @@ pub fn provenance(s: &SuiteData) -> String {
     for n in &m.notes {
         let _ = write!(text, "\n- {n}");
     }
+    let _ = write!(text, "\n- {}", commits_line(&s.cells));
     text
+}
+
+/// Which commits played the cells (the CSV's `commit` column), most cells first.
+fn commits_line(cells: &[Cell]) -> String {
+    let mut counts: Vec<(&str, usize)> = Vec::new();
+    for c in cells {
+        match counts.iter_mut().find(|(k, _)| *k == c.commit) {
+            Some((_, n)) => *n += 1,
+            None => counts.push((&c.commit, 1)),
+        }
+    }
+    counts.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(b.0)));
+    let parts: Vec<String> = counts
+        .iter()
+        .map(|(commit, n)| match commit.strip_prefix("<=") {
+            Some(c) => format!("{n} at {} or an earlier commit", crate::train::provenance::short_commit(c, 12)),
+            None => format!("{n} at {}", crate::train::provenance::short_commit(commit, 12)),
+        })
+        .collect();
+    format!("cells played (the CSV's commit column): {}", parts.join(", "))
 }
 
 /// The section: provenance, summary table, goal, then per axis its chart and cells.
@@ -312,4 +333,20 @@ pub(crate) fn section(doc: &mut Document, out: &Path, s: &SuiteData, videos: Opt
         doc.table(&header.iter().map(String::as_str).collect::<Vec<_>>(), rows);
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::evaluation::robustness::suite::test_cell;
+
+    #[test]
+    fn the_commits_line_counts_cells_per_commit_and_marks_carried_ones() {
+        let at = |commit: &str| Cell { commit: commit.into(), ..test_cell("p", "policy", "payload", 1.0, "S") };
+        let cells = [at("<=0123456789abcdef"), at("fedcba9876543210-dirty"), at("<=0123456789abcdef")];
+        assert_eq!(
+            commits_line(&cells),
+            "cells played (the CSV's commit column): 2 at 0123456789ab or an earlier commit, 1 at fedcba987654-dirty"
+        );
+    }
 }

@@ -151,15 +151,19 @@ impl SuiteMeta {
     }
 }
 
-/// Reads a committed suite: its cells and metadata from `dir`.
+/// Reads a committed suite: its cells and metadata from `dir`. A cell from a CSV without the
+/// commit column gets `<=COMMIT` (the suite's commit, or an earlier one, played it).
 pub fn read_dir(dir: &Path) -> Result<(Vec<Cell>, SuiteMeta)> {
     let csv = dir.join(CSV_FILE);
     let text = std::fs::read_to_string(&csv).with_context(|| format!("reading {}", csv.display()))?;
-    let cells = super::suite::from_csv(&text, &csv.display().to_string())?;
+    let mut cells = super::suite::from_csv(&text, &csv.display().to_string())?;
     let meta_path = dir.join(META_FILE);
     let meta_text = std::fs::read_to_string(&meta_path).with_context(|| format!("reading {}", meta_path.display()))?;
-    let meta =
+    let meta: SuiteMeta =
         toml::from_str(&meta_text).with_context(|| format!("{}: not a suite's metadata", meta_path.display()))?;
+    for c in cells.iter_mut().filter(|c| c.commit.is_empty()) {
+        c.commit = format!("<={}", meta.git_commit);
+    }
     Ok((cells, meta))
 }
 

@@ -159,6 +159,10 @@ pub struct Cell {
     pub speed: f64,
     /// Cost of transport of the episodes together.
     pub cost_of_transport: f64,
+    /// The commit of the binary that played the cell (`-dirty` when its source had uncommitted
+    /// edits). `<=HASH` for a cell carried over from a suite written before the CSV had this
+    /// column: it was played at that suite's commit or an earlier one.
+    pub commit: String,
 }
 
 impl Cell {
@@ -193,6 +197,7 @@ impl Cell {
             ret: estimate(std::slice::from_ref(&returns), stats::mean, BOOTSTRAP_SEED).interval,
             speed: stats::mean(&episodes.iter().map(|e| e.mean_speed).collect::<Vec<_>>()),
             cost_of_transport: mean_cost_of_transport(episodes),
+            commit: crate::train::git_commit().unwrap_or_else(|| UNKNOWN_COMMIT.into()),
         }
     }
 }
@@ -212,6 +217,7 @@ pub(crate) fn test_cell(policy: &str, kind: &str, axis: &str, level: f64, outcom
         ret: Interval::point(0.0),
         speed: 0.0,
         cost_of_transport: 0.0,
+        commit: "abc".into(),
     }
 }
 
@@ -293,7 +299,14 @@ impl Suite {
 
 /// The CSV's header.
 pub const CSV_HEADER: &str = "env,policy,kind,commanded,axis,level,episodes,survived,fell,unstable,survival,\
+survival_low,survival_high,return_mean,return_low,return_high,speed,cost_of_transport,outcomes,commit";
+
+/// The header of a suite written before cells carried their commit; still read.
+const LEGACY_CSV_HEADER: &str = "env,policy,kind,commanded,axis,level,episodes,survived,fell,unstable,survival,\
 survival_low,survival_high,return_mean,return_low,return_high,speed,cost_of_transport,outcomes";
+
+/// A cell's commit where the binary was built outside a git checkout.
+pub const UNKNOWN_COMMIT: &str = "unknown";
 
 /// The cells as CSV text (one row each).
 pub fn to_csv(cells: &[Cell]) -> String {
@@ -303,7 +316,7 @@ pub fn to_csv(cells: &[Cell]) -> String {
         let s = c.survival();
         let outcomes: String = c.outcomes.iter().map(|o| o.letter()).collect();
         out.push_str(&format!(
-            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
+            "{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{},{}\n",
             c.env,
             c.policy,
             c.kind,
@@ -322,26 +335,30 @@ pub fn to_csv(cells: &[Cell]) -> String {
             c.ret.high,
             c.speed,
             c.cost_of_transport,
-            outcomes
+            outcomes,
+            c.commit
         ));
     }
     out
 }
 
-/// Reads cells back from `to_csv`'s text; `source` names the file in errors.
+/// Reads cells back from `to_csv`'s text; `source` names the file in errors. A suite written
+/// before the commit column gets an empty commit, which [`super::output::read_dir`] fills in.
 pub fn from_csv(text: &str, source: &str) -> Result<Vec<Cell>> {
     let mut lines = text.lines();
-    if lines.next().map(str::trim) != Some(CSV_HEADER) {
-        bail!("{source}: not a robustness CSV (its header differs from `{CSV_HEADER}`)");
-    }
+    let fields = match lines.next().map(str::trim) {
+        Some(CSV_HEADER) => 20,
+        Some(LEGACY_CSV_HEADER) => 19,
+        _ => bail!("{source}: not a robustness CSV (its header differs from `{CSV_HEADER}`)"),
+    };
     lines
         .enumerate()
         .filter(|(_, l)| !l.trim().is_empty())
         .map(|(i, line)| {
             let at = || format!("{source} line {}", i + 2);
             let f: Vec<&str> = line.split(',').collect();
-            if f.len() != 19 {
-                bail!("{}: {} fields, expected 19", at(), f.len());
+            if f.len() != fields {
+                bail!("{}: {} fields, expected {fields}", at(), f.len());
             }
             let num = |k: usize| f[k].parse::<f64>().with_context(|| format!("{}: '{}' is not a number", at(), f[k]));
             let outcomes = f[18].chars().map(Outcome::from_letter).collect::<Result<Vec<_>>>().with_context(at)?;
@@ -356,6 +373,7 @@ pub fn from_csv(text: &str, source: &str) -> Result<Vec<Cell>> {
                 ret: Interval { estimate: num(13)?, low: num(14)?, high: num(15)? },
                 speed: num(16)?,
                 cost_of_transport: num(17)?,
+                commit: f.get(19).map_or(String::new(), |c| c.to_string()),
             })
         })
         .collect()
@@ -377,12 +395,19 @@ mod tests {
         assert_eq!((cell.survived(), cell.fell(), cell.unstable()), (1, 1, 1));
         assert_eq!(cell.survival(), wilson(1, 2));
         let text = to_csv(std::slice::from_ref(&cell));
-        assert!(text.lines().nth(1).unwrap().ends_with(",SFU"));
+        let commit = crate::train::git_commit().unwrap_or_else(|| UNKNOWN_COMMIT.into());
+        assert!(text.lines().nth(1).unwrap().ends_with(&format!(",SFU,{commit}")));
         let back = from_csv(&text, "x.csv").unwrap();
         assert_eq!(back[0].outcomes, cell.outcomes);
         assert_eq!(back[0].ret, cell.ret);
+        assert_eq!(back[0].commit, commit);
+        // The header and rows without the commit column still read, with an empty commit.
+        let legacy = text.replace(",outcomes,commit", ",outcomes").replace(&format!(",SFU,{commit}"), ",SFU");
+        assert_eq!(from_csv(&legacy, "old.csv").unwrap()[0].commit, "");
+        let short = text.replace(&format!(",SFU,{commit}"), ",SFU");
+        assert!(from_csv(&short, "w.csv").unwrap_err().to_string().contains("19 fields, expected 20"));
         assert!(from_csv("a,b\n", "y.csv").unwrap_err().to_string().contains("y.csv"));
-        let bad = text.replace(",SFU", ",SXU");
+        let bad = text.replace(",SFU,", ",SXU,");
         assert!(format!("{:#}", from_csv(&bad, "z.csv").unwrap_err()).contains("z.csv line 2"));
     }
 
