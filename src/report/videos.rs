@@ -335,7 +335,9 @@ fn gif_window(push: Option<f64>, first_fall: Option<f64>, fps: f64, len: usize) 
 fn write_clip(plan: &ClipPlan, panels: &[Panel], dir: &Path) -> Result<Clip> {
     let (mut frames, fps) = tile_panels(panels)?;
     let mut duration = panels.iter().map(|p| p.seconds).fold(0.0, f64::max);
-    let last_fall = panels.iter().filter(|p| p.fell || p.unstable).map(|p| p.seconds).fold(f64::NAN, f64::max);
+    // When each panel that ended early fell (or blew up).
+    let falls: Vec<f64> = panels.iter().filter(|p| p.fell || p.unstable).map(|p| p.seconds).collect();
+    let last_fall = falls.iter().copied().fold(f64::NAN, f64::max);
     if plan.until_decided && last_fall + 1.0 < duration {
         // Whole frames only, and the duration the kept frames show: a browser plays n frames
         // for n / fps seconds, so the clip must not claim a fraction of a frame more or less.
@@ -348,7 +350,7 @@ fn write_clip(plan: &ClipPlan, panels: &[Panel], dir: &Path) -> Result<Clip> {
     crate::render::video::write_poster(&dir.join(name("jpg")), &frames[frames.len() / 2])?;
     let every = (fps / GIF_FPS).ceil().max(1.0) as usize;
     let push = panels.iter().filter_map(|p| p.push_time).reduce(f64::min);
-    let first_fall = panels.iter().filter(|p| p.fell || p.unstable).map(|p| p.seconds).reduce(f64::min);
+    let first_fall = falls.iter().copied().reduce(f64::min);
     // At half the size: a GIF's frames compress far worse than a video's.
     let gif_frames: Vec<_> =
         frames[gif_window(push, first_fall, fps, frames.len())].iter().step_by(every).map(|f| f.half()).collect();
