@@ -4,9 +4,9 @@ eval`, `record` and `report` then run in Rust.
 
 The layouts are SB3 2.x's (`stable_baselines3/common/policies.py`, `sac/policies.py`,
 `td3/policies.py`):
-- PPO: `mlp_extractor.policy_net` (Linear, Tanh, ...), `action_net`, and a state-independent
-  `log_std`: locobench's PPO actor (a tanh MLP and `log_std`, `agents::ppo`), deterministic action
-  the mean clipped to the action bounds.
+- PPO: `mlp_extractor.policy_net` (Linear, Tanh or ReLU, ...), `action_net`, and a
+  state-independent `log_std`: locobench's PPO actor (an MLP with that activation and `log_std`,
+  `agents::ppo`), deterministic action the mean clipped to the action bounds.
 - SAC: `actor.latent_pi` (Linear, ReLU, ...), `actor.mu` and `actor.log_std`: locobench's SAC actor,
   whose last layer gives the mean and the log-std side by side; deterministic action tanh(mean).
 - TD3 and DDPG: `actor.mu` (Linear, ReLU, ..., Linear, Tanh): locobench's deterministic actor.
@@ -24,9 +24,10 @@ from locobench.evaluation import _core_env
 _ALGOS = {"PPO": "ppo", "SAC": "sac", "TD3": "td3", "DDPG": "ddpg"}
 
 
-def _linear_chain(sequential, activation, what, output_tanh=False):
-    """The (weight, bias) of each Linear in `sequential`, checking that `activation` follows every
-    one but the last, and with `output_tanh` (TD3's and DDPG's actor) that Tanh follows the last."""
+def _linear_chain(sequential, activations, what, output_tanh=False):
+    """The (weight, bias) of each Linear in `sequential` and the activation between them (one of
+    `activations`, the same after every Linear but the last, None with one layer); with
+    `output_tanh` (TD3's and DDPG's actor), Tanh must follow the last."""
     import torch.nn as nn
 
     modules = list(sequential)
@@ -41,12 +42,16 @@ def _linear_chain(sequential, activation, what, output_tanh=False):
         elif isinstance(m, (nn.ReLU, nn.Tanh)):
             acts.append(type(m).__name__)
         else:
-            raise ValueError(f"{what}: a {type(m).__name__} layer is not supported (an MLP of Linear and "
-                             f"{activation} layers is)")
-    wrong = [a for a in acts if a != activation]
+            raise ValueError(f"{what}: {type(m).__name__} layers are not supported (an MLP of Linear and "
+                             f"{' or '.join(activations)} layers is)")
+    wrong = [a for a in acts if a not in activations]
     if wrong:
-        raise ValueError(f"{what}: {wrong[0]} activations are not supported: locobench's actor uses {activation}")
-    return layers
+        raise ValueError(f"{what}: {wrong[0]} activations are not supported: locobench's actor uses "
+                         f"{' or '.join(activations)}")
+    if len(set(acts)) > 1:
+        raise ValueError(f"{what}: mixed activations ({', '.join(sorted(set(acts)))}) are not supported: "
+                         "locobench's actor uses one between every layer")
+    return layers, (acts[0] if acts else None)
 
 
 def _check_mlp_policy(model):
@@ -110,7 +115,7 @@ def import_sb3(model, out_dir, env, *, vec_normalize=None, options=None):
     tensors, train = {}, {"algo": algo}
     policy = model.policy
     if algo == "ppo":
-        layers = _linear_chain(policy.mlp_extractor.policy_net, "Tanh", "PPO's policy network")
+        layers, activation = _linear_chain(policy.mlp_extractor.policy_net, ("Tanh", "ReLU"), "PPO's policy network")
         action_net = policy.action_net
         layers.append((action_net.weight.detach().cpu().double().numpy(),
                        action_net.bias.detach().cpu().double().numpy()))
@@ -120,7 +125,7 @@ def import_sb3(model, out_dir, env, *, vec_normalize=None, options=None):
         train["weight_init"] = "orthogonal"
     elif algo == "sac":
         actor = policy.actor
-        layers = _linear_chain(actor.latent_pi, "ReLU", "SAC's actor")
+        layers, _ = _linear_chain(actor.latent_pi, ("ReLU",), "SAC's actor")
         w = np.concatenate([actor.mu.weight.detach().cpu().double().numpy(),
                             actor.log_std.weight.detach().cpu().double().numpy()])
         b = np.concatenate([actor.mu.bias.detach().cpu().double().numpy(),
@@ -129,11 +134,13 @@ def import_sb3(model, out_dir, env, *, vec_normalize=None, options=None):
         for i, (w, b) in enumerate(layers):
             tensors[f"actor.{i}.weight"], tensors[f"actor.{i}.bias"] = w, b
     else:
-        layers = _linear_chain(policy.actor.mu, "ReLU", f"{name}'s actor", output_tanh=True)
+        layers, _ = _linear_chain(policy.actor.mu, ("ReLU",), f"{name}'s actor", output_tanh=True)
         for i, (w, b) in enumerate(layers):
             tensors[f"actor.{i}.weight"], tensors[f"actor.{i}.bias"] = w, b
     train["hidden"] = [int(w.shape[0]) for w, _ in layers[:-1]]
     section = {}
+    if algo == "ppo" and activation == "ReLU":
+        section["activation"] = "relu"
 
     if vec_normalize is not None:
         if isinstance(vec_normalize, (str, os.PathLike)):

@@ -39,19 +39,22 @@ def _observations(rng, n=20):
     return [rng.normal(0, 1.5, OBS) for _ in range(n)]
 
 
-def test_the_ppo_layout_with_vecnormalize_acts_as_its_numpy_forward_pass(tmp_path):
+@pytest.mark.parametrize("activation", ["tanh", "relu"])
+def test_the_ppo_layout_with_vecnormalize_acts_as_its_numpy_forward_pass(tmp_path, activation):
     rng = np.random.default_rng(0)
     layers = _mlp(rng, [OBS, 16, 16, ACT])
     mean, var = rng.normal(0, 1, OBS), rng.uniform(0.1, 4, OBS)
     tensors = {f"actor.mean.{i}.{p}": t for i, (w, b) in enumerate(layers) for p, t in (("weight", w), ("bias", b))}
     tensors.update({"actor.log_std": np.zeros((1, ACT)), "actor.obs_mean": mean, "actor.obs_var": var,
                     "actor.obs_count": np.array([1000.0])})
-    config = _config("ppo", [16, 16], "normalize_observations = true\n\n[train.ppo]\nclip_observations = 5.0\n")
+    section = "clip_observations = 5.0\n" + ('activation = "relu"\n' if activation == "relu" else "")
+    config = _config("ppo", [16, 16], "normalize_observations = true\n\n[train.ppo]\n" + section)
     _core.import_policy(str(tmp_path / "p"), _payload(tensors), config, "test = true\n")
     policy = locobench.load_policy(tmp_path / "p")
     for obs in _observations(rng):
         x = np.clip((obs - mean) / np.sqrt(var + 1e-8), -5, 5)
-        expected = np.clip(_forward(layers, x, np.tanh), -1, 1)
+        hidden = np.tanh if activation == "tanh" else (lambda h: np.maximum(h, 0))
+        expected = np.clip(_forward(layers, x, hidden), -1, 1)
         assert np.allclose(policy.predict(obs)[0], expected, atol=1e-5)
 
 
@@ -93,20 +96,25 @@ def sb3():
     return pytest.importorskip("stable_baselines3", reason="Stable-Baselines3 is optional (python/check_sb3.py)")
 
 
-@pytest.mark.parametrize("algo", ["PPO", "SAC", "TD3", "DDPG"])
+@pytest.mark.parametrize("algo", ["PPO", "PPO-relu", "SAC", "TD3", "DDPG"])
 def test_a_converted_sb3_model_acts_as_sb3_predicts(tmp_path, algo, binary, sb3):
+    import torch
     from stable_baselines3.common.env_util import make_vec_env
     from stable_baselines3.common.vec_env import VecNormalize
 
     locobench.register_envs()
     venv = make_vec_env("locobench/Minitaur-v0", n_envs=1, seed=0)
-    norm = VecNormalize(venv, norm_reward=False) if algo in ("PPO", "TD3") else None
+    norm = VecNormalize(venv, norm_reward=False) if algo in ("PPO", "PPO-relu", "TD3") else None
     kwargs = dict(policy_kwargs=dict(net_arch=[32, 32]), seed=0, device="cpu")
-    if algo == "PPO":
+    if algo == "PPO-relu":
+        # rl-baselines3-zoo's MuJoCo policy settings: separate ReLU networks, no orthogonal init
+        kwargs["policy_kwargs"] = dict(net_arch=dict(pi=[32, 32], vf=[48, 48]), activation_fn=torch.nn.ReLU,
+                                       log_std_init=-2, ortho_init=False)
+    if algo.startswith("PPO"):
         kwargs.update(n_steps=64, batch_size=32, n_epochs=1)
     else:
         kwargs.update(learning_starts=32, buffer_size=1000)
-    model = getattr(sb3, algo)("MlpPolicy", norm or venv, **kwargs)
+    model = getattr(sb3, algo.split("-")[0])("MlpPolicy", norm or venv, **kwargs)
     model.learn(96)  # trained a little, so that no weight is at its initial value
     path = tmp_path / "model.zip"
     model.save(path)
@@ -130,8 +138,11 @@ def test_unsupported_sb3_models_are_refused_by_name(tmp_path, sb3):
 
     locobench.register_envs()
     env = "locobench/InvertedPendulum-v5"
-    model = sb3.PPO("MlpPolicy", env, policy_kwargs=dict(activation_fn=torch.nn.ReLU), device="cpu")
-    with pytest.raises(ValueError, match="ReLU activations are not supported"):
+    model = sb3.PPO("MlpPolicy", env, policy_kwargs=dict(activation_fn=torch.nn.ELU), device="cpu")
+    with pytest.raises(ValueError, match="ELU layers are not supported"):
+        locobench.import_sb3(model, tmp_path / "p", env)
+    model = sb3.SAC("MlpPolicy", env, policy_kwargs=dict(activation_fn=torch.nn.Tanh), device="cpu")
+    with pytest.raises(ValueError, match="Tanh activations are not supported"):
         locobench.import_sb3(model, tmp_path / "p", env)
     model = sb3.SAC("MlpPolicy", env, device="cpu")
     with pytest.raises(ValueError, match=r"observations \(4,\).*hopper"):

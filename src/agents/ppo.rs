@@ -12,7 +12,7 @@
 //! unclipped sample, as in CleanRL.
 use serde::{Deserialize, Serialize};
 
-use candle_core::{DType, Device, Result, Tensor, Var, D};
+use candle_core::{Device, Result, Tensor, Var, D};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -21,36 +21,79 @@ use super::config::{positive, Algo, TrainConfig, WeightInit};
 use super::nets::{batch_tensor, orthogonal, DenseStack};
 use super::{layer_sizes, Agent, OnPolicyAgent};
 use crate::numeric::dense::dense;
-use crate::numeric::inplace::Activation;
+use crate::numeric::inplace::Activation as Activation_;
 use crate::numeric::optim::{Adam, Optimizer};
 
 /// gymnasium's `NormalizeObservation` epsilon and the clip CleanRL applies after it.
 const OBS_EPSILON: f64 = 1e-8;
 
-/// Dense layers with tanh between them and nothing after the last; the parameters, their
-/// checkpoint names and updates are `DenseStack`'s, only the activation differs.
-struct TanhMlp(DenseStack);
+/// The nonlinearity between PPO's hidden layers: tanh (CleanRL's, the default) or ReLU
+/// (rl-baselines3-zoo's tuned MuJoCo settings, `activation_fn=nn.ReLU`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Activation {
+    /// tanh.
+    #[default]
+    Tanh,
+    /// max(x, 0).
+    Relu,
+}
 
-impl TanhMlp {
-    fn new(sizes: &[usize], output_gain: f64, rng: &mut ChaCha8Rng) -> Result<TanhMlp> {
+impl Activation {
+    fn is_tanh(&self) -> bool {
+        *self == Activation::Tanh
+    }
+}
+
+/// Dense layers with the activation between them and nothing after the last; the parameters,
+/// their checkpoint names and updates are `DenseStack`'s.
+struct PpoMlp {
+    stack: DenseStack,
+    activation: Activation,
+}
+
+impl PpoMlp {
+    /// Orthogonal weights (gain sqrt 2, `output_gain` on the last layer) and zero biases, as
+    /// CleanRL; with `WeightInit::Uniform`, PyTorch's `nn.Linear` default (SB3's `ortho_init=False`).
+    fn new(
+        sizes: &[usize],
+        output_gain: f64,
+        init: WeightInit,
+        activation: Activation,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<PpoMlp> {
         let n = sizes.len() - 1;
         let mut layers = Vec::with_capacity(n);
         for (i, w) in sizes.windows(2).enumerate() {
-            let gain = if i + 1 == n { output_gain } else { std::f64::consts::SQRT_2 };
-            let weight = Tensor::from_vec(orthogonal(w[1], w[0], gain, rng), (w[1], w[0]), &Device::Cpu)?;
-            let bias = Tensor::zeros(w[1], DType::F32, &Device::Cpu)?;
+            let (fan_in, fan_out) = (w[0], w[1]);
+            let (weight, bias) = match init {
+                WeightInit::Orthogonal => {
+                    let gain = if i + 1 == n { output_gain } else { std::f64::consts::SQRT_2 };
+                    (orthogonal(fan_out, fan_in, gain, rng), vec![0.0f32; fan_out])
+                }
+                WeightInit::Uniform => {
+                    let bound = 1.0 / (fan_in as f32).sqrt();
+                    let weight = (0..fan_in * fan_out).map(|_| rng.random_range(-bound..bound)).collect();
+                    (weight, (0..fan_out).map(|_| rng.random_range(-bound..bound)).collect())
+                }
+            };
+            let weight = Tensor::from_vec(weight, (fan_out, fan_in), &Device::Cpu)?;
+            let bias = Tensor::from_vec(bias, fan_out, &Device::Cpu)?;
             layers.push((Var::from_tensor(&weight)?, Var::from_tensor(&bias)?));
         }
-        Ok(TanhMlp(DenseStack::new(layers)))
+        Ok(PpoMlp { stack: DenseStack::new(layers), activation })
     }
 
     fn forward(&self, x: &Tensor) -> Result<Tensor> {
-        let layers = self.0.layers();
+        let layers = self.stack.layers();
         let mut h = x.clone();
         for (i, (w, b)) in layers.iter().enumerate() {
-            h = dense(&h, w.as_tensor(), b.as_tensor(), Activation::Identity)?;
+            h = dense(&h, w.as_tensor(), b.as_tensor(), Activation_::Identity)?;
             if i + 1 < layers.len() {
-                h = h.tanh()?;
+                h = match self.activation {
+                    Activation::Tanh => h.tanh()?,
+                    Activation::Relu => h.relu()?,
+                };
             }
         }
         Ok(h)
@@ -138,9 +181,9 @@ pub struct PpoAgent {
     obs_dim: usize,
     act_dim: usize,
     settings: PpoConfig,
-    actor: TanhMlp,
+    actor: PpoMlp,
     log_std: Var,
-    critic: TanhMlp,
+    critic: PpoMlp,
     obs_stats: ObsStats,
     actor_opt: Adam,
     critic_opt: Adam,
@@ -286,13 +329,14 @@ impl PpoAgent {
     /// Builds the networks for `obs_dim`/`act_dim`, initialised from `rng`.
     pub fn new(cfg: &TrainConfig, obs_dim: usize, act_dim: usize, rng: &mut ChaCha8Rng) -> Result<Self> {
         let settings = cfg.ppo().clone();
-        let critic = TanhMlp::new(&layer_sizes(obs_dim, &cfg.hidden, 1), 1.0, rng)?;
-        let actor = TanhMlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), 0.01, rng)?;
-        let log_std = Var::from_tensor(&Tensor::zeros((1, act_dim), DType::F32, &Device::Cpu)?)?;
-        let mut actor_vars = actor.0.vars();
+        let (init, activation) = (cfg.weight_init, settings.activation);
+        let critic = PpoMlp::new(&layer_sizes(obs_dim, &cfg.hidden, 1), 1.0, init, activation, rng)?;
+        let actor = PpoMlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), 0.01, init, activation, rng)?;
+        let log_std = Var::from_tensor(&Tensor::full(settings.log_std_init as f32, (1, act_dim), &Device::Cpu)?)?;
+        let mut actor_vars = actor.stack.vars();
         actor_vars.push(log_std.clone());
         let mut actor_opt = Adam::new(actor_vars, cfg.actor_lr);
-        let mut critic_opt = Adam::new(critic.0.vars(), cfg.critic_lr);
+        let mut critic_opt = Adam::new(critic.stack.vars(), cfg.critic_lr);
         actor_opt.eps = settings.adam_eps;
         critic_opt.eps = settings.adam_eps;
         Ok(PpoAgent {
@@ -379,7 +423,7 @@ impl OnPolicyAgent for PpoAgent {
         // Global gradient-norm clipping over every trained parameter, as torch's
         // clip_grad_norm_ (the norm accumulates in f64 in a fixed order).
         let vars: Vec<Var> =
-            self.actor.0.vars().into_iter().chain([self.log_std.clone()]).chain(self.critic.0.vars()).collect();
+            self.actor.stack.vars().into_iter().chain([self.log_std.clone()]).chain(self.critic.stack.vars()).collect();
         let mut sum_sq = 0.0f64;
         for v in &vars {
             if let Some(g) = grads.get(v.as_tensor()) {
@@ -437,10 +481,10 @@ impl Agent for PpoAgent {
 
     fn parameters(&self) -> Vec<(String, Var)> {
         named_networks(
-            self.actor.0.named_vars("actor.mean"),
+            self.actor.stack.named_vars("actor.mean"),
             &self.log_std,
             &self.obs_stats,
-            self.critic.0.named_vars("critic"),
+            self.critic.stack.named_vars("critic"),
         )
     }
 
@@ -498,6 +542,16 @@ pub struct PpoConfig {
     pub target_kl: Option<f64>,
     /// Adam's epsilon.
     pub adam_eps: f64,
+    /// The hidden layers' nonlinearity, in the policy and the value network.
+    #[serde(default, skip_serializing_if = "Activation::is_tanh")]
+    pub activation: Activation,
+    /// The policy's log-std before training (SB3's `log_std_init`; CleanRL starts at 0).
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub log_std_init: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
 }
 
 impl PpoConfig {
@@ -519,6 +573,8 @@ impl PpoConfig {
         "clip_rewards",
         "target_kl",
         "adam_eps",
+        "activation",
+        "log_std_init",
     ];
 
     /// Transitions per rollout.
@@ -549,6 +605,11 @@ impl PpoConfig {
         if let Some(kl) = self.target_kl {
             positive("target_kl", kl)?;
         }
+        anyhow::ensure!(
+            self.log_std_init.is_finite() && self.log_std_init.abs() <= 20.0,
+            "log_std_init must be a number in [-20, 20], got {}",
+            self.log_std_init
+        );
         Ok(())
     }
 }
@@ -586,6 +647,8 @@ impl TrainConfig {
                 clip_rewards: 10.0,
                 target_kl: None,
                 adam_eps: 1e-5,
+                activation: Activation::Tanh,
+                log_std_init: 0.0,
             }),
             ..TrainConfig::shared_defaults(Algo::Ppo)
         }
@@ -601,6 +664,53 @@ mod tests {
         let mut cfg = TrainConfig::defaults(Algo::Ppo);
         cfg.hidden = vec![8, 8];
         PpoAgent::new(&cfg, 3, 2, &mut ChaCha8Rng::seed_from_u64(0)).unwrap()
+    }
+
+    #[test]
+    fn relu_networks_and_the_initial_log_std_are_as_configured() {
+        let mut cfg = TrainConfig::defaults(Algo::Ppo);
+        cfg.hidden = vec![8, 8];
+        cfg.weight_init = WeightInit::Uniform;
+        let ppo = cfg.ppo.as_mut().unwrap();
+        (ppo.activation, ppo.log_std_init) = (Activation::Relu, -2.0);
+        let a = PpoAgent::new(&cfg, 3, 2, &mut ChaCha8Rng::seed_from_u64(0)).unwrap();
+        assert_eq!(a.log_std.as_tensor().flatten_all().unwrap().to_vec1::<f32>().unwrap(), vec![-2.0, -2.0]);
+        // PyTorch's nn.Linear default: every weight and bias within 1/sqrt(fan_in).
+        for (w, b) in a.actor.stack.layers() {
+            let fan_in = w.as_tensor().dims()[1] as f32;
+            let bound = 1.0 / fan_in.sqrt();
+            let values = [w.as_tensor().flatten_all().unwrap(), b.as_tensor().clone()];
+            assert!(values.iter().all(|t| t.to_vec1::<f32>().unwrap().iter().all(|v| v.abs() <= bound)));
+        }
+        // The mean by hand: ReLU between the layers, nothing after the last.
+        let x = [0.3f32, -1.2, 2.0];
+        let mut h: Vec<f32> = x.to_vec();
+        let layers = a.actor.stack.layers();
+        for (i, (w, b)) in layers.iter().enumerate() {
+            let (w, b) = (w.as_tensor().to_vec2::<f32>().unwrap(), b.as_tensor().to_vec1::<f32>().unwrap());
+            h = w
+                .iter()
+                .zip(&b)
+                .map(|(row, bj)| row.iter().zip(&h).map(|(wi, hi)| wi * hi).sum::<f32>() + bj)
+                .collect();
+            if i + 1 < layers.len() {
+                h.iter_mut().for_each(|v| *v = v.max(0.0));
+            }
+        }
+        let got = a.actor.forward(&batch_tensor(&x, 1, 3).unwrap()).unwrap().flatten_all().unwrap().to_vec1::<f32>();
+        for (g, e) in got.unwrap().iter().zip(&h) {
+            assert!((g - e).abs() < 1e-6, "{g} vs {e}");
+        }
+        // Written to config.toml only when set, so a CleanRL-style run's file is as before.
+        let flat = TrainConfig::defaults(Algo::Ppo).to_flat_table();
+        assert!(!flat.contains_key("activation") && !flat.contains_key("log_std_init"));
+        let text = toml::to_string(&cfg).unwrap();
+        assert!(text.contains("activation = \"relu\"") && text.contains("log_std_init = -2.0"), "{text}");
+        let table: toml::Table = toml::from_str(&text).unwrap();
+        let back = TrainConfig::from_table(&table, crate::agents::config::OtherAlgorithmKeys::Refuse).unwrap();
+        assert_eq!(back, cfg);
+        cfg.ppo.as_mut().unwrap().log_std_init = f64::NAN;
+        assert!(cfg.ppo().validate().unwrap_err().to_string().contains("log_std_init"));
     }
 
     #[test]

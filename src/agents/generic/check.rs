@@ -70,7 +70,7 @@ pub struct Gap {
 /// Runs both paths through `updates` updates; `device` hosts the generic one.
 pub fn compare(algo: Algo, device: &Device, updates: usize) -> Gap {
     if algo == Algo::Ppo {
-        return compare_ppo(device, updates);
+        return compare_ppo(&config(algo), device, updates);
     }
     let cfg = config(algo);
     let mut fused = make_learner(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11)).unwrap();
@@ -136,8 +136,9 @@ pub(crate) fn ppo_batch(agent: &dyn OnPolicyAgent, rng: &mut ChaCha8Rng, n: usiz
 /// PPO's comparison: rollouts of 8 minibatches sampled by the fused agent as it learns (so the
 /// ratios move away from 1 and the clips engage, as in training), each learned from by both paths,
 /// with the learning rate annealed between rollouts.
-fn compare_ppo(device: &Device, updates: usize) -> Gap {
-    let cfg = config(Algo::Ppo);
+/// [`compare`] for PPO with the settings `cfg`.
+pub fn compare_ppo(cfg: &TrainConfig, device: &Device, updates: usize) -> Gap {
+    let cfg = cfg.clone();
     let mut fused = PpoAgent::new(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11)).unwrap();
     let mut generic = make_generic_on_policy(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11), device).unwrap();
     let mut data = ChaCha8Rng::seed_from_u64(3);

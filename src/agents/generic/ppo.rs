@@ -10,12 +10,14 @@ use super::layers::{clamp, constant, DeviceStack};
 use super::read_scalars;
 use crate::agents::config::{Algo, PpoConfig, TrainConfig};
 use crate::agents::ppo::{
-    named_networks, normalized_advantages, sample_actions, ObsStats, PolicyStep, PpoBatch, PpoLosses, HALF_LOG_2PI,
+    named_networks, normalized_advantages, sample_actions, Activation, ObsStats, PolicyStep, PpoBatch, PpoLosses,
+    HALF_LOG_2PI,
 };
 use crate::agents::{Agent, OnPolicyAgent, PpoAgent};
 use crate::numeric::optim::Optimizer;
 
-/// PPO's Gaussian policy (tanh MLP mean, state-independent log-std) and tanh MLP critic.
+/// PPO's Gaussian policy (MLP mean, state-independent log-std) and MLP critic, tanh or ReLU
+/// between their hidden layers.
 pub struct GenericPpo {
     device: Device,
     obs_dim: usize,
@@ -42,8 +44,14 @@ impl GenericPpo {
     ) -> anyhow::Result<Self> {
         let settings = cfg.ppo().clone();
         let params = PpoAgent::new(cfg, obs_dim, act_dim, rng)?.parameters();
-        let actor = DeviceStack::from_named(&params, "actor.mean", device)?.with_tanh();
-        let critic = DeviceStack::from_named(&params, "critic", device)?.with_tanh();
+        let stack = |prefix: &str| -> Result<DeviceStack> {
+            let s = DeviceStack::from_named(&params, prefix, device)?;
+            Ok(match settings.activation {
+                Activation::Tanh => s.with_tanh(),
+                Activation::Relu => s,
+            })
+        };
+        let (actor, critic) = (stack("actor.mean")?, stack("critic")?);
         let (_, log_std) = params.iter().find(|(n, _)| n == "actor.log_std").expect("PPO has a log-std");
         let log_std = Var::from_tensor(&log_std.as_tensor().to_device(device)?)?;
         let adam = |vars: Vec<Var>, lr: f64| -> Result<DeviceAdam> {

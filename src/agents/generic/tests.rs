@@ -52,6 +52,20 @@ fn ppo_generic_path_follows_the_fused_one() {
 }
 
 #[test]
+fn ppo_with_relu_and_a_log_std_init_follows_the_fused_one_too() {
+    let mut cfg = super::check::config(Algo::Ppo);
+    cfg.weight_init = crate::agents::config::WeightInit::Uniform;
+    let ppo = cfg.ppo.as_mut().unwrap();
+    (ppo.activation, ppo.log_std_init) = (crate::agents::ppo::Activation::Relu, -2.0);
+    // With a std of e^-2 a step of 1e-2 moves the mean by several stds, the ratios leave any
+    // range and the paths' last-bit differences decide which samples clip: 1e-3 still clips.
+    (cfg.actor_lr, cfg.critic_lr) = (1e-3, 1e-3);
+    let gap = super::check::compare_ppo(&cfg, &Device::Cpu, UPDATES);
+    let tol = tolerance(Algo::Ppo);
+    assert!(gap.loss <= tol.loss && gap.weight <= tol.weight, "{gap:?}");
+}
+
+#[test]
 fn each_builder_refuses_the_other_kind_of_learner() {
     let rng = &mut ChaCha8Rng::seed_from_u64(1);
     let err = make_generic_agent(&TrainConfig::defaults(Algo::Ppo), OBS, ACT, rng, &Device::Cpu).err().unwrap();
