@@ -34,6 +34,8 @@ runs=(
   # PPO with CleanRL's settings, 1M steps, with their policies; PPO and the branching DQN on Minitaur
   $r/{half-cheetah,walker2d}/ppo-seed{0,1,2}-1m $r/hopper/ppo-seed{0,1,2,3,4,5,6,7,8,9}-1m
   $r/minitaur/ppo-8envs-seed{0,1,2}-2m $r/minitaur/dqn-seed0-300k $r/inverted-pendulum/dqn-seed0
+  # PPO with rl-baselines3-zoo's tuned HalfCheetah settings (docs/training.md), 1M steps
+  $r/half-cheetah/ppo-zoo-seed{0,1,2}-1m
   # PPO trained for robustness (random shoves, rough ground, latency, sensor noise, slopes),
   # 2M steps, policies at 1M and 2M; evaluated in the nominal env like every row
   $r/minitaur/ppo-robust-seed{0,1,2}-2m
