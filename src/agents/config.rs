@@ -361,8 +361,13 @@ mod tests {
             let section = table[algo.name()].as_table().unwrap();
             // Every serialised key is declared (target_entropy is absent while None).
             assert!(section.keys().all(|k| section_keys(algo).contains(&k.as_str())), "{algo:?}");
-            // target_entropy (SAC) and target_kl (PPO) are absent while None.
-            let optional = usize::from(matches!(algo, Algo::Sac | Algo::Ppo | Algo::Crossq));
+            // target_entropy (SAC, CrossQ) and target_kl (PPO) are absent while None, and PPO's
+            // activation and log_std_init while at their defaults (tanh, 0).
+            let optional = match algo {
+                Algo::Sac | Algo::Crossq => 1,
+                Algo::Ppo => 3,
+                _ => 0,
+            };
             assert_eq!(section.len() + optional, section_keys(algo).len());
             for other in ["td3", "ddpg", "sac", "ppo", "dqn", "crossq"].into_iter().filter(|o| *o != algo.name()) {
                 assert!(!table.contains_key(other));
