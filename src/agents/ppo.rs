@@ -4,7 +4,9 @@
 //! initialisation (gain sqrt 2, 0.01 on the mean's output, 1 on the value's), the clipped
 //! surrogate objective, a clipped value loss, advantage normalisation per minibatch and global
 //! gradient-norm clipping. Observations are normalised by running statistics that belong to the
-//! policy (they are saved with it and used when it acts).
+//! policy (they are saved with it and used when it acts). ReLU networks, PyTorch's default
+//! initialisation and a starting log-std are settings, for rl-baselines3-zoo's tuned MuJoCo
+//! entries (DLR-RM/rl-baselines3-zoo, `hyperparams/ppo.yml`).
 //!
 //! The collection loop, GAE and reward normalisation live in `train::on_policy`; this file holds
 //! the networks and one minibatch update. Actions live in [-1, 1]^n like every agent's: a sample
@@ -21,7 +23,7 @@ use super::config::{positive, Algo, TrainConfig, WeightInit};
 use super::nets::{batch_tensor, orthogonal, DenseStack};
 use super::{layer_sizes, Agent, OnPolicyAgent};
 use crate::numeric::dense::dense;
-use crate::numeric::inplace::Activation as Activation_;
+use crate::numeric::inplace::Activation as DenseActivation;
 use crate::numeric::optim::{Adam, Optimizer};
 
 /// gymnasium's `NormalizeObservation` epsilon and the clip CleanRL applies after it.
@@ -88,7 +90,7 @@ impl PpoMlp {
         let layers = self.stack.layers();
         let mut h = x.clone();
         for (i, (w, b)) in layers.iter().enumerate() {
-            h = dense(&h, w.as_tensor(), b.as_tensor(), Activation_::Identity)?;
+            h = dense(&h, w.as_tensor(), b.as_tensor(), DenseActivation::Identity)?;
             if i + 1 < layers.len() {
                 h = match self.activation {
                     Activation::Tanh => h.tanh()?,
