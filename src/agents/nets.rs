@@ -121,6 +121,15 @@ pub(crate) struct Mlp {
     output: Output,
 }
 
+/// PyTorch's `nn.Linear` default: weights, then biases, from U(-1/sqrt(fan_in), 1/sqrt(fan_in)),
+/// drawn from `rng` in that order (row-major `fan_out x fan_in` weights).
+pub(crate) fn torch_default_layer(fan_in: usize, fan_out: usize, rng: &mut ChaCha8Rng) -> (Vec<f32>, Vec<f32>) {
+    let bound = 1.0 / (fan_in as f32).sqrt();
+    let weight = (0..fan_in * fan_out).map(|_| rng.random_range(-bound..bound)).collect();
+    let bias = (0..fan_out).map(|_| rng.random_range(-bound..bound)).collect();
+    (weight, bias)
+}
+
 impl Mlp {
     /// Weights and biases drawn by `init` from `rng`, layer by layer, so that a seed reproduces
     /// the network.
@@ -129,12 +138,7 @@ impl Mlp {
         for w in sizes.windows(2) {
             let (fan_in, fan_out) = (w[0], w[1]);
             let (weight, bias) = match init {
-                WeightInit::Uniform => {
-                    let bound = 1.0 / (fan_in as f32).sqrt();
-                    let weight: Vec<f32> = (0..fan_in * fan_out).map(|_| rng.random_range(-bound..bound)).collect();
-                    let bias: Vec<f32> = (0..fan_out).map(|_| rng.random_range(-bound..bound)).collect();
-                    (weight, bias)
-                }
+                WeightInit::Uniform => torch_default_layer(fan_in, fan_out, rng),
                 WeightInit::Orthogonal => {
                     (orthogonal(fan_out, fan_in, std::f64::consts::SQRT_2, rng), vec![0.0; fan_out])
                 }

@@ -20,7 +20,7 @@ use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
 
 use super::config::{positive, Algo, TrainConfig, WeightInit};
-use super::nets::{batch_tensor, orthogonal, DenseStack};
+use super::nets::{batch_tensor, orthogonal, torch_default_layer, DenseStack};
 use super::{layer_sizes, Agent, OnPolicyAgent};
 use crate::numeric::dense::dense;
 use crate::numeric::inplace::Activation as DenseActivation;
@@ -73,11 +73,7 @@ impl PpoMlp {
                     let gain = if i + 1 == n { output_gain } else { std::f64::consts::SQRT_2 };
                     (orthogonal(fan_out, fan_in, gain, rng), vec![0.0f32; fan_out])
                 }
-                WeightInit::Uniform => {
-                    let bound = 1.0 / (fan_in as f32).sqrt();
-                    let weight = (0..fan_in * fan_out).map(|_| rng.random_range(-bound..bound)).collect();
-                    (weight, (0..fan_out).map(|_| rng.random_range(-bound..bound)).collect())
-                }
+                WeightInit::Uniform => torch_default_layer(fan_in, fan_out, rng),
             };
             let weight = Tensor::from_vec(weight, (fan_out, fan_in), &Device::Cpu)?;
             let bias = Tensor::from_vec(bias, fan_out, &Device::Cpu)?;

@@ -293,9 +293,9 @@ fn commits_line(cells: &[Cell]) -> String {
     counts.sort_by(|a, b| b.1.cmp(&a.1).then(a.0.cmp(b.0)));
     let parts: Vec<String> = counts
         .iter()
-        .map(|(commit, n)| match commit.strip_prefix("<=") {
-            Some(c) => format!("{n} at {} or an earlier commit", crate::train::provenance::short_commit(c, 12)),
-            None => format!("{n} at {}", crate::train::provenance::short_commit(commit, 12)),
+        .map(|(commit, n)| {
+            let (hash, earlier) = commit.strip_prefix("<=").map_or((*commit, ""), |c| (c, " or an earlier commit"));
+            format!("{n} at {}{earlier}", crate::train::provenance::short_commit(hash, 12))
         })
         .collect();
     format!("cells played (the CSV's commit column): {}", parts.join(", "))

@@ -301,10 +301,6 @@ impl Suite {
 pub const CSV_HEADER: &str = "env,policy,kind,commanded,axis,level,episodes,survived,fell,unstable,survival,\
 survival_low,survival_high,return_mean,return_low,return_high,speed,cost_of_transport,outcomes,commit";
 
-/// The header of a suite written before cells carried their commit; still read.
-const LEGACY_CSV_HEADER: &str = "env,policy,kind,commanded,axis,level,episodes,survived,fell,unstable,survival,\
-survival_low,survival_high,return_mean,return_low,return_high,speed,cost_of_transport,outcomes";
-
 /// A cell's commit where the binary was built outside a git checkout.
 pub const UNKNOWN_COMMIT: &str = "unknown";
 
@@ -346,10 +342,14 @@ pub fn to_csv(cells: &[Cell]) -> String {
 /// before the commit column gets an empty commit, which [`super::output::read_dir`] fills in.
 pub fn from_csv(text: &str, source: &str) -> Result<Vec<Cell>> {
     let mut lines = text.lines();
-    let fields = match lines.next().map(str::trim) {
-        Some(CSV_HEADER) => 20,
-        Some(LEGACY_CSV_HEADER) => 19,
-        _ => bail!("{source}: not a robustness CSV (its header differs from `{CSV_HEADER}`)"),
+    // A suite written before cells carried their commit has the header without its last column.
+    let header = lines.next().map(str::trim);
+    let fields = if header == Some(CSV_HEADER) {
+        20
+    } else if header.is_some() && header == CSV_HEADER.strip_suffix(",commit") {
+        19
+    } else {
+        bail!("{source}: not a robustness CSV (its header differs from `{CSV_HEADER}`)");
     };
     lines
         .enumerate()
