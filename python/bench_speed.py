@@ -8,10 +8,17 @@ crossing), (4) Gymnasium's own v5 env (MuJoCo 4.0 from PyPI) through gymnasium.m
 vector env (8 copies, the class gymnasium.make_vec builds) on one thread and on two, and (6) the
 same vector env's steps looped in Rust on one thread and on two: the gain a second thread can
 give on this machine, which (5) approaches as the Python side of a step shrinks; (7) the vector
-env's former step, which batched one info dict per copy through Gymnasium's `_add_info`. (5), (6)
-and (7) take turns, the median of seven rounds each. The binding's
-overhead per step is (2) - (3). Zero actions; episodes reset when they end.
+env's former step, which batched one info dict per copy through Gymnasium's `_add_info`; (8) two
+processes at once, each looping its own vector env in Rust on one thread: the machine's own
+ceiling for a second core, with nothing shared and nothing to wait for, which (6) cannot exceed.
+(5) to (8) take turns, nine rounds: each rate is the median over the rounds, and each gain from a
+second thread or process is the median of the rounds' own ratios (a round's runs follow each other
+within seconds, so a shared machine's slow stretches cancel out of them). The binding's overhead
+per step is (2) - (3). Zero actions; episodes reset when they end.
+
+    python python/bench_speed.py [STEPS [ENV ...]]    (ENV: locobench names; default all four)
 """
+import multiprocessing
 import os
 import platform
 import subprocess
@@ -90,9 +97,10 @@ def vec_loop(name, threads, dicts=False):
     return run
 
 
-def interleaved(loops, n, rounds=7):
-    """Steps per second of each loop, the median of `rounds` rounds of `n` steps, the loops taking
-    turns within a round so that a slow stretch of a shared machine falls on all of them alike."""
+def interleaved(loops, n, rounds=9):
+    """Steps per second of each loop in each of `rounds` rounds of `n` steps (a list per loop), the
+    loops taking turns within a round so that a slow stretch of a shared machine falls on all of
+    them alike."""
     for loop in loops:
         loop(n // 10)
     rates = [[] for _ in loops]
@@ -101,7 +109,7 @@ def interleaved(loops, n, rounds=7):
             start = time.perf_counter()
             loop(n)
             rates[i].append(n / (time.perf_counter() - start))
-    return [float(np.median(r)) for r in rates]
+    return [np.array(r) for r in rates]
 
 
 def vec_rust_loop(name, threads):
@@ -109,6 +117,42 @@ def vec_rust_loop(name, threads):
     actions = [[0.0] * envs.single_action_space.shape[0]] * VEC_COPIES
     envs.reset(seed=0)
     return lambda n: envs._core.step_repeat(actions, n // VEC_COPIES)
+
+
+def _process_worker(name, conn):
+    """Loops its own one-thread vector env in Rust for the number of steps it receives, until None."""
+    envs = locobench.LocobenchVectorEnv(name, VEC_COPIES, threads=1)
+    actions = [[0.0] * envs.single_action_space.shape[0]] * VEC_COPIES
+    envs.reset(seed=0)
+    while (n := conn.recv()) is not None:
+        envs._core.step_repeat(actions, n // VEC_COPIES)
+        conn.send(None)
+
+
+class TwoProcesses:
+    """Two processes (spawned: no threads inherited), each with the 8-copy vector env on one thread;
+    a call with `n` has each loop n / 2 steps at the same time and returns when both are done."""
+
+    def __init__(self, name):
+        ctx = multiprocessing.get_context("spawn")
+        self.conns, self.procs = [], []
+        for _ in range(2):
+            ours, theirs = ctx.Pipe()
+            proc = ctx.Process(target=_process_worker, args=(name, theirs), daemon=True)
+            proc.start()
+            self.conns.append(ours)
+            self.procs.append(proc)
+
+    def __call__(self, n):
+        for conn in self.conns:
+            conn.send(n // 2)
+        for conn in self.conns:
+            conn.recv()
+
+    def close(self):
+        for conn, proc in zip(self.conns, self.procs):
+            conn.send(None)
+            proc.join()
 
 
 def cpu():
@@ -120,6 +164,10 @@ def cpu():
 
 def main():
     steps = int(sys.argv[1]) if len(sys.argv) > 1 else 20000
+    names = sys.argv[2:] or [name for name, _ in ENVS]
+    unknown = [n for n in names if n not in dict(ENVS)]
+    if unknown:
+        sys.exit(f"python/bench_speed.py: unknown env {unknown[0]!r} (one of {', '.join(n for n, _ in ENVS)})")
     if locobench._core.BUILD_PROFILE != "release":
         sys.exit(f"python/bench_speed.py: locobench's extension ({locobench._core.__file__}) is a "
                  f"{locobench._core.BUILD_PROFILE} build, whose Rust code is unoptimised (python/test.sh installs one); "
@@ -132,12 +180,16 @@ def main():
     note = os.environ.get("LOCOBENCH_BENCH_NOTE", "")
     print(f"# machine: {cpu()} ({simd}), {os.cpu_count()} cores; commit {commit}; release build; "
           f"python {platform.python_version()}, "
-          f"gymnasium {gym.__version__}; command: python python/bench_speed.py {steps}" + (f"; {note}" if note else ""))
+          f"gymnasium {gym.__version__}; command: python python/bench_speed.py {' '.join(sys.argv[1:]) or steps}"
+          + (f"; {note}" if note else ""))
     print("env,locobench_gym_steps_per_s,locobench_raw_steps_per_s,locobench_rust_steps_per_s,binding_overhead_us,"
           "gymnasium_steps_per_s,vec8_1_thread_steps_per_s,vec8_2_threads_steps_per_s,"
           "vec8_rust_1_thread_steps_per_s,vec8_rust_2_threads_steps_per_s,"
-          "vec8_dicts_1_thread_steps_per_s,vec8_dicts_2_threads_steps_per_s")
+          "vec8_dicts_1_thread_steps_per_s,vec8_dicts_2_threads_steps_per_s,vec8_rust_2_processes_steps_per_s,"
+          "vec8_2_threads_gain,vec8_rust_2_threads_gain,vec8_dicts_2_threads_gain,vec8_rust_2_processes_gain")
     for name, gym_id in ENVS:
+        if name not in names:
+            continue
         ours = gym.make(locobench.ENV_IDS[name])
         g = rate(gym_loop(ours), steps)
         raw = rate(raw_loop(ours), steps)
@@ -146,9 +198,14 @@ def main():
         theirs = rate(gym_loop(gym.make(gym_id)), steps) if gym_id else float("nan")
         loops = [vec_loop(name, t) for t in (1, 2)] + [vec_rust_loop(name, t) for t in (1, 2)]
         loops += [vec_loop(name, t, dicts=True) for t in (1, 2)]
-        vec1, vec2, rust1, rust2, dicts1, dicts2 = interleaved(loops, steps)
-        print(f"{name},{g:.0f},{raw:.0f},{rust:.0f},{overhead:.2f},{theirs:.0f},{vec1:.0f},{vec2:.0f},"
-              f"{rust1:.0f},{rust2:.0f},{dicts1:.0f},{dicts2:.0f}")
+        processes = TwoProcesses(name)
+        runs = interleaved(loops + [processes], steps)
+        processes.close()
+        vec1, vec2, rust1, rust2, dicts1, dicts2, procs2 = runs
+        rates = ",".join(f"{np.median(r):.0f}" for r in runs)
+        gains = ",".join(f"{np.median(two / one):.3f}" for two, one in
+                         ((vec2, vec1), (rust2, rust1), (dicts2, dicts1), (procs2, rust1)))
+        print(f"{name},{g:.0f},{raw:.0f},{rust:.0f},{overhead:.2f},{theirs:.0f},{rates},{gains}", flush=True)
 
 
 if __name__ == "__main__":

@@ -78,27 +78,27 @@ class LocobenchVectorEnv(VectorEnv):
 
     def step(self, actions):
         a = _float64_actions(actions, self.action_space.shape, "actions", " (num_envs, action dim)")
-        s = self._core.step_arrays(a.tobytes())
-        if s is None:
-            return self._step_with_dicts(a)
-        n = self.num_envs
-        s["ended"] = np.frombuffer(s["ended"], dtype=bool)
-        s["reward_terms"] = np.frombuffer(s["reward_terms"], dtype=np.float64).reshape(n, -1)
-        s["metrics"] = np.frombuffer(s["metrics"], dtype=np.float64).reshape(n, -1)
-        s["clipped_actions"] = np.frombuffer(s["clipped_actions"], dtype=np.int64)
-        s["unstable"] = np.frombuffer(s["unstable"], dtype=bool)
-        return (
-            np.frombuffer(s["observations"], dtype=np.float64).reshape(n, -1),
-            np.frombuffer(s["rewards"], dtype=np.float64),
-            np.frombuffer(s["terminated"], dtype=bool),
-            np.frombuffer(s["truncated"], dtype=bool),
-            _vector_infos(s),
-        )
+        obs, rewards, terminated, truncated, infos = self._core.step_gym(a)
+        if isinstance(infos, tuple):  # the copies' infos differ in their names: batched here
+            infos = self._batch(*infos)
+        return obs, rewards, terminated, truncated, infos
 
     def _step_with_dicts(self, a):
-        """The step for copies whose infos differ in their keys: one dict per copy, batched by
-        Gymnasium's ``_add_info``."""
+        """The step through one info dict per copy, batched by Gymnasium's ``_add_info``: what
+        ``step`` builds in Rust, kept as the reference the tests compare it with and as the former
+        step ``python/bench_speed.py`` measures."""
         obs, rewards, terminated, truncated, final_obs, step_infos = self._core.step(a.tolist())
+        return (
+            np.asarray(obs, dtype=np.float64),
+            np.asarray(rewards, dtype=np.float64),
+            np.asarray(terminated, dtype=bool),
+            np.asarray(truncated, dtype=bool),
+            self._batch(final_obs, step_infos),
+        )
+
+    def _batch(self, final_obs, step_infos):
+        """Gymnasium's ``_add_info`` batching of one info dict per copy, a copy whose episode ended
+        with its last observation and info under ``final_obs`` and ``final_info``."""
         infos = {}
         for i, info in enumerate(step_infos):
             if final_obs[i] is None:
@@ -106,61 +106,8 @@ class LocobenchVectorEnv(VectorEnv):
             else:
                 last = {"final_obs": np.asarray(final_obs[i], dtype=np.float64), "final_info": info}
                 infos = self._add_info(infos, last, i)
-        return (
-            np.asarray(obs, dtype=np.float64),
-            np.asarray(rewards, dtype=np.float64),
-            np.asarray(terminated, dtype=bool),
-            np.asarray(truncated, dtype=bool),
-            infos,
-        )
+        return infos
 
     def render(self):
         return None
 
-
-def _vector_infos(s):
-    """The infos ``_add_info`` would build from each copy's info dict (same keys, masks, values
-    and dtypes), made from the step's columns: a copy whose episode ended has its last info under
-    ``final_info`` and its last observation under ``final_obs``; the others' infos are at the top."""
-    ended = s["ended"]
-    infos = {}
-    if not ended.all():
-        _masked_info(infos, s, ~ended)
-    if ended.any():
-        final_obs = np.full(len(ended), None, dtype=object)
-        for i in np.flatnonzero(ended):
-            final_obs[i] = np.asarray(s["final_observations"][i], dtype=np.float64)
-        infos["final_obs"] = final_obs
-        infos["_final_obs"] = ended.copy()
-        infos["final_info"] = _masked_info({}, s, ended)
-        infos["_final_info"] = ended.copy()
-    return infos
-
-
-def _masked_info(out, s, mask):
-    every = mask.all()
-
-    def column(values):
-        return values.copy() if every else np.where(mask, values, np.zeros((), values.dtype))
-
-    for key, names, table in (("reward_terms", s["term_names"], s["reward_terms"]), ("metrics", s["metric_names"], s["metrics"])):
-        group = {}
-        for j, name in enumerate(names):
-            group[name] = column(table[:, j])
-            group["_" + name] = mask.copy()
-        out[key] = group
-        out["_" + key] = mask.copy()
-    out["clipped_actions"] = column(s["clipped_actions"])
-    out["_clipped_actions"] = mask.copy()
-    out["unstable"] = column(s["unstable"])
-    out["_unstable"] = mask.copy()
-    warned = [i for i, w in enumerate(s["warnings"]) if w and mask[i]]
-    if warned:
-        warnings = np.full(len(mask), None, dtype=object)
-        has = np.zeros(len(mask), dtype=bool)
-        for i in warned:
-            warnings[i] = s["warnings"][i]
-            has[i] = True
-        out["warnings"] = warnings
-        out["_warnings"] = has
-    return out

@@ -4,14 +4,17 @@
 use std::path::PathBuf;
 use std::sync::Mutex;
 
+mod vector_step;
+
 use locobench::controller::baseline::{baseline_controller_for, baseline_env, parse_gait, RAMP_TIME};
 use locobench::controller::command::{Command, SpeedProfile};
 use locobench::envs::{env_names, make, reward_weight_option, EnvConfig, VecEnv};
 use locobench::policy::Policy;
 use locobench::runtime::Runtime;
+use numpy::PyReadonlyArray2;
 use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
-use pyo3::types::{PyByteArray, PyDict};
+use pyo3::types::PyDict;
 
 fn value_error(e: impl std::fmt::Display) -> PyErr {
     PyValueError::new_err(e.to_string())
@@ -227,91 +230,25 @@ impl PyVecEnv {
         .map_err(value_error)
     }
 
-    /// `step` with flat buffers in (`actions`: `[copies, action dim]` f64, native-endian) and out,
-    /// and the infos as columns over the copies; None where the copies' infos do not share their
-    /// term and metric names (the caller then uses `step`). What the Python vector env steps with:
-    /// it builds few Python objects, so little of a step holds the GIL.
-    fn step_arrays<'py>(&self, py: Python<'py>, actions: &[u8]) -> PyResult<Option<VecStepArrays<'py>>> {
-        let values: Vec<f64> =
-            actions.chunks_exact(8).map(|b| f64::from_ne_bytes(b.try_into().expect("8 bytes"))).collect();
+    /// `step` as Gymnasium's vector API returns it (`vector_step`): `actions` a float64
+    /// `[copies, action dim]` array in, NumPy arrays and batched infos out. What the Python vector
+    /// env steps with: little of a step holds the GIL.
+    fn step_gym<'py>(
+        &self,
+        py: Python<'py>,
+        actions: PyReadonlyArray2<'py, f64>,
+    ) -> PyResult<vector_step::GymStep<'py>> {
+        let rows: Vec<Vec<f64>> = actions.as_array().rows().into_iter().map(|r| r.to_vec()).collect();
         let envs = &self.envs;
-        let s = py
+        let (s, dim) = py
             .detach(|| {
                 let mut envs = envs.lock().unwrap_or_else(|p| p.into_inner());
-                let width = envs.spec().action_space.dim();
-                let expected = envs.len() * width;
-                if actions.len() != 8 * expected {
-                    return Err(locobench::envs::EnvError::ActionLength { expected, got: actions.len() / 8 });
-                }
-                let rows: Vec<Vec<f64>> = values.chunks(width).map(<[f64]>::to_vec).collect();
-                envs.step(&rows)
+                let dim = envs.spec().observation_space.dim();
+                envs.step(&rows).map(|s| (s, dim))
             })
             .map_err(value_error)?;
-        let first = &s.infos[0];
-        let names = |pairs: &[(&'static str, f64)]| pairs.iter().map(|(k, _)| *k).collect::<Vec<_>>();
-        let (term_names, metric_names) = (names(&first.reward_terms), names(&first.metrics));
-        if s.infos.iter().any(|i| names(&i.reward_terms) != term_names || names(&i.metrics) != metric_names) {
-            return Ok(None);
-        }
-        let column = |pick: fn(&locobench::envs::Info) -> &[(&'static str, f64)]| {
-            f64_bytes(py, s.infos.iter().flat_map(|i| pick(i).iter().map(|(_, v)| *v)))
-        };
-        Ok(Some(VecStepArrays {
-            observations: f64_bytes(py, s.observations.iter().flatten().copied()),
-            rewards: f64_bytes(py, s.rewards.iter().copied()),
-            terminated: bool_bytes(py, s.terminated.iter().copied()),
-            truncated: bool_bytes(py, s.truncated.iter().copied()),
-            ended: bool_bytes(py, s.final_observations.iter().map(Option::is_some)),
-            reward_terms: column(|i| &i.reward_terms),
-            term_names,
-            metrics: column(|i| &i.metrics),
-            metric_names,
-            clipped_actions: PyByteArray::new(
-                py,
-                &s.infos.iter().flat_map(|i| (i.clipped_actions as i64).to_ne_bytes()).collect::<Vec<u8>>(),
-            ),
-            unstable: bool_bytes(py, s.infos.iter().map(|i| i.unstable)),
-            warnings: s.infos.iter().map(|i| i.warnings.clone()).collect(),
-            final_observations: s.final_observations,
-        }))
+        vector_step::gym_step(py, s, dim, |info| info_dict(py, info, false))
     }
-}
-
-/// A vector step as flat native-endian buffers (`PyVecEnv::step_arrays`), which the Python side
-/// views as NumPy arrays without a copy; the infos as columns over the copies.
-#[derive(IntoPyObject)]
-struct VecStepArrays<'py> {
-    /// f64, `[copies, observation dim]`.
-    observations: Bound<'py, PyByteArray>,
-    /// f64 per copy.
-    rewards: Bound<'py, PyByteArray>,
-    /// One byte (0 or 1) per copy.
-    terminated: Bound<'py, PyByteArray>,
-    truncated: Bound<'py, PyByteArray>,
-    /// The copies whose episode ended this step.
-    ended: Bound<'py, PyByteArray>,
-    /// The ended episodes' last observations (None for the other copies).
-    final_observations: Vec<Option<Vec<f64>>>,
-    /// f64, `[copies, terms]`, in `term_names` order.
-    reward_terms: Bound<'py, PyByteArray>,
-    term_names: Vec<&'static str>,
-    /// f64, `[copies, metrics]`, in `metric_names` order.
-    metrics: Bound<'py, PyByteArray>,
-    metric_names: Vec<&'static str>,
-    /// i64 per copy.
-    clipped_actions: Bound<'py, PyByteArray>,
-    unstable: Bound<'py, PyByteArray>,
-    /// Each copy's MuJoCo warnings (empty where none).
-    warnings: Vec<Vec<String>>,
-}
-
-/// `values` as native-endian bytes in a Python bytearray.
-fn f64_bytes<'py>(py: Python<'py>, values: impl Iterator<Item = f64>) -> Bound<'py, PyByteArray> {
-    PyByteArray::new(py, &values.flat_map(f64::to_ne_bytes).collect::<Vec<u8>>())
-}
-
-fn bool_bytes<'py>(py: Python<'py>, values: impl Iterator<Item = bool>) -> Bound<'py, PyByteArray> {
-    PyByteArray::new(py, &values.map(u8::from).collect::<Vec<u8>>())
 }
 
 /// The reset seed of episode `episode` of copy `copy` after a vector reset with `seed`.

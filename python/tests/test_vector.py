@@ -86,10 +86,11 @@ def assert_same_infos(ours, theirs, path="infos"):
                     assert x == y, f"{path}[{key!r}]: {a} vs {b}"
 
 
-def test_infos_from_columns_equal_gymnasiums_batching_of_each_copys_dict():
-    """The step's infos, built from columns, are what Gymnasium's ``_add_info`` makes of the copies'
+def test_infos_batched_in_rust_equal_gymnasiums_batching_of_each_copys_dict():
+    """The step's infos, batched in Rust, are what Gymnasium's ``_add_info`` makes of the copies'
     info dicts (same keys, masks, values and dtypes), with episodes ending in some copies (a
-    7-step time limit, staggered by a falling Hopper) and not in others."""
+    7-step time limit, staggered by a falling Hopper) and not in others; actions in any memory
+    layout (a transposed view here) step alike."""
     fast = locobench.LocobenchVectorEnv("hopper", num_envs=3, threads=2, max_episode_steps=7)
     slow = locobench.LocobenchVectorEnv("hopper", num_envs=3, threads=2, max_episode_steps=7)
     fast.reset(seed=4)
@@ -98,7 +99,7 @@ def test_infos_from_columns_equal_gymnasiums_batching_of_each_copys_dict():
     ended_steps = 0
     for _ in range(30):
         a = rng.uniform(-1, 1, size=(3, 3))
-        out = fast.step(a)
+        out = fast.step(np.ascontiguousarray(a.T).T)
         ref = slow._step_with_dicts(a)
         for x, y in zip(out[:4], ref[:4]):
             np.testing.assert_array_equal(x, y)
@@ -164,3 +165,6 @@ def test_the_speed_benchmark_refuses_a_dev_build():
     out = subprocess.run([sys.executable, str(root / "python/bench_speed.py"), "10"], capture_output=True, text=True)
     assert out.returncode != 0 and out.stdout == ""
     assert "is a dev build" in out.stderr and "bash python/install.sh" in out.stderr, out.stderr
+    out = subprocess.run([sys.executable, str(root / "python/bench_speed.py"), "10", "hopper", "walker"],
+                         capture_output=True, text=True)
+    assert out.returncode != 0 and out.stdout == "" and "unknown env 'walker'" in out.stderr, out.stderr

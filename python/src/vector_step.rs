@@ -1,0 +1,113 @@
+//! A vector step as Gymnasium's vector API returns it, built in Rust: NumPy arrays for the
+//! observations, rewards and flags, and the infos batched the way Gymnasium's
+//! `VectorEnv._add_info` batches the copies' info dicts (gymnasium/vector/vector_env.py): every
+//! leaf becomes an array over the copies with a boolean mask `_key` beside it, a copy whose
+//! episode ended has its last info under `final_info` and its last observation under `final_obs`.
+//! Building them here instead of in Python takes most of the Python side out of a step, which is
+//! the part a second thread cannot share (`python/bench_speed.py` measures both).
+use locobench::envs::{Info, VecStep};
+use numpy::{PyArray1, PyArrayMethods};
+use pyo3::prelude::*;
+use pyo3::types::{PyDict, PyList};
+
+/// What the vector step hands to Python: `(observations, rewards, terminated, truncated, infos)`,
+/// `infos` batched; or, where the copies' infos differ in their term or metric names (so columns
+/// do not line up), `infos` as `(final observations, one info dict per copy)` for Python's
+/// `_add_info` to batch.
+pub(crate) type GymStep<'py> = (
+    Bound<'py, PyAny>,
+    Bound<'py, PyArray1<f64>>,
+    Bound<'py, PyArray1<bool>>,
+    Bound<'py, PyArray1<bool>>,
+    Bound<'py, PyAny>,
+);
+
+pub(crate) fn gym_step<'py>(
+    py: Python<'py>,
+    s: VecStep,
+    observation_dim: usize,
+    info_dict: impl Fn(&Info) -> PyResult<Bound<'py, PyDict>>,
+) -> PyResult<GymStep<'py>> {
+    let n = s.rewards.len();
+    let observations = PyArray1::from_vec(py, s.observations.concat()).reshape([n, observation_dim])?.into_any();
+    let rewards = PyArray1::from_slice(py, &s.rewards);
+    let terminated = PyArray1::from_slice(py, &s.terminated);
+    let truncated = PyArray1::from_slice(py, &s.truncated);
+    let infos = if columns_line_up(&s.infos) {
+        batched_infos(py, &s)?.into_any()
+    } else {
+        let finals =
+            PyList::new(py, s.final_observations.iter().map(|o| o.as_ref().map(|o| PyArray1::from_slice(py, o))))?;
+        let dicts = PyList::new(py, s.infos.iter().map(info_dict).collect::<PyResult<Vec<_>>>()?)?;
+        (finals, dicts).into_pyobject(py)?.into_any()
+    };
+    Ok((observations, rewards, terminated, truncated, infos))
+}
+
+/// One of an info's lists of named values.
+type Named = fn(&Info) -> &[(&'static str, f64)];
+
+fn columns_line_up(infos: &[Info]) -> bool {
+    let names = |pairs: &[(&'static str, f64)]| pairs.iter().map(|(k, _)| *k).collect::<Vec<_>>();
+    let (terms, metrics) = (names(&infos[0].reward_terms), names(&infos[0].metrics));
+    infos.iter().all(|i| names(&i.reward_terms) == terms && names(&i.metrics) == metrics)
+}
+
+fn batched_infos<'py>(py: Python<'py>, s: &VecStep) -> PyResult<Bound<'py, PyDict>> {
+    let ended: Vec<bool> = s.final_observations.iter().map(Option::is_some).collect();
+    let infos = PyDict::new(py);
+    if !ended.iter().all(|&e| e) {
+        let running: Vec<bool> = ended.iter().map(|&e| !e).collect();
+        masked_info(py, &infos, &s.infos, &running)?;
+    }
+    if ended.iter().any(|&e| e) {
+        let finals: Vec<Py<PyAny>> = s
+            .final_observations
+            .iter()
+            .map(|o| o.as_ref().map_or_else(|| py.None(), |o| PyArray1::from_slice(py, o).into_any().unbind()))
+            .collect();
+        infos.set_item("final_obs", PyArray1::from_vec(py, finals))?;
+        infos.set_item("_final_obs", PyArray1::from_slice(py, &ended))?;
+        let final_info = PyDict::new(py);
+        masked_info(py, &final_info, &s.infos, &ended)?;
+        infos.set_item("final_info", final_info)?;
+        infos.set_item("_final_info", PyArray1::from_slice(py, &ended))?;
+    }
+    Ok(infos)
+}
+
+/// The batched infos of the copies in `mask` (the others' entries zero and masked out), into `out`.
+fn masked_info<'py>(py: Python<'py>, out: &Bound<'py, PyDict>, infos: &[Info], mask: &[bool]) -> PyResult<()> {
+    let mask_array = || PyArray1::from_slice(py, mask);
+    let column = |value: &dyn Fn(&Info) -> f64| -> Vec<f64> {
+        infos.iter().zip(mask).map(|(info, &m)| if m { value(info) } else { 0.0 }).collect()
+    };
+    let groups: [(&str, Named); 2] = [("reward_terms", |i| &i.reward_terms), ("metrics", |i| &i.metrics)];
+    for (key, pick) in groups {
+        let group = PyDict::new(py);
+        for (j, (name, _)) in pick(&infos[0]).iter().enumerate() {
+            group.set_item(*name, PyArray1::from_vec(py, column(&|i| pick(i)[j].1)))?;
+            group.set_item(format!("_{name}"), mask_array())?;
+        }
+        out.set_item(key, group)?;
+        out.set_item(format!("_{key}"), mask_array())?;
+    }
+    let clipped: Vec<i64> =
+        infos.iter().zip(mask).map(|(i, &m)| if m { i.clipped_actions as i64 } else { 0 }).collect();
+    out.set_item("clipped_actions", PyArray1::from_vec(py, clipped))?;
+    out.set_item("_clipped_actions", mask_array())?;
+    let unstable: Vec<bool> = infos.iter().zip(mask).map(|(i, &m)| m && i.unstable).collect();
+    out.set_item("unstable", PyArray1::from_vec(py, unstable))?;
+    out.set_item("_unstable", mask_array())?;
+    let warned: Vec<bool> = infos.iter().zip(mask).map(|(i, &m)| m && !i.warnings.is_empty()).collect();
+    if warned.contains(&true) {
+        let warnings = infos
+            .iter()
+            .zip(&warned)
+            .map(|(i, &w)| if w { Ok(PyList::new(py, &i.warnings)?.into_any().unbind()) } else { Ok(py.None()) })
+            .collect::<PyResult<Vec<Py<PyAny>>>>()?;
+        out.set_item("warnings", PyArray1::from_vec(py, warnings))?;
+        out.set_item("_warnings", PyArray1::from_vec(py, warned))?;
+    }
+    Ok(())
+}
