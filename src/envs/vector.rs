@@ -8,15 +8,17 @@
 //!
 //! Seeds: episode `k` of copy `i` after `reset(seed)` is reset with [`episode_seed`]`(seed, i, k)`
 //! (or the trainer's own scheme, [`VecEnv::with_episode_seeds`]).
-//! Each copy is a function of its own seeds and actions alone, and the copies are split over
-//! threads in contiguous blocks, so the numbers are the same bit for bit whatever the thread
-//! count (tested in `tests/vector_env.rs`).
+//! Each copy is a function of its own seeds and actions alone, whichever thread steps it, so the
+//! numbers are the same bit for bit whatever the thread count (tested in `tests/vector_env.rs`).
 //!
 //! Snapshots: every copy keeps the actions of its episode in progress, so [`VecEnv::snapshot`] is
 //! a few numbers per copy plus those actions, and [`VecEnv::restore`] rebuilds every copy's exact
 //! state by resetting it with the same seed and replaying them. A training checkpoint taken in the
 //! middle of episodes thus resumes bit for bit, for every environment, without reading MuJoCo's
 //! state or an environment's internals.
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+
 use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
@@ -251,9 +253,9 @@ impl VecEnv {
         self.copies[i].env.as_ref()
     }
 
-    /// `f` on every copy, results in copy order. Copies are split into contiguous blocks: two,
-    /// when the calling thread has a helper thread (`numeric::second_core`) or `threads` is 2
-    /// (this environment's own helper then takes the second), else `threads` blocks on scoped
+    /// `f` on every copy, results in copy order. With two threads (the calling thread's helper,
+    /// `numeric::second_core`, or this environment's own helper when `threads` is 2) both take
+    /// copies as they come; with more, copies are split into `threads` contiguous blocks on scoped
     /// threads. Every thread computes with the caller's floating-point mode (flush-to-zero), so a
     /// copy computes the same bits on any thread.
     fn run<R: Send>(&mut self, f: impl Fn(usize, &mut Copy) -> R + Sync) -> Vec<R> {
@@ -264,23 +266,29 @@ impl VecEnv {
         }
         let training_helper = second_core::has_helper();
         if training_helper || threads == 2 {
-            // A thread that already runs takes the second half, instead of one spawned per step:
-            // the training thread's helper (`runtime::Runtime` with two threads), or ours.
-            let (first, second) = self.copies.split_at_mut(n.div_ceil(2));
-            let offset = first.len();
-            let (mut a, mut b) = (Vec::new(), Vec::new());
-            let f = &f;
-            let halves = (
-                || a = first.iter_mut().enumerate().map(|(i, c)| f(i, c)).collect(),
-                || b = second.iter_mut().enumerate().map(|(j, c)| f(offset + j, c)).collect(),
-            );
+            // A thread that already runs takes part, instead of one spawned per step: the training
+            // thread's helper (`runtime::Runtime` with two threads), or ours. Both take copies one
+            // at a time from a shared counter, so a thread held up (a copy's reset, another process
+            // on its core) steps fewer of them instead of keeping the other waiting.
+            let slots: Vec<Mutex<(&mut Copy, Option<R>)>> =
+                self.copies.iter_mut().map(|c| Mutex::new((c, None))).collect();
+            let next = AtomicUsize::new(0);
+            let take_copies = || loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(slot) = slots.get(i) else { break };
+                let mut slot = slot.lock().unwrap_or_else(|p| p.into_inner());
+                let result = f(i, slot.0);
+                slot.1 = Some(result);
+            };
             if training_helper {
-                second_core::join(halves.0, halves.1);
+                second_core::join(take_copies, take_copies);
             } else {
-                self.helper.get_or_insert_with(OwnedHelper::start).join(halves.0, halves.1);
+                self.helper.get_or_insert_with(OwnedHelper::start).join(take_copies, take_copies);
             }
-            a.extend(b);
-            return a;
+            return slots
+                .into_iter()
+                .map(|m| m.into_inner().unwrap_or_else(|p| p.into_inner()).1.expect("every copy was stepped"))
+                .collect();
         }
         let block = n.div_ceil(threads);
         let mode = float_mode();
