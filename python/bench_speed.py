@@ -121,11 +121,9 @@ def vec_rust_loop(name, threads):
 
 def _process_worker(name, conn):
     """Loops its own one-thread vector env in Rust for the number of steps it receives, until None."""
-    envs = locobench.LocobenchVectorEnv(name, VEC_COPIES, threads=1)
-    actions = [[0.0] * envs.single_action_space.shape[0]] * VEC_COPIES
-    envs.reset(seed=0)
+    run = vec_rust_loop(name, 1)
     while (n := conn.recv()) is not None:
-        envs._core.step_repeat(actions, n // VEC_COPIES)
+        run(n)
         conn.send(None)
 
 

@@ -76,30 +76,29 @@ fn batched_infos<'py>(py: Python<'py>, s: &VecStep) -> PyResult<Bound<'py, PyDic
     Ok(infos)
 }
 
+/// `value` of each copy in `mask`, the type's zero for the others (as `_add_info` leaves them).
+fn masked<T: Default>(infos: &[Info], mask: &[bool], value: impl Fn(&Info) -> T) -> Vec<T> {
+    infos.iter().zip(mask).map(|(info, &m)| if m { value(info) } else { T::default() }).collect()
+}
+
 /// The batched infos of the copies in `mask` (the others' entries zero and masked out), into `out`.
 fn masked_info<'py>(py: Python<'py>, out: &Bound<'py, PyDict>, infos: &[Info], mask: &[bool]) -> PyResult<()> {
     let mask_array = || PyArray1::from_slice(py, mask);
-    let column = |value: &dyn Fn(&Info) -> f64| -> Vec<f64> {
-        infos.iter().zip(mask).map(|(info, &m)| if m { value(info) } else { 0.0 }).collect()
-    };
     let groups: [(&str, Named); 2] = [("reward_terms", |i| &i.reward_terms), ("metrics", |i| &i.metrics)];
     for (key, pick) in groups {
         let group = PyDict::new(py);
         for (j, (name, _)) in pick(&infos[0]).iter().enumerate() {
-            group.set_item(*name, PyArray1::from_vec(py, column(&|i| pick(i)[j].1)))?;
+            group.set_item(*name, PyArray1::from_vec(py, masked(infos, mask, |i| pick(i)[j].1)))?;
             group.set_item(format!("_{name}"), mask_array())?;
         }
         out.set_item(key, group)?;
         out.set_item(format!("_{key}"), mask_array())?;
     }
-    let clipped: Vec<i64> =
-        infos.iter().zip(mask).map(|(i, &m)| if m { i.clipped_actions as i64 } else { 0 }).collect();
-    out.set_item("clipped_actions", PyArray1::from_vec(py, clipped))?;
+    out.set_item("clipped_actions", PyArray1::from_vec(py, masked(infos, mask, |i| i.clipped_actions as i64)))?;
     out.set_item("_clipped_actions", mask_array())?;
-    let unstable: Vec<bool> = infos.iter().zip(mask).map(|(i, &m)| m && i.unstable).collect();
-    out.set_item("unstable", PyArray1::from_vec(py, unstable))?;
+    out.set_item("unstable", PyArray1::from_vec(py, masked(infos, mask, |i| i.unstable)))?;
     out.set_item("_unstable", mask_array())?;
-    let warned: Vec<bool> = infos.iter().zip(mask).map(|(i, &m)| m && !i.warnings.is_empty()).collect();
+    let warned = masked(infos, mask, |i| !i.warnings.is_empty());
     if warned.contains(&true) {
         let warnings = infos
             .iter()
