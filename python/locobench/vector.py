@@ -9,6 +9,10 @@ from gymnasium.vector.utils import batch_space
 from locobench import _core
 from locobench.envs import LocobenchEnv, _core_arguments, _float64_actions
 
+# Action arrays of these types and the right shape go to Rust as they are (float32 is widened
+# there); anything else is checked and converted here first.
+_AS_THEY_ARE = (np.dtype(np.float64), np.dtype(np.float32))
+
 _NO_RENDERING = (
     "render_mode={!r}: the vector env does not render its copies; film single envs made with "
     "gymnasium.make(..., render_mode='rgb_array') (what SB3's make_vec_env and VecVideoRecorder use), "
@@ -53,6 +57,7 @@ class LocobenchVectorEnv(VectorEnv):
         self.single_action_space = single.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
+        self._actions_shape = self.action_space.shape
         self._seed = None
 
     def reset(self, *, seed=None, options=None):
@@ -77,8 +82,9 @@ class LocobenchVectorEnv(VectorEnv):
         return int(np.random.default_rng(self._seed).integers(0, 2**63 - 1))
 
     def step(self, actions):
-        a = _float64_actions(actions, self.action_space.shape, "actions", " (num_envs, action dim)")
-        obs, rewards, terminated, truncated, infos = self._core.step_gym(a)
+        if not (type(actions) is np.ndarray and actions.shape == self._actions_shape and actions.dtype in _AS_THEY_ARE):
+            actions = _float64_actions(actions, self.action_space.shape, "actions", " (num_envs, action dim)")
+        obs, rewards, terminated, truncated, infos = self._core.step_gym(actions)
         if isinstance(infos, tuple):  # the copies' infos differ in their names: batched here
             infos = self._batch(*infos)
         return obs, rewards, terminated, truncated, infos

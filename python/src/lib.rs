@@ -11,7 +11,6 @@ use locobench::controller::command::{Command, SpeedProfile};
 use locobench::envs::{env_names, make, reward_weight_option, EnvConfig, VecEnv};
 use locobench::policy::Policy;
 use locobench::runtime::Runtime;
-use numpy::PyReadonlyArray2;
 use pyo3::exceptions::{PyFileNotFoundError, PyRuntimeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::PyDict;
@@ -230,24 +229,14 @@ impl PyVecEnv {
         .map_err(value_error)
     }
 
-    /// `step` as Gymnasium's vector API returns it (`vector_step`): `actions` a float64
+    /// `step` as Gymnasium's vector API returns it (`vector_step`): `actions` a float64 or float32
     /// `[copies, action dim]` array in, NumPy arrays and batched infos out. What the Python vector
     /// env steps with: little of a step holds the GIL.
-    fn step_gym<'py>(
-        &self,
-        py: Python<'py>,
-        actions: PyReadonlyArray2<'py, f64>,
-    ) -> PyResult<vector_step::GymStep<'py>> {
-        let rows: Vec<Vec<f64>> = actions.as_array().rows().into_iter().map(|r| r.to_vec()).collect();
+    fn step_gym<'py>(&self, py: Python<'py>, actions: &Bound<'py, PyAny>) -> PyResult<vector_step::GymStep<'py>> {
+        let rows = vector_step::action_rows(actions)?;
         let envs = &self.envs;
-        let (s, dim) = py
-            .detach(|| {
-                let mut envs = envs.lock().unwrap_or_else(|p| p.into_inner());
-                let dim = envs.spec().observation_space.dim();
-                envs.step(&rows).map(|s| (s, dim))
-            })
-            .map_err(value_error)?;
-        vector_step::gym_step(py, s, dim, |info| info_dict(py, info, false))
+        let s = py.detach(|| envs.lock().unwrap_or_else(|p| p.into_inner()).step(&rows)).map_err(value_error)?;
+        vector_step::gym_step(py, s, |info| info_dict(py, info, false))
     }
 }
 

@@ -6,7 +6,8 @@
 //! Building them here instead of in Python takes most of the Python side out of a step, which is
 //! the part a second thread cannot share (`python/bench_speed.py` measures both).
 use locobench::envs::{Info, VecStep};
-use numpy::{PyArray1, PyArrayMethods};
+use numpy::{Element, PyArray1, PyArray2, PyArrayMethods};
+use pyo3::exceptions::{PyTypeError, PyValueError};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 
@@ -25,11 +26,11 @@ pub(crate) type GymStep<'py> = (
 pub(crate) fn gym_step<'py>(
     py: Python<'py>,
     s: VecStep,
-    observation_dim: usize,
     info_dict: impl Fn(&Info) -> PyResult<Bound<'py, PyDict>>,
 ) -> PyResult<GymStep<'py>> {
-    let n = s.rewards.len();
-    let observations = PyArray1::from_vec(py, s.observations.concat()).reshape([n, observation_dim])?.into_any();
+    // One object per array: `from_vec` would add a base object to each, and `reshape` a view.
+    let observations =
+        PyArray2::from_vec2(py, &s.observations).map_err(|e| PyValueError::new_err(e.to_string()))?.into_any();
     let rewards = PyArray1::from_slice(py, &s.rewards);
     let terminated = PyArray1::from_slice(py, &s.terminated);
     let truncated = PyArray1::from_slice(py, &s.truncated);
@@ -42,6 +43,28 @@ pub(crate) fn gym_step<'py>(
         (finals, dicts).into_pyobject(py)?.into_any()
     };
     Ok((observations, rewards, terminated, truncated, infos))
+}
+
+/// Each copy's action from a float64 or float32 `[copies, action dim]` array (float32 widened
+/// exactly, as NumPy's `astype` does); any other type is refused. The vector env's Python side
+/// converts other inputs and checks the shape before.
+pub(crate) fn action_rows(actions: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<f64>>> {
+    fn rows<T: Element + Copy + Into<f64>>(a: &Bound<'_, PyArray2<T>>) -> Vec<Vec<f64>> {
+        // SAFETY: read while this thread holds the GIL and copied before anything else runs, so no
+        // Python code and no other borrow writes the array meanwhile. (A `PyReadonlyArray`
+        // would register a borrow for this, a cost on every step.)
+        unsafe { a.as_array() }.rows().into_iter().map(|r| r.iter().map(|&x| x.into()).collect()).collect()
+    }
+    if let Ok(a) = actions.cast::<PyArray2<f64>>() {
+        Ok(rows(a))
+    } else if let Ok(a) = actions.cast::<PyArray2<f32>>() {
+        Ok(rows(a))
+    } else {
+        Err(PyTypeError::new_err(format!(
+            "actions must be a float64 or float32 array of shape (copies, action dim), not {}",
+            actions.get_type().name()?
+        )))
+    }
 }
 
 /// One of an info's lists of named values.
@@ -88,15 +111,15 @@ fn masked_info<'py>(py: Python<'py>, out: &Bound<'py, PyDict>, infos: &[Info], m
     for (key, pick) in groups {
         let group = PyDict::new(py);
         for (j, (name, _)) in pick(&infos[0]).iter().enumerate() {
-            group.set_item(*name, PyArray1::from_vec(py, masked(infos, mask, |i| pick(i)[j].1)))?;
+            group.set_item(*name, PyArray1::from_slice(py, &masked(infos, mask, |i| pick(i)[j].1)))?;
             group.set_item(format!("_{name}"), mask_array())?;
         }
         out.set_item(key, group)?;
         out.set_item(format!("_{key}"), mask_array())?;
     }
-    out.set_item("clipped_actions", PyArray1::from_vec(py, masked(infos, mask, |i| i.clipped_actions as i64)))?;
+    out.set_item("clipped_actions", PyArray1::from_slice(py, &masked(infos, mask, |i| i.clipped_actions as i64)))?;
     out.set_item("_clipped_actions", mask_array())?;
-    out.set_item("unstable", PyArray1::from_vec(py, masked(infos, mask, |i| i.unstable)))?;
+    out.set_item("unstable", PyArray1::from_slice(py, &masked(infos, mask, |i| i.unstable)))?;
     out.set_item("_unstable", mask_array())?;
     let warned = masked(infos, mask, |i| !i.warnings.is_empty());
     if warned.contains(&true) {
@@ -106,7 +129,7 @@ fn masked_info<'py>(py: Python<'py>, out: &Bound<'py, PyDict>, infos: &[Info], m
             .map(|(i, &w)| if w { Ok(PyList::new(py, &i.warnings)?.into_any().unbind()) } else { Ok(py.None()) })
             .collect::<PyResult<Vec<Py<PyAny>>>>()?;
         out.set_item("warnings", PyArray1::from_vec(py, warnings))?;
-        out.set_item("_warnings", PyArray1::from_vec(py, warned))?;
+        out.set_item("_warnings", PyArray1::from_slice(py, &warned))?;
     }
     Ok(())
 }

@@ -86,27 +86,55 @@ def assert_same_infos(ours, theirs, path="infos"):
                     assert x == y, f"{path}[{key!r}]: {a} vs {b}"
 
 
-def test_infos_batched_in_rust_equal_gymnasiums_batching_of_each_copys_dict():
+@pytest.mark.parametrize("threads", [1, 2])
+def test_infos_batched_in_rust_equal_gymnasiums_batching_of_each_copys_dict(threads):
     """The step's infos, batched in Rust, are what Gymnasium's ``_add_info`` makes of the copies'
-    info dicts (same keys, masks, values and dtypes), with episodes ending in some copies (a
-    7-step time limit, staggered by a falling Hopper) and not in others; actions in any memory
-    layout (a transposed view here) step alike."""
-    fast = locobench.LocobenchVectorEnv("hopper", num_envs=3, threads=2, max_episode_steps=7)
-    slow = locobench.LocobenchVectorEnv("hopper", num_envs=3, threads=2, max_episode_steps=7)
-    fast.reset(seed=4)
-    slow.reset(seed=4)
-    rng = np.random.default_rng(2)
-    ended_steps = 0
-    for _ in range(30):
-        a = rng.uniform(-1, 1, size=(3, 3))
-        out = fast.step(np.ascontiguousarray(a.T).T)
-        ref = slow._step_with_dicts(a)
-        for x, y in zip(out[:4], ref[:4]):
+    info dicts (same keys, masks, values and dtypes), with episodes ending in none of the copies,
+    in all of them (a 7-step time limit) and in some (a 12-step limit, which some copies' falls
+    come before); actions in any memory layout (a transposed view here) step alike. Each step's
+    arrays are its own: a result kept is not overwritten by later steps."""
+    ended = []
+    for limit in (7, 12):
+        fast = locobench.LocobenchVectorEnv("hopper", num_envs=3, threads=threads, max_episode_steps=limit)
+        slow = locobench.LocobenchVectorEnv("hopper", num_envs=3, threads=threads, max_episode_steps=limit)
+        fast.reset(seed=4)
+        slow.reset(seed=4)
+        rng = np.random.default_rng(2)
+        for _ in range(30):
+            a = rng.uniform(-1, 1, size=(3, 3))
+            out = fast.step(np.ascontiguousarray(a.T).T)
+            ref = slow._step_with_dicts(a)
+            for x, y in zip(out[:4], ref[:4]):
+                np.testing.assert_array_equal(x, y)
+                assert x.dtype == y.dtype
+            assert_same_infos(out[4], ref[4])
+            ended.append(out[4].get("_final_obs", np.zeros(3, dtype=bool)).sum())
+    assert 0 in ended and 3 in ended and any(0 < e < 3 for e in ended), ended
+    first = fast.step(np.zeros((3, 3)))
+    kept = [first[0], first[1], first[4]["reward_terms"]["forward"]]
+    copies = [x.copy() for x in kept]
+    fast.step(np.ones((3, 3)))
+    for x, y in zip(kept, copies):
+        np.testing.assert_array_equal(x, y)
+
+
+def test_float32_actions_step_as_their_float64_values():
+    """float32 actions (what SB3 and CleanRL policies give) go to Rust as they are and step
+    exactly as the same values in float64; an array of another type reaching the binding is refused
+    by name."""
+    ours = locobench.LocobenchVectorEnv("half-cheetah", num_envs=4, threads=2)
+    ref = locobench.LocobenchVectorEnv("half-cheetah", num_envs=4, threads=2)
+    ours.reset(seed=9)
+    ref.reset(seed=9)
+    rng = np.random.default_rng(3)
+    for _ in range(20):
+        a = rng.uniform(-1, 1, size=(4, 6)).astype(np.float32)
+        out, expected = ours.step(a), ref.step(a.astype(np.float64))
+        for x, y in zip(out[:4], expected[:4]):
             np.testing.assert_array_equal(x, y)
-            assert x.dtype == y.dtype
-        assert_same_infos(out[4], ref[4])
-        ended_steps += "final_obs" in out[4]
-    assert 0 < ended_steps < 30
+        assert_same_infos(out[4], expected[4])
+    with pytest.raises(TypeError, match="float64 or float32 array.*ndarray"):
+        ours._core.step_gym(np.zeros((4, 6), dtype=np.int64))
 
 
 def test_same_numbers_on_one_thread_and_two():

@@ -255,9 +255,9 @@ impl VecEnv {
 
     /// `f` on every copy, results in copy order. With two threads (the calling thread's helper,
     /// `numeric::second_core`, or this environment's own helper when `threads` is 2) both take
-    /// copies as they come; with more, copies are split into `threads` contiguous blocks on scoped
-    /// threads. Every thread computes with the caller's floating-point mode (flush-to-zero), so a
-    /// copy computes the same bits on any thread.
+    /// copies as they come, from opposite ends; with more, copies are split into `threads`
+    /// contiguous blocks on scoped threads. Every thread computes with the caller's floating-point
+    /// mode (flush-to-zero), so a copy computes the same bits on any thread.
     fn run<R: Send>(&mut self, f: impl Fn(usize, &mut Copy) -> R + Sync) -> Vec<R> {
         let n = self.copies.len();
         let threads = self.threads.min(n);
@@ -267,23 +267,27 @@ impl VecEnv {
         let training_helper = second_core::has_helper();
         if training_helper || threads == 2 {
             // A thread that already runs takes part, instead of one spawned per step: the training
-            // thread's helper (`runtime::Runtime` with two threads), or ours. Both take copies one
-            // at a time from a shared counter, so a thread held up (a copy's reset, another process
-            // on its core) steps fewer of them instead of keeping the other waiting.
+            // thread's helper (`runtime::Runtime` with two threads), or ours. Each takes copies
+            // one at a time, while any are left: the caller from the first copy up, the helper from
+            // the last one down. So a thread held up (a copy's reset, another process on its core)
+            // steps fewer of them instead of keeping the other waiting, and a copy is stepped by
+            // the same thread from step to step, its simulation's data still in that core's cache.
             let slots: Vec<Mutex<(&mut Copy, Option<R>)>> =
                 self.copies.iter_mut().map(|c| Mutex::new((c, None))).collect();
-            let next = AtomicUsize::new(0);
-            let take_copies = || loop {
-                let i = next.fetch_add(1, Ordering::Relaxed);
-                let Some(slot) = slots.get(i) else { break };
-                let mut slot = slot.lock().unwrap_or_else(|p| p.into_inner());
+            let taken = AtomicUsize::new(0);
+            let step_slot = |i: usize| {
+                let mut slot = slots[i].lock().unwrap_or_else(|p| p.into_inner());
                 let result = f(i, slot.0);
                 slot.1 = Some(result);
             };
+            // Every copy is granted once (`taken` counts grants), so the two ends never meet.
+            let from_first = || (0..n).take_while(|_| taken.fetch_add(1, Ordering::Relaxed) < n).for_each(step_slot);
+            let from_last =
+                || (0..n).rev().take_while(|_| taken.fetch_add(1, Ordering::Relaxed) < n).for_each(step_slot);
             if training_helper {
-                second_core::join(take_copies, take_copies);
+                second_core::join(from_first, from_last);
             } else {
-                self.helper.get_or_insert_with(OwnedHelper::start).join(take_copies, take_copies);
+                self.helper.get_or_insert_with(OwnedHelper::start).join(from_first, from_last);
             }
             return slots
                 .into_iter()
