@@ -11,9 +11,10 @@ give on this machine, which (5) approaches as the Python side of a step shrinks;
 env's former step, which batched one info dict per copy through Gymnasium's `_add_info`; (8) two
 processes at once, each looping its own vector env in Rust on one thread: the machine's own
 ceiling for a second core, with nothing shared and nothing to wait for, which (6) cannot exceed.
-(5) to (8) take turns, nine rounds: each rate is the median over the rounds, and each gain from a
-second thread or process is the median of the rounds' own ratios (a round's runs follow each other
-within seconds, so a shared machine's slow stretches cancel out of them). The binding's overhead
+(5) to (8) take turns, ninety rounds of a tenth of STEPS each, in reverse order every other round:
+each rate is the median over the rounds, and each gain from a second thread or process is the
+median of the rounds' own ratios (the two runs of a ratio follow each other within a fraction of a
+second, so a shared machine's slow stretches cancel out of them). The binding's overhead
 per step is (2) - (3). Zero actions; episodes reset when they end.
 
     python python/bench_speed.py [STEPS [ENV ...]]    (ENV: locobench names; default all four)
@@ -97,17 +98,17 @@ def vec_loop(name, threads, dicts=False):
     return run
 
 
-def interleaved(loops, n, rounds=9):
-    """Steps per second of each loop in each of `rounds` rounds of `n` steps (a list per loop), the
-    loops taking turns within a round so that a slow stretch of a shared machine falls on all of
-    them alike."""
+def interleaved(loops, n, rounds):
+    """Steps per second of each loop in each of `rounds` rounds of `n` steps (an array per loop).
+    The loops take turns within a round, in reverse order every other round, so that a slow stretch
+    of a shared machine, and a loop's place in the round, fall on all of them alike."""
     for loop in loops:
-        loop(n // 10)
+        loop(n)
     rates = [[] for _ in loops]
-    for _ in range(rounds):
-        for i, loop in enumerate(loops):
+    for r in range(rounds):
+        for i in range(len(loops)) if r % 2 == 0 else reversed(range(len(loops))):
             start = time.perf_counter()
-            loop(n)
+            loops[i](n)
             rates[i].append(n / (time.perf_counter() - start))
     return [np.array(r) for r in rates]
 
@@ -197,7 +198,7 @@ def main():
         loops = [vec_loop(name, t) for t in (1, 2)] + [vec_rust_loop(name, t) for t in (1, 2)]
         loops += [vec_loop(name, t, dicts=True) for t in (1, 2)]
         processes = TwoProcesses(name)
-        runs = interleaved(loops + [processes], steps)
+        runs = interleaved(loops + [processes], steps // 10, rounds=90)
         processes.close()
         vec1, vec2, rust1, rust2, dicts1, dicts2, procs2 = runs
         rates = ",".join(f"{np.median(r):.0f}" for r in runs)
