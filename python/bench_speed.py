@@ -9,13 +9,14 @@ vector env (8 copies, the class gymnasium.make_vec builds) on one thread and on 
 same vector env's steps looped in Rust on one thread and on two: the gain a second thread can
 give on this machine, which (5) approaches as the Python side of a step shrinks; (7) the vector
 env's former step, which batched one info dict per copy through Gymnasium's `_add_info`; (8) two
-processes at once, each looping its own vector env in Rust on one thread: the machine's own
-ceiling for a second core, with nothing shared and nothing to wait for, which (6) cannot exceed.
-(5) to (8) take turns, ninety rounds of a tenth of STEPS each, in reverse order every other round:
-each rate is the median over the rounds, and each gain from a second thread or process is the
-median of the rounds' own ratios (the two runs of a ratio follow each other within a fraction of a
-second, so a shared machine's slow stretches cancel out of them). The binding's overhead
-per step is (2) - (3). Zero actions; episodes reset when they end.
+processes at once, each looping a vector env of half the copies in Rust on one thread (so each
+core steps as many copies as each of two threads does): the machine's own ceiling for a second
+core, with nothing shared and nothing to wait for. (1) to (4) take turns, thirty rounds of a tenth
+of STEPS each, and (5) to (8) ninety, in reverse order every other round: each rate is the median
+over the rounds, and each gain from a second thread or process is the median of the rounds' own
+ratios (the two runs of a ratio follow each other within a fraction of a second, so a shared
+machine's slow stretches cancel out of them). The binding's overhead per step is the median of
+the rounds' (2) - (3). Zero actions; episodes reset when they end.
 
     python python/bench_speed.py [STEPS [ENV ...]]    (ENV: locobench names; default all four)
 """
@@ -32,18 +33,6 @@ import numpy as np
 import locobench
 
 ENVS = [("half-cheetah", "HalfCheetah-v5"), ("hopper", "Hopper-v5"), ("ant", "Ant-v5"), ("minitaur", None)]
-
-
-def rate(step, n, rounds=3):
-    """Steps per second, the best of `rounds` rounds of `n` steps (a shared machine's noise only
-    ever slows a round down)."""
-    step(n // 10)  # warm up
-    best = 0.0
-    for _ in range(rounds):
-        start = time.perf_counter()
-        step(n)
-        best = max(best, n / (time.perf_counter() - start))
-    return best
 
 
 def gym_loop(env):
@@ -113,24 +102,26 @@ def interleaved(loops, n, rounds):
     return [np.array(r) for r in rates]
 
 
-def vec_rust_loop(name, threads):
-    envs = locobench.LocobenchVectorEnv(name, VEC_COPIES, threads=threads)
-    actions = [[0.0] * envs.single_action_space.shape[0]] * VEC_COPIES
+def vec_rust_loop(name, threads, copies=VEC_COPIES):
+    envs = locobench.LocobenchVectorEnv(name, copies, threads=threads)
+    actions = [[0.0] * envs.single_action_space.shape[0]] * copies
     envs.reset(seed=0)
-    return lambda n: envs._core.step_repeat(actions, n // VEC_COPIES)
+    return lambda n: envs._core.step_repeat(actions, n // copies)
 
 
 def _process_worker(name, conn):
-    """Loops its own one-thread vector env in Rust for the number of steps it receives, until None."""
-    run = vec_rust_loop(name, 1)
+    """Loops its own one-thread vector env of half the copies in Rust for the number of steps it
+    receives, until None."""
+    run = vec_rust_loop(name, 1, VEC_COPIES // 2)
     while (n := conn.recv()) is not None:
         run(n)
         conn.send(None)
 
 
 class TwoProcesses:
-    """Two processes (spawned: no threads inherited), each with the 8-copy vector env on one thread;
-    a call with `n` has each loop n / 2 steps at the same time and returns when both are done."""
+    """Two processes (spawned: no threads inherited), each with a vector env of half the copies on
+    one thread (so each core steps as many copies as each of two threads does); a call with `n`
+    has each loop n / 2 steps at the same time and returns when both are done."""
 
     def __init__(self, name):
         ctx = multiprocessing.get_context("spawn")
@@ -189,12 +180,13 @@ def main():
     for name, gym_id in ENVS:
         if name not in names:
             continue
-        ours = gym.make(locobench.ENV_IDS[name])
-        g = rate(gym_loop(ours), steps)
-        raw = rate(raw_loop(ours), steps)
-        rust = rate(rust_loop(ours), steps)
-        overhead = (1 / raw - 1 / rust) * 1e6
-        theirs = rate(gym_loop(gym.make(gym_id)), steps) if gym_id else float("nan")
+        ours = [gym.make(locobench.ENV_IDS[name]) for _ in range(3)]
+        single = [gym_loop(ours[0]), raw_loop(ours[1]), rust_loop(ours[2])]
+        single += [gym_loop(gym.make(gym_id))] if gym_id else []
+        g, raw, rust, *theirs = interleaved(single, steps // 10, rounds=30)
+        overhead = np.median(1 / raw - 1 / rust) * 1e6
+        g, raw, rust = np.median(g), np.median(raw), np.median(rust)
+        theirs = np.median(theirs[0]) if theirs else float("nan")
         loops = [vec_loop(name, t) for t in (1, 2)] + [vec_rust_loop(name, t) for t in (1, 2)]
         loops += [vec_loop(name, t, dicts=True) for t in (1, 2)]
         processes = TwoProcesses(name)
