@@ -57,7 +57,6 @@ class LocobenchVectorEnv(VectorEnv):
         self.single_action_space = single.action_space
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
-        self._actions_shape = self.action_space.shape
         self._seed = None
 
     def reset(self, *, seed=None, options=None):
@@ -82,7 +81,7 @@ class LocobenchVectorEnv(VectorEnv):
         return int(np.random.default_rng(self._seed).integers(0, 2**63 - 1))
 
     def step(self, actions):
-        if not (type(actions) is np.ndarray and actions.shape == self._actions_shape and actions.dtype in _AS_THEY_ARE):
+        if not (type(actions) is np.ndarray and actions.shape == self.action_space.shape and actions.dtype in _AS_THEY_ARE):
             actions = _float64_actions(actions, self.action_space.shape, "actions", " (num_envs, action dim)")
         obs, rewards, terminated, truncated, infos = self._core.step_gym(actions)
         if isinstance(infos, tuple):  # the copies' infos differ in their names: batched here

@@ -159,8 +159,8 @@ pub(crate) fn python_speed(results: &Path) -> Result<String> {
         out += "\nWhat a second thread gives the vector env, beside the same vector env looped in Rust, its former \
                 step (one info dict per copy, batched by Gymnasium's `_add_info`), and two processes each looping \
                 a vector env of half the copies in Rust on one thread (as many copies per core as two threads \
-                step): the machine's ceiling for a second core, with nothing shared. They took turns over ninety short rounds, in reverse order every other round; each gain \
-                is the median of the rounds' own ratios:\n\n\
+                step): the machine's ceiling for a second core, with nothing shared. They took turns over ninety \
+                short rounds, in reverse order every other round; each gain is the median of the rounds' own ratios:\n\n\
                 | env | vector env, 2 threads / 1 | looped in Rust, 2 threads / 1 | former step, 2 threads / 1 | two processes / one |\n|---|---|---|---|---|\n";
         for r in &rows {
             let _ = writeln!(

@@ -281,9 +281,9 @@ impl VecEnv {
                 slot.1 = Some(result);
             };
             // Every copy is granted once (`taken` counts grants), so the two ends never meet.
-            let from_first = || (0..n).take_while(|_| taken.fetch_add(1, Ordering::Relaxed) < n).for_each(step_slot);
-            let from_last =
-                || (0..n).rev().take_while(|_| taken.fetch_add(1, Ordering::Relaxed) < n).for_each(step_slot);
+            let granted = |_: &usize| taken.fetch_add(1, Ordering::Relaxed) < n;
+            let from_first = || (0..n).take_while(granted).for_each(step_slot);
+            let from_last = || (0..n).rev().take_while(granted).for_each(step_slot);
             if training_helper {
                 second_core::join(from_first, from_last);
             } else {
