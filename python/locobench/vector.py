@@ -9,10 +9,6 @@ from gymnasium.vector.utils import batch_space
 from locobench import _core
 from locobench.envs import LocobenchEnv, _core_arguments, _float64_actions
 
-# Action arrays of these types and the right shape go to Rust as they are (float32 is widened
-# there); anything else is checked and converted here first.
-_AS_THEY_ARE = (np.dtype(np.float64), np.dtype(np.float32))
-
 _NO_RENDERING = (
     "render_mode={!r}: the vector env does not render its copies; film single envs made with "
     "gymnasium.make(..., render_mode='rgb_array') (what SB3's make_vec_env and VecVideoRecorder use), "
@@ -81,12 +77,14 @@ class LocobenchVectorEnv(VectorEnv):
         return int(np.random.default_rng(self._seed).integers(0, 2**63 - 1))
 
     def step(self, actions):
-        if not (type(actions) is np.ndarray and actions.shape == self.action_space.shape and actions.dtype in _AS_THEY_ARE):
+        out = self._core.step_gym(actions)
+        if out is None:  # not a float64 or float32 array of shape (num_envs, action dim)
             actions = _float64_actions(actions, self.action_space.shape, "actions", " (num_envs, action dim)")
-        obs, rewards, terminated, truncated, infos = self._core.step_gym(actions)
-        if isinstance(infos, tuple):  # the copies' infos differ in their names: batched here
-            infos = self._batch(*infos)
-        return obs, rewards, terminated, truncated, infos
+            out = self._core.step_gym(actions)
+        if type(out[4]) is tuple:  # the copies' infos differ in their names: batched here
+            obs, rewards, terminated, truncated, (final_obs, step_infos) = out
+            out = obs, rewards, terminated, truncated, self._batch(final_obs, step_infos)
+        return out
 
     def _step_with_dicts(self, a):
         """The step through one info dict per copy, batched by Gymnasium's ``_add_info``: what

@@ -162,8 +162,11 @@ fn env_config(name: &str, options: Vec<(String, String)>, reward: Vec<(String, f
 /// depend on the thread count.
 #[pyclass(name = "VecEnv", module = "locobench._core")]
 struct PyVecEnv {
-    // A pyclass must be Sync; the lock is only ever taken by the thread holding the object.
+    // A pyclass must be Sync; the locks are only ever taken by the thread holding the object.
     envs: Mutex<VecEnv>,
+    /// `[copies, action dim]`, the shape of the action arrays `step_gym` takes.
+    action_shape: [usize; 2],
+    keys: Mutex<Option<vector_step::InfoKeys>>,
 }
 
 impl PyVecEnv {
@@ -192,7 +195,8 @@ impl PyVecEnv {
         }
         let config = env_config(name, options, reward)?;
         let envs = VecEnv::new(&config, copies, threads).map_err(value_error)?;
-        Ok(PyVecEnv { envs: Mutex::new(envs) })
+        let action_shape = [envs.len(), envs.spec().action_space.low.len()];
+        Ok(PyVecEnv { envs: Mutex::new(envs), action_shape, keys: Mutex::new(None) })
     }
 
     #[getter]
@@ -230,13 +234,19 @@ impl PyVecEnv {
     }
 
     /// `step` as Gymnasium's vector API returns it (`vector_step`): `actions` a float64 or float32
-    /// `[copies, action dim]` array in, NumPy arrays and batched infos out. What the Python vector
-    /// env steps with: little of a step holds the GIL.
-    fn step_gym<'py>(&self, py: Python<'py>, actions: &Bound<'py, PyAny>) -> PyResult<vector_step::GymStep<'py>> {
-        let rows = vector_step::action_rows(actions)?;
+    /// `[copies, action dim]` array in, NumPy arrays and batched infos out; None, without stepping,
+    /// for actions of any other type or shape (the Python side converts or refuses those). What
+    /// the Python vector env steps with: little of a step holds the GIL.
+    fn step_gym<'py>(
+        &self,
+        py: Python<'py>,
+        actions: &Bound<'py, PyAny>,
+    ) -> PyResult<Option<vector_step::GymStep<'py>>> {
+        let Some(rows) = vector_step::action_rows(actions, self.action_shape) else { return Ok(None) };
         let envs = &self.envs;
         let s = py.detach(|| envs.lock().unwrap_or_else(|p| p.into_inner()).step(&rows)).map_err(value_error)?;
-        vector_step::gym_step(py, s, |info| info_dict(py, info, false))
+        let mut keys = self.keys.lock().unwrap_or_else(|p| p.into_inner());
+        vector_step::gym_step(py, s, &mut keys, |info| info_dict(py, info, false)).map(Some)
     }
 }
 

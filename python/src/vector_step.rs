@@ -6,10 +6,11 @@
 //! Building them here instead of in Python takes most of the Python side out of a step, which is
 //! the part a second thread cannot share (`python/bench_speed.py` measures both).
 use locobench::envs::{Info, VecStep};
-use numpy::{Element, PyArray1, PyArray2, PyArrayMethods};
-use pyo3::exceptions::{PyTypeError, PyValueError};
+use numpy::{Element, PyArray1, PyArray2, PyArrayMethods, PyUntypedArrayMethods};
+use pyo3::exceptions::PyValueError;
+use pyo3::intern;
 use pyo3::prelude::*;
-use pyo3::types::{PyDict, PyList};
+use pyo3::types::{PyDict, PyList, PyString};
 
 /// What the vector step hands to Python: `(observations, rewards, terminated, truncated, infos)`,
 /// `infos` batched; or, where the copies' infos differ in their term or metric names (so columns
@@ -26,6 +27,7 @@ pub(crate) type GymStep<'py> = (
 pub(crate) fn gym_step<'py>(
     py: Python<'py>,
     s: VecStep,
+    keys: &mut Option<InfoKeys>,
     info_dict: impl Fn(&Info) -> PyResult<Bound<'py, PyDict>>,
 ) -> PyResult<GymStep<'py>> {
     // One object per array: `from_vec` would add a base object to each, and `reshape` a view.
@@ -35,7 +37,10 @@ pub(crate) fn gym_step<'py>(
     let terminated = PyArray1::from_slice(py, &s.terminated);
     let truncated = PyArray1::from_slice(py, &s.truncated);
     let infos = if columns_line_up(&s.infos) {
-        batched_infos(py, &s)?.into_any()
+        if !keys.as_ref().is_some_and(|k| k.fit(&s.infos[0])) {
+            *keys = Some(InfoKeys::new(py, &s.infos[0]));
+        }
+        batched_infos(py, &s, keys.as_ref().expect("made above"))?.into_any()
     } else {
         let finals =
             PyList::new(py, s.final_observations.iter().map(|o| o.as_ref().map(|o| PyArray1::from_slice(py, o))))?;
@@ -45,43 +50,78 @@ pub(crate) fn gym_step<'py>(
     Ok((observations, rewards, terminated, truncated, infos))
 }
 
-/// Each copy's action from a float64 or float32 `[copies, action dim]` array (float32 widened
-/// exactly, as NumPy's `astype` does); any other type is refused. The vector env's Python side
-/// converts other inputs and checks the shape before.
-pub(crate) fn action_rows(actions: &Bound<'_, PyAny>) -> PyResult<Vec<Vec<f64>>> {
-    fn rows<T: Element + Copy + Into<f64>>(a: &Bound<'_, PyArray2<T>>) -> Vec<Vec<f64>> {
+/// Each copy's action from a float64 or float32 array of `shape` (`[copies, action dim]`; float32
+/// widened exactly, as NumPy's `astype` does), or None for anything else, which the vector env's
+/// Python side then checks and converts.
+pub(crate) fn action_rows(actions: &Bound<'_, PyAny>, shape: [usize; 2]) -> Option<Vec<Vec<f64>>> {
+    fn rows<T: Element + Copy + Into<f64>>(a: &Bound<'_, PyArray2<T>>, shape: [usize; 2]) -> Option<Vec<Vec<f64>>> {
+        if a.shape() != shape {
+            return None;
+        }
         // SAFETY: read while this thread holds the GIL and copied before anything else runs, so no
         // Python code and no other borrow writes the array meanwhile. (A `PyReadonlyArray`
         // would register a borrow for this, a cost on every step.)
-        unsafe { a.as_array() }.rows().into_iter().map(|r| r.iter().map(|&x| x.into()).collect()).collect()
+        Some(unsafe { a.as_array() }.rows().into_iter().map(|r| r.iter().map(|&x| x.into()).collect()).collect())
     }
     if let Ok(a) = actions.cast::<PyArray2<f64>>() {
-        Ok(rows(a))
+        rows(a, shape)
     } else if let Ok(a) = actions.cast::<PyArray2<f32>>() {
-        Ok(rows(a))
+        rows(a, shape)
     } else {
-        Err(PyTypeError::new_err(format!(
-            "actions must be a float64 or float32 array of shape (copies, action dim), not {}",
-            actions.get_type().name()?
-        )))
+        None
     }
 }
 
 /// One of an info's lists of named values.
 type Named = fn(&Info) -> &[(&'static str, f64)];
 
-fn columns_line_up(infos: &[Info]) -> bool {
-    let names = |pairs: &[(&'static str, f64)]| pairs.iter().map(|(k, _)| *k).collect::<Vec<_>>();
-    let (terms, metrics) = (names(&infos[0].reward_terms), names(&infos[0].metrics));
-    infos.iter().all(|i| names(&i.reward_terms) == terms && names(&i.metrics) == metrics)
+/// The batched infos' keys for the reward terms and metrics, `name` and `_name`, as Python
+/// strings made once for an env's names instead of on every step (a step of Minitaur has 14).
+/// Interned, so their hashes are kept too.
+pub(crate) struct InfoKeys {
+    terms: Vec<&'static str>,
+    metrics: Vec<&'static str>,
+    term_keys: Vec<KeyPair>,
+    metric_keys: Vec<KeyPair>,
 }
 
-fn batched_infos<'py>(py: Python<'py>, s: &VecStep) -> PyResult<Bound<'py, PyDict>> {
+/// A value's key and its mask's key: `name` and `_name`.
+type KeyPair = [Py<PyString>; 2];
+
+impl InfoKeys {
+    fn new(py: Python<'_>, info: &Info) -> InfoKeys {
+        let names = |pairs: &[(&'static str, f64)]| pairs.iter().map(|(k, _)| *k).collect::<Vec<_>>();
+        let keys = |names: &[&str]| {
+            names
+                .iter()
+                .map(|n| [PyString::intern(py, n).unbind(), PyString::intern(py, &format!("_{n}")).unbind()])
+                .collect()
+        };
+        let (terms, metrics) = (names(&info.reward_terms), names(&info.metrics));
+        InfoKeys { term_keys: keys(&terms), metric_keys: keys(&metrics), terms, metrics }
+    }
+
+    /// Whether these are the keys of `info`'s names.
+    fn fit(&self, info: &Info) -> bool {
+        let same = |names: &[&str], pairs: &[(&str, f64)]| {
+            names.len() == pairs.len() && names.iter().zip(pairs).all(|(n, (k, _))| n == k)
+        };
+        same(&self.terms, &info.reward_terms) && same(&self.metrics, &info.metrics)
+    }
+}
+
+fn columns_line_up(infos: &[Info]) -> bool {
+    let same = |a: &[(&str, f64)], b: &[(&str, f64)]| a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.0 == y.0);
+    let first = &infos[0];
+    infos.iter().all(|i| same(&i.reward_terms, &first.reward_terms) && same(&i.metrics, &first.metrics))
+}
+
+fn batched_infos<'py>(py: Python<'py>, s: &VecStep, keys: &InfoKeys) -> PyResult<Bound<'py, PyDict>> {
     let ended: Vec<bool> = s.final_observations.iter().map(Option::is_some).collect();
     let infos = PyDict::new(py);
     if !ended.iter().all(|&e| e) {
         let running: Vec<bool> = ended.iter().map(|&e| !e).collect();
-        masked_info(py, &infos, &s.infos, &running)?;
+        masked_info(py, &infos, &s.infos, &running, keys)?;
     }
     if ended.iter().any(|&e| e) {
         let finals: Vec<Py<PyAny>> = s
@@ -89,12 +129,12 @@ fn batched_infos<'py>(py: Python<'py>, s: &VecStep) -> PyResult<Bound<'py, PyDic
             .iter()
             .map(|o| o.as_ref().map_or_else(|| py.None(), |o| PyArray1::from_slice(py, o).into_any().unbind()))
             .collect();
-        infos.set_item("final_obs", PyArray1::from_vec(py, finals))?;
-        infos.set_item("_final_obs", PyArray1::from_slice(py, &ended))?;
+        infos.set_item(intern!(py, "final_obs"), PyArray1::from_vec(py, finals))?;
+        infos.set_item(intern!(py, "_final_obs"), PyArray1::from_slice(py, &ended))?;
         let final_info = PyDict::new(py);
-        masked_info(py, &final_info, &s.infos, &ended)?;
-        infos.set_item("final_info", final_info)?;
-        infos.set_item("_final_info", PyArray1::from_slice(py, &ended))?;
+        masked_info(py, &final_info, &s.infos, &ended, keys)?;
+        infos.set_item(intern!(py, "final_info"), final_info)?;
+        infos.set_item(intern!(py, "_final_info"), PyArray1::from_slice(py, &ended))?;
     }
     Ok(infos)
 }
@@ -105,22 +145,30 @@ fn masked<T: Default>(infos: &[Info], mask: &[bool], value: impl Fn(&Info) -> T)
 }
 
 /// The batched infos of the copies in `mask` (the others' entries zero and masked out), into `out`.
-fn masked_info<'py>(py: Python<'py>, out: &Bound<'py, PyDict>, infos: &[Info], mask: &[bool]) -> PyResult<()> {
+fn masked_info<'py>(
+    py: Python<'py>,
+    out: &Bound<'py, PyDict>,
+    infos: &[Info],
+    mask: &[bool],
+    keys: &InfoKeys,
+) -> PyResult<()> {
     let mask_array = || PyArray1::from_slice(py, mask);
-    let groups: [(&str, Named); 2] = [("reward_terms", |i| &i.reward_terms), ("metrics", |i| &i.metrics)];
-    for (key, pick) in groups {
+    let group = |[key, mask_key]: [&Bound<'py, PyString>; 2], names: &[KeyPair], pick: Named| -> PyResult<()> {
         let group = PyDict::new(py);
-        for (j, (name, _)) in pick(&infos[0]).iter().enumerate() {
-            group.set_item(*name, PyArray1::from_slice(py, &masked(infos, mask, |i| pick(i)[j].1)))?;
-            group.set_item(format!("_{name}"), mask_array())?;
+        for (j, [name, name_mask]) in names.iter().enumerate() {
+            group.set_item(name.bind(py), PyArray1::from_slice(py, &masked(infos, mask, |i| pick(i)[j].1)))?;
+            group.set_item(name_mask.bind(py), mask_array())?;
         }
         out.set_item(key, group)?;
-        out.set_item(format!("_{key}"), mask_array())?;
-    }
-    out.set_item("clipped_actions", PyArray1::from_slice(py, &masked(infos, mask, |i| i.clipped_actions as i64)))?;
-    out.set_item("_clipped_actions", mask_array())?;
-    out.set_item("unstable", PyArray1::from_slice(py, &masked(infos, mask, |i| i.unstable)))?;
-    out.set_item("_unstable", mask_array())?;
+        out.set_item(mask_key, mask_array())
+    };
+    group([intern!(py, "reward_terms"), intern!(py, "_reward_terms")], &keys.term_keys, |i| &i.reward_terms)?;
+    group([intern!(py, "metrics"), intern!(py, "_metrics")], &keys.metric_keys, |i| &i.metrics)?;
+    let clipped = masked(infos, mask, |i| i.clipped_actions as i64);
+    out.set_item(intern!(py, "clipped_actions"), PyArray1::from_slice(py, &clipped))?;
+    out.set_item(intern!(py, "_clipped_actions"), mask_array())?;
+    out.set_item(intern!(py, "unstable"), PyArray1::from_slice(py, &masked(infos, mask, |i| i.unstable)))?;
+    out.set_item(intern!(py, "_unstable"), mask_array())?;
     let warned = masked(infos, mask, |i| !i.warnings.is_empty());
     if warned.contains(&true) {
         let warnings = infos
@@ -128,8 +176,8 @@ fn masked_info<'py>(py: Python<'py>, out: &Bound<'py, PyDict>, infos: &[Info], m
             .zip(&warned)
             .map(|(i, &w)| if w { Ok(PyList::new(py, &i.warnings)?.into_any().unbind()) } else { Ok(py.None()) })
             .collect::<PyResult<Vec<Py<PyAny>>>>()?;
-        out.set_item("warnings", PyArray1::from_vec(py, warnings))?;
-        out.set_item("_warnings", PyArray1::from_slice(py, &warned))?;
+        out.set_item(intern!(py, "warnings"), PyArray1::from_vec(py, warnings))?;
+        out.set_item(intern!(py, "_warnings"), PyArray1::from_slice(py, &warned))?;
     }
     Ok(())
 }

@@ -120,8 +120,8 @@ def test_infos_batched_in_rust_equal_gymnasiums_batching_of_each_copys_dict(thre
 
 def test_float32_actions_step_as_their_float64_values():
     """float32 actions (what SB3 and CleanRL policies give) go to Rust as they are and step
-    exactly as the same values in float64; an array of another type reaching the binding is refused
-    by name."""
+    exactly as the same values in float64; the binding leaves arrays of other types and shapes to the
+    Python side (None, without stepping), which converts them or refuses them by name."""
     ours = locobench.LocobenchVectorEnv("half-cheetah", num_envs=4, threads=2)
     ref = locobench.LocobenchVectorEnv("half-cheetah", num_envs=4, threads=2)
     ours.reset(seed=9)
@@ -133,8 +133,16 @@ def test_float32_actions_step_as_their_float64_values():
         for x, y in zip(out[:4], expected[:4]):
             np.testing.assert_array_equal(x, y)
         assert_same_infos(out[4], expected[4])
-    with pytest.raises(TypeError, match="float64 or float32 array.*ndarray"):
-        ours._core.step_gym(np.zeros((4, 6), dtype=np.int64))
+    for other in (np.zeros((4, 6), dtype=np.int64), np.zeros((4, 5), dtype=np.float32), np.zeros(24), [[0.0] * 6] * 4):
+        assert ours._core.step_gym(other) is None
+    a = np.zeros((4, 6), dtype=np.int64)
+    out, expected = ours.step(a), ref.step(a.astype(np.float64))
+    for x, y in zip(out[:4], expected[:4]):
+        np.testing.assert_array_equal(x, y)
+    with pytest.raises(ValueError, match=r"actions shape \(4, 5\), expected \(4, 6\)"):
+        ours.step(np.zeros((4, 5), dtype=np.float32))
+    with pytest.raises(TypeError, match="actions dtype <U1 is not numeric"):
+        ours.step(np.full((4, 6), "a"))
 
 
 def test_same_numbers_on_one_thread_and_two():
