@@ -23,7 +23,6 @@ use rand::{RngCore, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 
 use super::{check_action, make, Env, EnvConfig, EnvError, EnvSpec, Info};
-use crate::numeric::denormals::{float_mode, set_float_mode};
 use crate::numeric::second_core::{self, OwnedHelper};
 
 /// The reset seed of episode `episode` of copy `copy` after a vector reset with `seed`: one ChaCha8
@@ -109,10 +108,11 @@ pub struct VecEnv {
     threads: usize,
     seed: u64,
     seeds: EpisodeSeeds,
-    /// The helper thread of two-thread steps made without a training thread's helper, started
-    /// on the first such step and kept: a thread spawned per step cost about as much as the
-    /// half of a small environment's step it took over.
-    helper: Option<OwnedHelper>,
+    /// The helper threads of steps on more than one thread made without a training thread's
+    /// helper (one per thread after the caller's), started on the first such step and kept: a
+    /// thread spawned per step cost about as much as the half of a small environment's step it
+    /// took over (a scoped spawn and join took 98 us on a 2-core KVM guest).
+    helpers: Vec<OwnedHelper>,
 }
 
 impl VecEnv {
@@ -128,7 +128,7 @@ impl VecEnv {
             .map(|_| make(config).map(|env| Copy { env, episodes: 0, actions: Vec::new() }))
             .collect::<Result<Vec<_>, _>>()?;
         let spec = copies[0].env.spec().clone();
-        Ok(VecEnv { copies, spec, threads: threads.max(1), seed: 0, seeds: default_seeds, helper: None })
+        Ok(VecEnv { copies, spec, threads: threads.max(1), seed: 0, seeds: default_seeds, helpers: Vec::new() })
     }
 
     /// Number of copies.
@@ -256,8 +256,9 @@ impl VecEnv {
     /// `f` on every copy, results in copy order. With two threads (the calling thread's helper,
     /// `numeric::second_core`, or this environment's own helper when `threads` is 2) both take
     /// copies as they come, from opposite ends; with more, copies are split into `threads`
-    /// contiguous blocks on scoped threads. Every thread computes with the caller's floating-point
-    /// mode (flush-to-zero), so a copy computes the same bits on any thread.
+    /// contiguous blocks, the caller stepping the first and this environment's kept helpers the
+    /// others. Every thread computes with the caller's floating-point mode (flush-to-zero), so a
+    /// copy computes the same bits on any thread.
     fn run<R: Send>(&mut self, f: impl Fn(usize, &mut Copy) -> R + Sync) -> Vec<R> {
         let n = self.copies.len();
         let threads = self.threads.min(n);
@@ -287,35 +288,49 @@ impl VecEnv {
             if training_helper {
                 second_core::join(from_first, from_last);
             } else {
-                self.helper.get_or_insert_with(OwnedHelper::start).join(from_first, from_last);
+                kept(&mut self.helpers, 1)[0].join(from_first, from_last);
             }
             return slots
                 .into_iter()
                 .map(|m| m.into_inner().unwrap_or_else(|p| p.into_inner()).1.expect("every copy was stepped"))
                 .collect();
         }
-        let block = n.div_ceil(threads);
-        let mode = float_mode();
-        let f = &f;
-        std::thread::scope(|scope| {
-            let mut blocks = self.copies.chunks_mut(block).enumerate();
-            // The caller steps the first block itself instead of waiting idle.
-            let (_, first) = blocks.next().expect("at least one copy");
-            let handles: Vec<_> = blocks
-                .map(|(b, copies)| {
-                    scope.spawn(move || {
-                        set_float_mode(mode);
-                        copies.iter_mut().enumerate().map(|(j, c)| f(b * block + j, c)).collect::<Vec<R>>()
-                    })
-                })
-                .collect();
-            let mut out: Vec<R> = first.iter_mut().enumerate().map(|(j, c)| f(j, c)).collect();
-            for h in handles {
-                out.extend(h.join().unwrap_or_else(|p| std::panic::resume_unwind(p)));
-            }
-            out
-        })
+        let size = n.div_ceil(threads);
+        let mut blocks: Vec<(usize, &mut [Copy])> =
+            self.copies.chunks_mut(size).enumerate().map(|(b, copies)| (b * size, copies)).collect();
+        let mut results: Vec<Vec<R>> = blocks.iter().map(|_| Vec::new()).collect();
+        let helpers = kept(&mut self.helpers, blocks.len() - 1);
+        run_blocks(helpers, &mut blocks, &mut results, &f);
+        results.into_iter().flatten().collect()
     }
+}
+
+/// The first `count` of `helpers`, started as needed.
+fn kept(helpers: &mut Vec<OwnedHelper>, count: usize) -> &mut [OwnedHelper] {
+    while helpers.len() < count {
+        helpers.push(OwnedHelper::start());
+    }
+    &mut helpers[..count]
+}
+
+/// Block 0 (first copy's index, copies) on this thread and block `k` on `helpers[k - 1]`, all at
+/// once, each block's results into its slot of `out`. Returns when every block is done.
+fn run_blocks<R: Send>(
+    helpers: &mut [OwnedHelper],
+    blocks: &mut [(usize, &mut [Copy])],
+    out: &mut [Vec<R>],
+    f: &(impl Fn(usize, &mut Copy) -> R + Sync),
+) {
+    let step_block = |(first, copies): &mut (usize, &mut [Copy]), out: &mut Vec<R>| {
+        *out = copies.iter_mut().enumerate().map(|(j, c)| f(*first + j, c)).collect();
+    };
+    let Some((helper, others)) = helpers.split_last_mut() else {
+        return step_block(&mut blocks[0], &mut out[0]);
+    };
+    // the last block on the last helper, the rest (nested, one helper fewer) meanwhile here
+    let (last_block, rest) = blocks.split_last_mut().expect("a block per helper and one more");
+    let (last_out, rest_out) = out.split_last_mut().expect("a slot per block");
+    helper.join(|| run_blocks(others, rest, rest_out, f), || step_block(last_block, last_out));
 }
 
 fn step_copy(
@@ -343,4 +358,36 @@ fn step_copy(
 
 fn in_copy(copy: usize, error: EnvError) -> EnvError {
     EnvError::InCopy { copy, source: Box::new(error) }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::thread::{current, sleep, ThreadId};
+    use std::time::Duration;
+
+    /// The thread that ran `run`'s closure for each copy, each copy taking long enough that the
+    /// helpers pick their blocks up (a block not picked up in time is run by the caller).
+    fn threads_of_copies(env: &mut VecEnv) -> Vec<ThreadId> {
+        env.run(|_, _| {
+            sleep(Duration::from_millis(20));
+            current().id()
+        })
+    }
+
+    #[test]
+    fn more_than_two_threads_step_their_blocks_on_kept_helpers() {
+        std::thread::spawn(|| {
+            let mut env = VecEnv::new(&EnvConfig::new("inverted-pendulum"), 5, 3).unwrap();
+            let first = threads_of_copies(&mut env);
+            // blocks of 2, 2 and 1 copies: the caller's first, then a helper each
+            let me = current().id();
+            assert_eq!(&first[..2], &[me, me]);
+            assert!(first[2] == first[3] && first[2] != me && first[4] != me && first[4] != first[2], "{first:?}");
+            // the same threads on the next step: kept, not spawned anew
+            assert_eq!(threads_of_copies(&mut env), first);
+        })
+        .join()
+        .unwrap();
+    }
 }
