@@ -103,17 +103,21 @@ impl InfoKeys {
 
     /// Whether these are the keys of `info`'s names.
     fn fit(&self, info: &Info) -> bool {
-        let same = |names: &[&str], pairs: &[(&str, f64)]| {
-            names.len() == pairs.len() && names.iter().zip(pairs).all(|(n, (k, _))| n == k)
-        };
-        same(&self.terms, &info.reward_terms) && same(&self.metrics, &info.metrics)
+        named(&info.reward_terms, self.terms.iter().copied()) && named(&info.metrics, self.metrics.iter().copied())
     }
 }
 
+/// Whether `pairs` are named `names`, in that order.
+fn named<'a>(pairs: &[(&str, f64)], names: impl ExactSizeIterator<Item = &'a str>) -> bool {
+    pairs.len() == names.len() && pairs.iter().zip(names).all(|((k, _), n)| *k == n)
+}
+
 fn columns_line_up(infos: &[Info]) -> bool {
-    let same = |a: &[(&str, f64)], b: &[(&str, f64)]| a.len() == b.len() && a.iter().zip(b).all(|(x, y)| x.0 == y.0);
     let first = &infos[0];
-    infos.iter().all(|i| same(&i.reward_terms, &first.reward_terms) && same(&i.metrics, &first.metrics))
+    infos.iter().all(|i| {
+        named(&i.reward_terms, first.reward_terms.iter().map(|(k, _)| *k))
+            && named(&i.metrics, first.metrics.iter().map(|(k, _)| *k))
+    })
 }
 
 fn batched_infos<'py>(py: Python<'py>, s: &VecStep, keys: &InfoKeys) -> PyResult<Bound<'py, PyDict>> {
