@@ -106,6 +106,48 @@ fn reward_terms_match_the_definition() {
 }
 
 #[test]
+fn a_speed_cap_pays_distance_up_to_it() {
+    // 0.05 m/s pays at most 0.5 mm per 0.01 s control step; the swinging legs move the base
+    // both less and more than that, so both sides of the cap are checked.
+    let cap = 0.05;
+    let opts = MinitaurOptions {
+        randomize_dynamics: false,
+        distance_weight: 2.0,
+        max_rewarded_speed: cap,
+        ..Default::default()
+    };
+    let mut e = env(opts);
+    e.reset(Some(1)).unwrap();
+    let dt = e.spec().dt;
+    assert!((dt - 0.01).abs() < 1e-12);
+    let (mut capped, mut paid_in_full) = (0, 0);
+    for t in 0..300 {
+        let before = e.base_position();
+        let a: Vec<f64> = (0..8).map(|i| ((t + i) as f64 * 0.7).sin() * 0.6).collect();
+        let s = e.step(&a).unwrap();
+        if s.terminated {
+            break;
+        }
+        let dx = e.base_position()[0] - before[0];
+        let got = s.info.term("distance").unwrap();
+        if dx > cap * dt {
+            capped += 1;
+            assert!((got - 2.0 * cap * dt).abs() < 1e-12, "step {t}: {got} for dx {dx}");
+        } else {
+            paid_in_full += 1;
+            assert!((got - 2.0 * dx).abs() < 1e-12, "step {t}: {got} for dx {dx}");
+        }
+        let sum: f64 = s.info.reward_terms.iter().map(|(_, v)| v).sum();
+        assert!((sum - s.reward).abs() < 1e-12);
+    }
+    assert!(capped > 10 && paid_in_full > 10, "{capped} capped, {paid_in_full} paid in full");
+
+    let bad = Minitaur::new(MinitaurOptions { max_rewarded_speed: -1.0, ..Default::default() });
+    let err = bad.err().expect("a negative cap is refused").to_string();
+    assert!(err.contains("max_rewarded_speed") && err.contains("-1"), "{err}");
+}
+
+#[test]
 fn fall_thresholds_end_the_episode() {
     // Legs fully retracted and swung hard: the robot drops below a strict height threshold.
     let mut e = env(MinitaurOptions { randomize_dynamics: false, fall_height: 0.17, ..Default::default() });

@@ -7,9 +7,10 @@ use crate::envs::EnvConfig;
 use crate::train::metrics::{self, MetricsRow};
 use crate::train::{read_run_config, RunConfig};
 
-/// Option keys that weight reward terms (what a reward sweep varies).
+/// Option keys that shape the reward: the terms' weights (what a reward sweep varies) and
+/// Minitaur's cap on the speed the distance term pays for.
 pub(crate) fn is_reward_weight(key: &str) -> bool {
-    key.ends_with("_weight") || key == "healthy_reward"
+    key.ends_with("_weight") || key == "healthy_reward" || key == "max_rewarded_speed"
 }
 
 /// `Run::reward_label` of a run with the env's default reward weights.

@@ -45,6 +45,9 @@ pub struct MinitaurOptions {
     pub drift_weight: f64,
     /// Weight of the vertical shaking cost.
     pub shake_weight: f64,
+    /// Forward speed (m/s) beyond which the distance term stops paying: each control step pays
+    /// for at most this speed times its duration. 0 pays for all distance, as PyBullet does.
+    pub max_rewarded_speed: f64,
     /// What the action commands: motor angles (PyBullet's default) or torques.
     pub action_mode: ActionMode,
     /// Fallen when the base's up vector has a world-z component below this.
@@ -116,6 +119,7 @@ impl Default for MinitaurOptions {
             energy_weight: 0.005,
             drift_weight: 0.0,
             shake_weight: 0.0,
+            max_rewarded_speed: 0.0,
             action_mode: ActionMode::Leg,
             fall_up_threshold: 0.85,
             fall_height: 0.13,
@@ -155,6 +159,7 @@ impl MinitaurOptions {
         c.non_negative("energy_weight", self.energy_weight)?;
         c.non_negative("drift_weight", self.drift_weight)?;
         c.non_negative("shake_weight", self.shake_weight)?;
+        c.non_negative("max_rewarded_speed", self.max_rewarded_speed)?;
         c.within("fall_up_threshold", self.fall_up_threshold, -1.0, 1.0)?;
         c.non_negative("fall_height", self.fall_height)?;
         c.positive_count("max_episode_steps", self.max_episode_steps)?;
@@ -471,7 +476,8 @@ impl Env for Minitaur {
         let velocities = self.motor_velocities();
         let power: f64 = self.observed_torque.iter().zip(&velocities).map(|(t, v)| t * v).sum();
         let o = &self.opts;
-        let distance = o.distance_weight * dx;
+        let paid_dx = if o.max_rewarded_speed > 0.0 { dx.min(o.max_rewarded_speed * self.core.spec.dt) } else { dx };
+        let distance = o.distance_weight * paid_dx;
         let energy = -o.energy_weight * power.abs() * SIM_DT;
         let drift = -o.drift_weight * dy.abs();
         let shake = -o.shake_weight * dz.abs();
