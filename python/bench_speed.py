@@ -15,7 +15,8 @@ core, with nothing shared and nothing to wait for. (1) to (4) take turns, thirty
 of STEPS each, and (5) to (8) ninety, in reverse order every other round: each rate is the median
 over the rounds, and each gain from a second thread or process is the median of the rounds' own
 ratios (the two runs of a ratio follow each other within a fraction of a second, so a shared
-machine's slow stretches cancel out of them). The binding's overhead per step is the median of
+machine's slow stretches cancel out of them), with a 95% percentile-bootstrap interval over the
+rounds (2000 resamples, seeded). The binding's overhead per step is the median of
 the rounds' (2) - (3). Zero actions; episodes reset when they end.
 
     python python/bench_speed.py [STEPS [ENV ...]]    (ENV: locobench names; default all four)
@@ -70,6 +71,8 @@ def rust_loop(env):
 
 
 VEC_COPIES = 8
+# What a second thread (or process) gives, each with its interval's bounds beside it.
+GAINS = ["vec8_2_threads_gain", "vec8_rust_2_threads_gain", "vec8_dicts_2_threads_gain", "vec8_rust_2_processes_gain"]
 
 
 def vec_loop(name, threads, dicts=False):
@@ -100,6 +103,16 @@ def interleaved(loops, n, rounds):
             loops[i](n)
             rates[i].append(n / (time.perf_counter() - start))
     return [np.array(r) for r in rates]
+
+
+def median_interval(ratios, resamples=2000, seed=0):
+    """The median of `ratios` and its 95% percentile-bootstrap interval: rounds drawn with
+    replacement, `resamples` times, from a generator seeded with `seed`."""
+    ratios = np.asarray(ratios, dtype=float)
+    rng = np.random.default_rng(seed)
+    medians = np.median(rng.choice(ratios, size=(resamples, len(ratios)), replace=True), axis=1)
+    low, high = np.percentile(medians, [2.5, 97.5])
+    return np.median(ratios), low, high
 
 
 def vec_rust_loop(name, threads, copies=VEC_COPIES):
@@ -176,7 +189,7 @@ def main():
           "gymnasium_steps_per_s,vec8_1_thread_steps_per_s,vec8_2_threads_steps_per_s,"
           "vec8_rust_1_thread_steps_per_s,vec8_rust_2_threads_steps_per_s,"
           "vec8_dicts_1_thread_steps_per_s,vec8_dicts_2_threads_steps_per_s,vec8_rust_2_processes_steps_per_s,"
-          "vec8_2_threads_gain,vec8_rust_2_threads_gain,vec8_dicts_2_threads_gain,vec8_rust_2_processes_gain")
+          + ",".join(f"{g},{g}_low,{g}_high" for g in GAINS))
     for name, gym_id in ENVS:
         if name not in names:
             continue
@@ -194,8 +207,8 @@ def main():
         processes.close()
         vec1, vec2, rust1, rust2, dicts1, dicts2, procs2 = runs
         rates = ",".join(f"{np.median(r):.0f}" for r in runs)
-        gains = ",".join(f"{np.median(two / one):.3f}" for two, one in
-                         ((vec2, vec1), (rust2, rust1), (dicts2, dicts1), (procs2, rust1)))
+        gains = ",".join(f"{v:.3f}" for two, one in ((vec2, vec1), (rust2, rust1), (dicts2, dicts1), (procs2, rust1))
+                         for v in median_interval(two / one))
         print(f"{name},{g:.0f},{raw:.0f},{rust:.0f},{overhead:.2f},{theirs:.0f},{rates},{gains}", flush=True)
 
 

@@ -204,3 +204,24 @@ def test_the_speed_benchmark_refuses_a_dev_build():
     out = subprocess.run([sys.executable, str(root / "python/bench_speed.py"), "10", "hopper", "walker"],
                          capture_output=True, text=True)
     assert out.returncode != 0 and out.stdout == "" and "unknown env 'walker'" in out.stderr, out.stderr
+
+
+def test_the_speed_benchmark_gives_each_gain_a_seeded_bootstrap_interval():
+    import importlib.util
+    import pathlib
+
+    import numpy as np
+
+    path = pathlib.Path(__file__).resolve().parents[2] / "python/bench_speed.py"
+    spec = importlib.util.spec_from_file_location("bench_speed", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    ratios = np.random.default_rng(7).normal(1.8, 0.05, size=90)
+    median, low, high = bench.median_interval(ratios)
+    assert median == np.median(ratios) and low < median < high
+    assert bench.median_interval(ratios) == (median, low, high), "the same seed gives the same interval"
+    assert bench.median_interval(ratios, seed=1) != (median, low, high)
+    # Four times the spread: an interval about four times as wide, around the same centre.
+    wide = bench.median_interval(1.8 + 4 * (ratios - 1.8))
+    assert 3 < (wide[2] - wide[1]) / (high - low) < 5
+    assert bench.median_interval(np.full(90, 1.75)) == (1.75, 1.75, 1.75)

@@ -4,7 +4,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
-use super::csv_rows::{comments, read};
+use super::csv_rows::{comments, read, Row};
 use crate::evaluation::stats::quantile;
 use crate::report::format::fixed;
 
@@ -156,21 +156,36 @@ pub(crate) fn python_speed(results: &Path) -> Result<String> {
         );
     }
     if rows.iter().any(|r| r.num("vec8_rust_2_processes_gain").is_finite()) {
-        out += "\nWhat a second thread gives the vector env, beside the same vector env looped in Rust, its former \
-                step (one info dict per copy, batched by Gymnasium's `_add_info`), and two processes each looping \
-                a vector env of half the copies in Rust on one thread (as many copies per core as two threads \
-                step): the machine's ceiling for a second core, with nothing shared. They took turns over ninety \
-                short rounds, in reverse order every other round; each gain is the median of the rounds' own ratios:\n\n\
-                | env | vector env, 2 threads / 1 | looped in Rust, 2 threads / 1 | former step, 2 threads / 1 | two processes / one |\n|---|---|---|---|---|\n";
+        // Files written before bench_speed.py gave intervals have the medians alone.
+        let with_intervals = rows.iter().all(|r| r.num("vec8_2_threads_gain_low").is_finite());
+        let _ = write!(
+            out,
+            "\nWhat a second thread gives the vector env, beside the same vector env looped in Rust, its former \
+             step (one info dict per copy, batched by Gymnasium's `_add_info`), and two processes each looping \
+             a vector env of half the copies in Rust on one thread (as many copies per core as two threads \
+             step): the machine's ceiling for a second core, with nothing shared. They took turns over ninety \
+             short rounds, in reverse order every other round; each gain is the median of the rounds' own \
+             ratios{}:\n\n\
+             | env | vector env, 2 threads / 1 | looped in Rust, 2 threads / 1 | former step, 2 threads / 1 | two processes / one |\n|---|---|---|---|---|\n",
+            if with_intervals { ", with its 95% bootstrap interval over the rounds" } else { "" },
+        );
+        let gain = |r: &Row, column: &str| {
+            let (low, high) = (r.num(&format!("{column}_low")), r.num(&format!("{column}_high")));
+            if with_intervals {
+                format!("{:.2}x [{low:.2}, {high:.2}]", r.num(column))
+            } else {
+                format!("{:.2}x", r.num(column))
+            }
+        };
         for r in &rows {
             let _ = writeln!(
                 out,
-                "| {} | {:.2}x | {:.2}x | {:.2}x | {:.2}x |",
+                "| {} | {} | {} | {} | {} |",
                 r.text("env"),
-                r.num("vec8_2_threads_gain"),
-                r.num("vec8_rust_2_threads_gain"),
-                r.num("vec8_dicts_2_threads_gain"),
-                r.num("vec8_rust_2_processes_gain"),
+                gain(r, "vec8_2_threads_gain"),
+                gain(r, "vec8_rust_2_threads_gain"),
+                gain(r, "vec8_dicts_2_threads_gain"),
+                gain(r, "vec8_rust_2_processes_gain"),
             );
         }
     }
