@@ -40,10 +40,12 @@ runs=(
   # 2M steps, policies at 1M and 2M; evaluated in the nominal env like every row
   $r/minitaur/ppo-robust-seed{0,1,2}-2m
   # The same with a random centre of mass (random_com_shift_max=0.15), 2M steps; with a wider one
-  # (0.25) from scratch, 2M steps; and the 0.15 runs' 2M actors fine-tuned with the wider one
+  # (0.25) from scratch, 2M steps; the 0.15 runs' 2M actors fine-tuned with the wider one; and
+  # fine-tuned so, with the distance term capped at 1.6 m/s (max_rewarded_speed), 500k and 1M
   $r/minitaur/ppo-robust-com-seed{0,1,2}-2m
   $r/minitaur/ppo-robust-com25-seed{0,1,2}-2m
   $r/minitaur/ppo-robust-com25-ft-seed{0,1,2}-500k
+  $r/minitaur/ppo-robust-com25-cap1.6-ft-seed{0,1,2}-{500k,1m}
   # SAC on Minitaur with Freeman's reward (no energy cost; drift weights 0, 0.5 and 1), 500k; CrossQ
   # with 256-wide critics, policies at 100k and 300k
   $r/minitaur/sac-energy0-*500k
