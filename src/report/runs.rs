@@ -9,7 +9,7 @@ use crate::train::{read_run_config, RunConfig};
 
 /// Option keys that shape the reward: the terms' weights (what a reward sweep varies) and
 /// Minitaur's cap on the speed the distance term pays for.
-pub(crate) fn is_reward_weight(key: &str) -> bool {
+pub(crate) fn is_reward_option(key: &str) -> bool {
     key.ends_with("_weight") || key == "healthy_reward" || key == "max_rewarded_speed"
 }
 
@@ -50,8 +50,8 @@ impl Run {
         self.config.train.algo.name()
     }
 
-    /// Reward weights that differ from the environment's defaults, e.g. `drift=0.25`, or
-    /// `DEFAULT_REWARD`.
+    /// Reward options that differ from the environment's defaults, e.g. `drift=0.25` or
+    /// `max_rewarded_speed=1.6`, or `DEFAULT_REWARD`.
     pub(crate) fn reward_label(&self) -> String {
         let defaults = EnvConfig::new(self.env()).resolved_options().unwrap_or_default();
         let mut changed: Vec<String> = self
@@ -59,7 +59,7 @@ impl Run {
             .env
             .options
             .iter()
-            .filter(|(k, v)| is_reward_weight(k) && defaults.get(*k) != Some(*v))
+            .filter(|(k, v)| is_reward_option(k) && defaults.get(*k) != Some(*v))
             .map(|(k, v)| format!("{}={}", k.trim_end_matches("_weight"), v))
             .collect();
         changed.sort();
@@ -87,7 +87,7 @@ impl Run {
         }
         let defaults = EnvConfig::new(self.env()).resolved_options().unwrap_or_default();
         for (k, v) in &self.config.env.options {
-            if !is_reward_weight(k) && defaults.get(k) != Some(v) {
+            if !is_reward_option(k) && defaults.get(k) != Some(v) {
                 changed.push(format!("{k}={v}"));
             }
         }
@@ -281,6 +281,11 @@ pub(crate) mod tests {
         shipped.dir = PathBuf::from("anything-seed2");
         assert_eq!(shipped.group().label(), "sac (drift=0.5)");
         assert_eq!(run("minitaur", Algo::Sac, "", &[]).variant_name(), "r");
+        // A speed cap is part of the reward, not a setting: such runs are not the default reward.
+        let capped = run("minitaur", Algo::Ppo, "", &[("max_rewarded_speed", "1.6"), ("random_push_max", "0.75")]);
+        assert_eq!(capped.reward_label(), "max_rewarded_speed=1.6");
+        assert_eq!(capped.settings_label(), "random_push_max=0.75");
+        assert_eq!(run("minitaur", Algo::Ppo, "", &[("max_rewarded_speed", "0")]).reward_label(), DEFAULT_REWARD);
     }
 
     #[test]
