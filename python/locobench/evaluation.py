@@ -31,19 +31,57 @@ def _core_env(env, options, reward):
     raise TypeError(f"env must be an env id, an env name or a locobench env, not {type(env).__name__}")
 
 
-def _act_function(policy, deterministic, act_dim):
-    """Observation (list of floats) -> action (list of floats), checked for shape and NaN."""
+def _observation_normalizer(vec_normalize, obs_dim):
+    """Observation -> observation normalised with the frozen statistics of an SB3 ``VecNormalize``
+    (or the path of its ``.pkl``), as SB3 evaluates a model trained behind one (``training=False``):
+    clip((obs - mean) / sqrt(var + epsilon), -clip_obs, clip_obs) as float32. None when it does not
+    normalise observations."""
+    where = ""
+    if isinstance(vec_normalize, (str, os.PathLike)):
+        import pickle
+
+        where = f" {os.fspath(vec_normalize)}"
+        with open(vec_normalize, "rb") as f:
+            try:
+                vec_normalize = pickle.load(f)
+            except Exception as e:  # an unpickling error can be of any type
+                raise ValueError(f"vec_normalize{where}: not a VecNormalize pickle ({type(e).__name__}: {e})") from e
+    if not getattr(vec_normalize, "norm_obs", True):
+        return None
+    rms = getattr(vec_normalize, "obs_rms", None)
+    if rms is None or isinstance(rms, dict) or not hasattr(rms, "mean") or not hasattr(rms, "var"):
+        raise ValueError(f"vec_normalize{where}: {type(vec_normalize).__name__} holds no observation statistics "
+                         "(obs_rms.mean and obs_rms.var of one vector observation)")
+    mean = np.asarray(rms.mean, dtype=np.float64)
+    var = np.asarray(rms.var, dtype=np.float64)
+    if mean.shape != (obs_dim,) or var.shape != (obs_dim,):
+        raise ValueError(f"vec_normalize{where}: its statistics cover observations of shape {mean.shape}; "
+                         f"the env's have ({obs_dim},)")
+    scale = np.sqrt(var + float(getattr(vec_normalize, "epsilon", 1e-8)))
+    clip = float(getattr(vec_normalize, "clip_obs", 10.0))
+
+    def normalize(observation):
+        return np.clip((np.asarray(observation, dtype=np.float64) - mean) / scale, -clip, clip).astype(np.float32)
+
+    return normalize
+
+
+def _act_function(policy, deterministic, act_dim, normalize=None):
+    """Observation (list of floats) -> action (list of floats), checked for shape and NaN;
+    ``normalize`` maps each observation first (a VecNormalize's frozen statistics)."""
     if isinstance(policy, TrainedPolicy):
         # The Rust actor's own float64 actions: the same bits as `locobench eval`.
         return policy._core.act
+    prepare = normalize or (lambda observation: observation)
     if hasattr(policy, "predict"):
         def predict(observation):
-            action, _ = policy.predict(np.asarray(observation, dtype=np.float32), deterministic=deterministic)
+            obs = np.asarray(prepare(observation), dtype=np.float32)
+            action, _ = policy.predict(obs, deterministic=deterministic)
             return action
         raw = predict
     elif callable(policy):
         def call(observation):
-            return policy(np.asarray(observation, dtype=np.float64))
+            return policy(np.asarray(prepare(observation), dtype=np.float64))
         raw = call
     else:
         raise TypeError(f"policy must have SB3's predict or be a callable, not {type(policy).__name__}")
@@ -98,14 +136,15 @@ def _meta(policy, label, author, policy_file, library, training_seed, steps):
 
 def evaluate(policy, env=None, *, episodes=50, seed=0, deterministic=True, options=None, reward=None,
              controller=False, pushes=(), out=None, label=None, author=None, policy_file=None, library=None,
-             training_seed=None, steps=None):
+             training_seed=None, steps=None, vec_normalize=None):
     """Plays ``policy`` on the protocol's held-out episodes and returns their statistics.
 
     ``policy``: anything with Stable-Baselines3's ``predict(obs, deterministic=...)``, a callable
     from observation to action, or a locobench policy (``load_policy``). ``env``: a Gymnasium id
     (``"locobench/Minitaur-v0"``), an env name (``"minitaur"``) with ``options`` and ``reward``
-    weights, or a locobench env; for a locobench policy it defaults to the env the policy was
-    trained in. The episodes are those of ``locobench eval --episodes EPISODES --seed SEED``
+    weights, or a locobench env. For a locobench policy it defaults to the world ``locobench
+    eval`` plays it in: the options it was trained with, its training perturbations switched off
+    (the nominal world), and ``options`` and ``reward`` on top, as ``eval --option --reward``. The episodes are those of ``locobench eval --episodes EPISODES --seed SEED``
     (fresh envs, reset seeds from the held-out stream), acted deterministically unless told.
 
     Returns a dict: ``return_mean`` and ``return_iqm`` as (estimate, low, high) with 95% bootstrap
@@ -116,6 +155,12 @@ def evaluate(policy, env=None, *, episodes=50, seed=0, deterministic=True, optio
     policy's mean speed on the same episodes, its statistics and ``policy_better``, P(policy's
     return > controller's) over the paired episodes. ``pushes`` (velocity changes in m/s) adds
     ``pushes``: {level: (survived, episodes, (rate, low, high))} under the evaluation's push.
+
+    ``vec_normalize``: the ``VecNormalize`` (or the path of its ``.pkl``) a model was trained
+    behind. Its frozen observation statistics normalise every observation before ``predict``, as
+    SB3's own evaluation does; without it a model trained so gets raw observations. Statistics of
+    another size than the env's observations are a ValueError. (A locobench policy carries its
+    own statistics and takes none.)
 
     ``out=DIR`` writes the episodes (``episodes.csv``) and their provenance (``external.toml``:
     ``label``, the library and its version, found from the policy's package unless
@@ -128,9 +173,10 @@ def evaluate(policy, env=None, *, episodes=50, seed=0, deterministic=True, optio
     if isinstance(policy, TrainedPolicy):
         training = policy._core.training
         if env is None:
-            core = _core.Env(policy.env_name, list(policy._core.env_options), [])
-            if options or reward:
-                raise ValueError("options and reward apply to an env given by name: pass env= as well")
+            # The world `locobench eval` builds: the run's options with its training
+            # perturbations off, then the options and reward weights given here on top.
+            pairs, weights = _core_arguments(options or {}, reward)
+            core = _core.Env(policy.env_name, list(policy._core.evaluation_options) + pairs, weights)
         else:
             core = _core_env(env, options, reward)
         if core.name != policy.env_name:
@@ -140,7 +186,13 @@ def evaluate(policy, env=None, *, episodes=50, seed=0, deterministic=True, optio
             raise ValueError("env is needed for a policy that is not a locobench policy")
         core = _core_env(env, options, reward)
     low, _ = core.action_bounds
-    act = _act_function(policy, deterministic, len(low))
+    normalize = None
+    if vec_normalize is not None:
+        if isinstance(policy, TrainedPolicy):
+            raise ValueError("vec_normalize is for models trained behind SB3's VecNormalize: a locobench policy "
+                             "normalises its observations itself")
+        normalize = _observation_normalizer(vec_normalize, len(core.observation_bounds[0]))
+    act = _act_function(policy, deterministic, len(low), normalize)
     meta = None
     if out is not None:
         meta = _meta(policy, label, author, policy_file, library, training_seed, steps)

@@ -63,11 +63,15 @@ class TrainedPolicy:
         self._core = _core.TrainedPolicy(os.fspath(path), budget, device)
         self.env_name = self._core.env
 
-    def make_env(self, **options):
-        """A Gymnasium env with the options the policy was trained with (and any given here)."""
+    def make_env(self, perturbed=False, **options):
+        """A Gymnasium env in the world ``locobench eval`` plays the policy in: the options it was
+        trained with, its training perturbations (pushes, terrain, latency, noise, random
+        dynamics) switched off, and any options given here on top. ``perturbed=True`` keeps the
+        training perturbations on."""
         from locobench.envs import ENV_IDS
 
-        return gym.make(ENV_IDS[self.env_name], _option_pairs=list(self._core.env_options), **options)
+        pairs = self._core.env_options if perturbed else self._core.evaluation_options
+        return gym.make(ENV_IDS[self.env_name], _option_pairs=list(pairs), **options)
 
     def predict(self, observation, state=None, episode_start=None, deterministic=True):
         """(action, state): the actor's action for one observation, in the env's bounds."""

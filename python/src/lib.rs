@@ -340,6 +340,7 @@ struct PyTrainedPolicy {
     agent: Box<dyn locobench::agents::Agent>,
     env: String,
     env_options: Vec<(String, String)>,
+    evaluation_options: Vec<(String, String)>,
     low: Vec<f64>,
     high: Vec<f64>,
     obs_dim: usize,
@@ -359,10 +360,12 @@ impl PyTrainedPolicy {
             locobench::train::resolve_policy(&path, budget).and_then(|p| p.load_on(device)).map_err(runtime_error)?;
         let env = make(&run.env).map_err(value_error)?;
         let spec = env.spec();
+        let pairs = |cfg: &EnvConfig| cfg.options.iter().map(|(k, v)| (k.clone(), v.to_string())).collect();
         Ok(PyTrainedPolicy {
             agent,
             env: run.env.name.clone(),
-            env_options: run.env.options.iter().map(|(k, v)| (k.clone(), v.to_string())).collect(),
+            env_options: pairs(&run.env),
+            evaluation_options: pairs(&run.env.for_evaluation()),
             low: spec.action_space.low.clone(),
             high: spec.action_space.high.clone(),
             obs_dim: spec.observation_space.dim(),
@@ -383,10 +386,19 @@ impl PyTrainedPolicy {
         self.env.clone()
     }
 
-    /// The options of the env it was trained on, as (key, TOML value) pairs.
+    /// The options of the env it was trained on, as (key, TOML value) pairs, its training
+    /// perturbations included.
     #[getter]
     fn env_options(&self) -> Vec<(String, String)> {
         self.env_options.clone()
+    }
+
+    /// The options of the env it is evaluated in, as (key, TOML value) pairs: the training
+    /// options with the perturbations switched off (`EnvConfig::for_evaluation`), the world
+    /// `locobench eval`, `report` and `record` play it in.
+    #[getter]
+    fn evaluation_options(&self) -> Vec<(String, String)> {
+        self.evaluation_options.clone()
     }
 
     /// The deterministic action for one observation, in the env's action bounds.

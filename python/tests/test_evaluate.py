@@ -13,15 +13,54 @@ ROOT = pathlib.Path(__file__).resolve().parents[2]
 PPO = ROOT / "models" / "policies" / "minitaur-ppo"
 
 
-def test_a_locobench_policy_gets_the_figures_locobench_eval_prints(binary):
-    result = locobench.evaluate(locobench.load_policy(PPO), episodes=4, seed=3)
-    printed = subprocess.run([str(binary), "eval", "--policy", str(PPO), "--episodes", "4", "--seed", "3"],
+SHIPPED = sorted(p for p in (ROOT / "models" / "policies").iterdir() if (p / "policy.safetensors").is_file())
+
+
+def test_every_policy_that_ships_is_tested_here():
+    names = {p.name for p in SHIPPED}
+    assert {"minitaur-ppo", "minitaur-ppo-robust", "minitaur-ppo-robust-com", "minitaur-sac", "minitaur-td3"} <= names
+
+
+@pytest.mark.parametrize("shipped", SHIPPED, ids=lambda p: p.name)
+def test_a_locobench_policy_gets_the_figures_locobench_eval_prints(binary, shipped):
+    """Digit for digit, for every shipped policy: the robust ones trained under pushes, rough
+    ground, latency and noise are scored in the nominal world by both."""
+    result = locobench.evaluate(locobench.load_policy(shipped), episodes=4, seed=3)
+    printed = subprocess.run([str(binary), "eval", "--policy", str(shipped), "--episodes", "4", "--seed", "3"],
                              check=True, capture_output=True, text=True).stdout.splitlines()
     assert printed[0].endswith("4 held-out episodes (protocol seed 3)")
     assert result["text"].splitlines() == printed[1:]
     assert result["episodes"] == 4 and len(result["episode_returns"]) == 4
     low, high = result["return_mean"][1:]
     assert low <= result["return_mean"][0] <= high
+
+
+def test_options_and_reward_over_a_policys_world_agree_with_eval_option_and_reward(binary):
+    """`evaluate(policy, options=..., reward=...)` lays them over the policy's evaluation world, as
+    `eval --option --reward` does; the training perturbations stay off."""
+    robust = ROOT / "models" / "policies" / "minitaur-ppo-robust"
+    result = locobench.evaluate(locobench.load_policy(robust), episodes=2, seed=3, options={"payload_mass": 1.0},
+                                reward={"energy": 0.0})
+    printed = subprocess.run([str(binary), "eval", "--policy", str(robust), "--episodes", "2", "--seed", "3",
+                              "--option", "payload_mass=1.0", "--reward", "energy=0"],
+                             check=True, capture_output=True, text=True).stdout.splitlines()
+    assert result["text"].splitlines() == printed[1:]
+    assert result["reward_terms"]["energy"] == 0.0
+
+
+def test_a_robust_policys_env_is_nominal_unless_asked():
+    policy = locobench.load_policy(ROOT / "models" / "policies" / "minitaur-ppo-robust")
+    training = dict(policy._core.env_options)
+    nominal = dict(policy._core.evaluation_options)
+    perturbations = set(training) - set(nominal)
+    assert perturbations, "the robust policy trained under perturbations"
+    assert all(nominal[k] == training[k] for k in nominal)
+    default = locobench.LocobenchEnv("minitaur")._core
+    env = policy.make_env().unwrapped._core
+    assert all(env.option_value(k) == default.option_value(k) for k in perturbations), perturbations
+    assert any(default.option_value(k) != training[k] for k in perturbations)
+    perturbed = policy.make_env(perturbed=True).unwrapped._core
+    assert all(perturbed.option_value(k) == training[k] for k in perturbations)
 
 
 def test_any_callable_or_predict_plays_the_same_episodes():
