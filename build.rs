@@ -44,8 +44,64 @@ fn record_git_commit() {
     }
 }
 
+/// Every file under `root` (recursively, sorted), skipping the folders named in `skip`.
+fn files_under(root: &Path, skip: &[&str], out: &mut Vec<PathBuf>) {
+    let Ok(entries) = std::fs::read_dir(root) else { return };
+    let mut paths: Vec<PathBuf> = entries.flatten().map(|e| e.path()).collect();
+    paths.sort();
+    for path in paths {
+        if skip.iter().any(|s| path == Path::new(s)) {
+            continue;
+        }
+        if path.is_dir() {
+            files_under(&path, skip, out);
+        } else {
+            out.push(path);
+        }
+    }
+}
+
+/// SHA-256 over the paths and bytes of `files`, as hex.
+fn digest_of(files: &[PathBuf]) -> String {
+    use sha2::{Digest, Sha256};
+    let mut hash = Sha256::new();
+    for f in files {
+        hash.update(f.to_string_lossy().as_bytes());
+        hash.update([0]);
+        hash.update(std::fs::read(f).unwrap_or_else(|e| fail(&format!("reading {}: {e}", f.display()))));
+        hash.update([0]);
+    }
+    hash.finalize().iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// Versions of the code that decides an evaluation's numbers and a clip's pixels, for the
+/// report's evaluation cache (`evaluation::cache`): a digest of the source files, so any edit
+/// that could change an episode changes the version and no cached number outlives it.
+/// `LOCOBENCH_EVAL_CODE`: everything the episodes depend on (physics, envs, models, agents,
+/// controller, protocol, the dependency versions), not the report's tables, the CLI, sweeps or
+/// docs. `LOCOBENCH_CLIP_CODE`: that, the renderer and the report's clip code.
+fn record_code_versions() {
+    for path in ["src", "models", "Cargo.toml", "Cargo.lock"] {
+        println!("cargo:rerun-if-changed={path}");
+    }
+    let mut eval = Vec::new();
+    files_under(
+        Path::new("src"),
+        &["src/report", "src/cli", "src/docgen", "src/sweep", "src/record", "src/render", "src/main.rs", "src/args.rs"],
+        &mut eval,
+    );
+    files_under(Path::new("models"), &["models/policies"], &mut eval);
+    eval.extend(["build.rs", "Cargo.toml", "Cargo.lock"].map(PathBuf::from));
+    let mut clip = eval.clone();
+    files_under(Path::new("src/render"), &[], &mut clip);
+    clip.extend(["src/report/videos.rs", "src/report/robustness_clips.rs"].map(PathBuf::from));
+    println!("cargo:rustc-env=LOCOBENCH_EVAL_CODE={}", digest_of(&eval));
+    println!("cargo:rustc-env=LOCOBENCH_CLIP_CODE={}", digest_of(&clip));
+}
+
 fn main() {
     println!("cargo:rerun-if-changed=build.rs");
+    record_code_versions();
     println!("cargo:rerun-if-changed=src/mujoco/shim.c");
     println!("cargo:rerun-if-env-changed=MUJOCO_INCLUDE_DIR");
     println!("cargo:rerun-if-env-changed=MUJOCO_LIB_DIR");

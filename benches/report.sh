@@ -4,7 +4,12 @@
 # 20 per push level); runs kept as config.toml + metrics.csv only give learning curves and are
 # listed as having no policy. Each algorithm's best row is filmed (report --videos) unless
 # LOCOBENCH_REPORT_VIDEOS=0. LOCOBENCH=BINARY runs that binary instead of building one.
-# About 10 minutes on 2 cores without videos (benches/report_timing.sh measures both).
+#
+# Evaluations and clips are kept in an evaluation cache (LOCOBENCH_REPORT_CACHE, default
+# benches/results/report-cache, committed beside the report): a regeneration with nothing new
+# reads every number from it and keeps every clip already in OUT/videos, so only new runs are
+# evaluated; entries this report does not use are pruned. LOCOBENCH_REPORT_CACHE=off computes
+# everything (report --no-cache). benches/report_timing.sh measures it cold and warm.
 #
 #   bash benches/report.sh [OUT] [REPORT OPTIONS...]      (default benches/results/report)
 set -euo pipefail
@@ -69,5 +74,10 @@ for f in robustness.csv ant/robustness.csv; do
   suite=$(ls -d $r/20??-??-??-*/$f 2>/dev/null | sort | tail -1)
   [ -n "$suite" ] && robustness+=(--robustness "$(dirname "$suite")")
 done
-rm -rf "$out"  # no chart of an earlier layout left behind
-"$bin" report --runs "${existing[@]}" "${external[@]}" --out "$out" "${videos[@]}" "${robustness[@]}" "${@:2}"
+cache=${LOCOBENCH_REPORT_CACHE:-benches/results/report-cache}
+if [ "$cache" = off ]; then cache_args=(--no-cache); else cache_args=(--cache "$cache" --prune-cache); fi
+# No chart of an earlier layout left behind: everything goes but the clips, which the report
+# keeps where the cache vouches for their bytes and removes where it shows them no more.
+if [ -d "$out" ]; then find "$out" -mindepth 1 -maxdepth 1 ! -name videos -exec rm -rf {} +; fi
+"$bin" report --runs "${existing[@]}" "${external[@]}" --out "$out" "${videos[@]}" "${robustness[@]}" \
+  "${cache_args[@]}" "${@:2}"

@@ -93,7 +93,12 @@ fn main() -> Result<()> {
     let threads = var("LOCOBENCH_ROBUSTNESS_THREADS")
         .map_or(Ok(locobench::evaluation::parallel::default_threads()), |v| v.parse())
         .context("threads")?;
-    let suite = Suite { env, axes, protocol: Protocol { episodes, seed }, threads };
+    // LOCOBENCH_ROBUSTNESS_CACHE: an evaluation cache directory (`robustness --cache`).
+    let cache = match var("LOCOBENCH_ROBUSTNESS_CACHE") {
+        Some(dir) => locobench::evaluation::EvalCache::open(std::path::Path::new(&dir))?,
+        None => locobench::evaluation::EvalCache::off(),
+    };
+    let suite = Suite { env, axes, protocol: Protocol { episodes, seed }, threads, cache };
     let env_var = if env_name == "minitaur" { String::new() } else { format!("LOCOBENCH_ROBUSTNESS_ENV={env_name} ") };
     let command = format!(
         "{env_var}LOCOBENCH_ROBUSTNESS_POLICIES={policies} LOCOBENCH_ROBUSTNESS_EPISODES={episodes} \

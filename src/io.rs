@@ -35,6 +35,29 @@ pub fn write_bytes_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
     write_atomic(path, |w| Ok(w.write_all(bytes)?))
 }
 
+/// SHA-256 of `bytes`, as lowercase hex.
+pub fn sha256_hex(bytes: &[u8]) -> String {
+    use sha2::Digest;
+    hex(&sha2::Sha256::digest(bytes))
+}
+
+fn hex(bytes: &[u8]) -> String {
+    bytes.iter().map(|b| format!("{b:02x}")).collect()
+}
+
+/// SHA-256 over the bytes of `files` in order (each prefixed by its length), as lowercase hex;
+/// an unreadable file is an error naming it.
+pub fn files_digest(files: &[std::path::PathBuf]) -> Result<String> {
+    use sha2::Digest;
+    let mut hash = sha2::Sha256::new();
+    for f in files {
+        let bytes = std::fs::read(f).with_context(|| format!("reading {}", f.display()))?;
+        hash.update((bytes.len() as u64).to_le_bytes());
+        hash.update(&bytes);
+    }
+    Ok(hex(&hash.finalize()))
+}
+
 /// Whether `name` is one of [`write_atomic`]'s temporary files (tempfile's `.tmp` and six
 /// letters or digits), which only a killed writer leaves behind.
 pub fn is_temporary_name(name: &str) -> bool {

@@ -146,30 +146,108 @@ fn sweep_then_report_evaluates_every_run_at_its_budget_beside_the_controller() {
         assert!(seconds > 0.0 && seconds <= 0.4 + 1e-9, "{seconds}");
     }
 
-    // The same report, number for number, on one thread.
+    // The same report, byte for byte, on one thread and computed again without the cache.
+    let first = report_files(&report);
+    let cache = report.join(".cache");
+    assert!(std::fs::read_dir(&cache).unwrap().count() > 0, "the default cache is OUT/.cache");
     let again = dir.path().join("report-1");
-    let (ok, out, err) = locobench(&[
+    let report_at = |out: &std::path::Path, extra: &[&str]| {
+        let mut args = vec![
+            "report",
+            "--runs",
+            s,
+            "--out",
+            out.to_str().unwrap(),
+            "--episodes",
+            "2",
+            "--push-episodes",
+            "1",
+            "--videos",
+        ];
+        args.extend_from_slice(extra);
+        let (ok, stdout, err) = locobench(&args);
+        assert!(ok, "{stdout}\n{err}");
+        (stdout, err)
+    };
+    let (printed, _) = report_at(&again, &["--threads", "1", "--no-cache"]);
+    assert!(!printed.contains("evaluation cache") && !again.join(".cache").exists(), "--no-cache keeps nothing");
+    assert_eq!(report_files(&again), first, "recomputed without the cache");
+
+    // Again into the same directory: everything read from the cache, nothing computed, the
+    // same bytes (videos included).
+    let (printed, _) = report_at(&report, &[]);
+    assert!(printed.contains(" read, 0 computed"), "{printed}");
+    assert_eq!(report_files(&report), first, "read from the cache");
+
+    // A damaged entry is recomputed with a warning, to the same numbers.
+    let entry = std::fs::read_dir(&cache).unwrap().flatten().map(|e| e.path()).find(|p| p.is_file()).unwrap();
+    let text = std::fs::read_to_string(&entry).unwrap();
+    std::fs::write(&entry, &text[..text.len() / 2]).unwrap();
+    let (printed, err) = report_at(&report, &[]);
+    assert!(
+        err.contains("is damaged") && err.contains(&entry.file_name().unwrap().to_string_lossy().to_string()),
+        "{err}"
+    );
+    assert!(printed.contains(" read, 1 computed (1 damaged entries recomputed)"), "{printed}");
+    assert_eq!(report_files(&report), first);
+    assert_eq!(std::fs::read_to_string(&entry).unwrap(), text, "rewritten whole");
+
+    // Another policy's bytes in one run: its evaluations (and only those) are computed afresh.
+    let runs = sweep.join("runs");
+    std::fs::copy(
+        runs.join("sac-drift0-seed1/policies/step-240.safetensors"),
+        runs.join("sac-drift0-seed0/policies/step-240.safetensors"),
+    )
+    .unwrap();
+    let (printed, _) = report_at(&report, &[]);
+    let computed: usize = printed
+        .split(" computed")
+        .next()
+        .and_then(|p| p.rsplit(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or_else(|| panic!("{printed}"));
+    assert!(computed >= 1, "{printed}");
+    assert!(!printed.contains(" 0 read"), "the other runs are read: {printed}");
+    assert_ne!(report_files(&report)["held_out.csv"], first["held_out.csv"], "the changed run's row changed");
+
+    // A cache directory that cannot be written: an error naming it, and no report written.
+    let blocked = dir.path().join("blocked");
+    std::fs::write(&blocked, "a file").unwrap();
+    let bad_cache = blocked.join("cache");
+    let elsewhere = dir.path().join("report-2");
+    let (ok, _, err) = locobench(&[
         "report",
         "--runs",
         s,
         "--out",
-        again.to_str().unwrap(),
+        elsewhere.to_str().unwrap(),
         "--episodes",
         "2",
-        "--push-episodes",
-        "1",
-        "--threads",
-        "1",
-        "--videos",
+        "--cache",
+        bad_cache.to_str().unwrap(),
     ]);
-    assert!(ok, "{out}\n{err}");
-    for file in ["README.md", "held_out.csv", "controller.csv"] {
-        assert_eq!(
-            std::fs::read_to_string(report.join(file)).unwrap(),
-            std::fs::read_to_string(again.join(file)).unwrap(),
-            "{file}"
-        );
+    assert!(!ok && err.contains(bad_cache.to_str().unwrap()), "{err}");
+    assert!(!elsewhere.join("index.html").exists());
+}
+
+/// Every file of a report directory (its cache aside) with its bytes, by path relative to it.
+fn report_files(dir: &std::path::Path) -> std::collections::BTreeMap<String, Vec<u8>> {
+    let mut out = std::collections::BTreeMap::new();
+    let mut stack = vec![dir.to_path_buf()];
+    while let Some(d) = stack.pop() {
+        for e in std::fs::read_dir(&d).unwrap().flatten() {
+            let path = e.path();
+            if path.is_dir() {
+                if e.file_name() != ".cache" {
+                    stack.push(path);
+                }
+            } else {
+                let rel = path.strip_prefix(dir).unwrap().to_string_lossy().to_string();
+                out.insert(rel, std::fs::read(&path).unwrap());
+            }
+        }
     }
+    out
 }
 
 /// A run whose policy file is damaged is a line in the report, not a panic or a silent gap.

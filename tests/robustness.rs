@@ -61,6 +61,20 @@ fn a_small_suite_writes_every_cell_the_same_on_any_thread_count() {
     let text = |d: &std::path::Path| std::fs::read_to_string(d.join("robustness.csv")).unwrap();
     assert!(text(&a) == text(&b), "thread count changes nothing");
 
+    // With an evaluation cache, a second suite reads every cell's episodes: the same file.
+    let cache = dir.path().join("cache");
+    let cached = |out: &str, threads: &str| {
+        let (ok, stdout, err) =
+            suite_of(&format!("ppo={PPO}"), &dir.path().join(out), threads, &["--cache", cache.to_str().unwrap()]);
+        assert!(ok, "{err}");
+        stdout
+    };
+    let first = cached("cached-1", "2");
+    assert!(first.contains("evaluation cache") && first.contains(" 0 read, 20 computed"), "{first}");
+    let second = cached("cached-2", "1");
+    assert!(second.contains(" 20 read, 0 computed"), "{second}");
+    assert!(text(&dir.path().join("cached-1")) == text(&a) && text(&dir.path().join("cached-2")) == text(&a));
+
     // --reuse keeps a cell only where its label still names the same policy: the same suite takes
     // every cell; the label "ppo" moved to another policy plays that policy's cells again.
     let reuse = |out: &std::path::Path, policy: &str| {

@@ -2,7 +2,7 @@ use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::Result;
-use locobench::evaluation::Protocol;
+use locobench::evaluation::{EvalCache, Protocol};
 use locobench::report::format::{budget, interval};
 use locobench::report::{fmt_return, write_report, ReportOptions};
 
@@ -42,6 +42,18 @@ pub struct ReportArgs {
     /// summary, goal check and one chart per axis.
     #[arg(long, num_args = 1.., value_name = "DIR")]
     pub robustness: Vec<PathBuf>,
+    /// Where held-out episodes, controller speeds and clips are kept between reports (default
+    /// OUT/.cache): each entry is keyed by everything that decides its numbers (the policy's
+    /// bytes, the env and its options and reward, the protocol, the push, the kernels and the
+    /// version of the code), so a report with little new evaluates only what is new.
+    #[arg(long, value_name = "DIR", conflicts_with = "no_cache")]
+    pub cache: Option<PathBuf>,
+    /// Compute everything again and keep nothing (the report is the same bytes as a cached one).
+    #[arg(long)]
+    pub no_cache: bool,
+    /// After the report, remove the cache entries it did not use (older code, runs or options).
+    #[arg(long, conflicts_with = "no_cache")]
+    pub prune_cache: bool,
     /// Protocol seed: picks the held-out reset seeds.
     #[command(flatten)]
     pub seed: super::SeedArg,
@@ -55,6 +67,11 @@ pub fn run(args: ReportArgs) -> Result<()> {
         println!("wrote {} ({clips} clips in training order)", index.display());
         return Ok(());
     }
+    let cache = if args.no_cache {
+        EvalCache::off()
+    } else {
+        EvalCache::open(&args.cache.clone().unwrap_or_else(|| args.out.join(".cache")))?
+    };
     let opts = ReportOptions {
         protocol: Protocol { episodes: args.episodes, seed: args.seed.seed },
         push_episodes: args.push_episodes,
@@ -62,6 +79,7 @@ pub fn run(args: ReportArgs) -> Result<()> {
         videos: args.videos,
         external: args.external.clone(),
         robustness: args.robustness.clone(),
+        cache: cache.clone(),
     };
     let report = write_report(&args.runs, &args.out, &opts)?;
     for (env, rows) in &report.rows {
@@ -74,6 +92,16 @@ pub fn run(args: ReportArgs) -> Result<()> {
                 interval(r.mean_return(locobench::report::BOOTSTRAP_SEED).interval, fmt_return)
             );
         }
+    }
+    if let Some(dir) = cache.dir() {
+        let (read, computed, damaged) = cache.counts();
+        let pruned = if args.prune_cache { cache.prune_unused()? } else { 0 };
+        println!(
+            "evaluation cache {}: {read} read, {computed} computed{}{}",
+            dir.display(),
+            if damaged > 0 { format!(" ({damaged} damaged entries recomputed)") } else { String::new() },
+            if args.prune_cache { format!(", {pruned} unused removed") } else { String::new() }
+        );
     }
     println!(
         "wrote {} and {} in {:.0} s",

@@ -3,7 +3,7 @@ use std::path::PathBuf;
 use anyhow::Result;
 use locobench::envs::EnvConfig;
 use locobench::evaluation::robustness::{output, select, Contender, ControllerChoice, Suite};
-use locobench::evaluation::{Protocol, DEFAULT_EPISODES};
+use locobench::evaluation::{EvalCache, Protocol, DEFAULT_EPISODES};
 
 #[derive(clap::Args, Debug)]
 pub struct RobustnessArgs {
@@ -39,6 +39,11 @@ pub struct RobustnessArgs {
     /// committed suite).
     #[arg(long, value_name = "DIR")]
     pub reuse: Option<PathBuf>,
+    /// Keep each contender's episodes on each cell in this evaluation cache (the one `report
+    /// --cache` takes), and read those it already holds: a suite run again, or one sharing cells
+    /// with an earlier one, plays only what is new.
+    #[arg(long, value_name = "DIR")]
+    pub cache: Option<PathBuf>,
 }
 
 pub fn run(args: RobustnessArgs) -> Result<()> {
@@ -49,6 +54,10 @@ pub fn run(args: RobustnessArgs) -> Result<()> {
         axes: select(&args.env, &args.axes)?,
         protocol: Protocol { episodes: args.episodes, seed: args.seed },
         threads: args.threads.unwrap_or_else(locobench::evaluation::parallel::default_threads),
+        cache: match &args.cache {
+            Some(dir) => EvalCache::open(dir)?,
+            None => EvalCache::off(),
+        },
     };
     let command = std::env::args().collect::<Vec<_>>().join(" ");
     let (reuse, from) = match &args.reuse {
@@ -65,6 +74,11 @@ pub fn run(args: RobustnessArgs) -> Result<()> {
     let controller = cells.iter().find(|c| c.kind == "controller").map(|c| c.policy.clone());
     for line in output::summary_lines(&cells, &suite.axes, controller.as_deref()) {
         println!("{line}");
+    }
+    if let Some(dir) = suite.cache.dir() {
+        let (read, computed, damaged) = suite.cache.counts();
+        let damaged = if damaged > 0 { format!(" ({damaged} damaged entries recomputed)") } else { String::new() };
+        println!("evaluation cache {}: {read} read, {computed} computed{damaged}", dir.display());
     }
     println!(
         "{} cells x {} episodes in {:.0} s -> {}",

@@ -59,6 +59,8 @@ pub struct ControllerFamily {
     cache: BTreeMap<(i64, i64), SpeedPoint>,
     /// Speeds evaluated at once.
     pub threads: usize,
+    /// Where evaluated speeds are kept across processes (off unless set).
+    pub disk: super::cache::EvalCache,
 }
 
 fn round_speed(speed: f64) -> f64 {
@@ -85,6 +87,7 @@ impl ControllerFamily {
             protocol,
             cache: BTreeMap::new(),
             threads: super::parallel::default_threads(),
+            disk: super::cache::EvalCache::off(),
         })
     }
 
@@ -107,12 +110,16 @@ impl ControllerFamily {
             .map(|&(s, p)| (round_speed(s), p))
             .collect();
         missing.dedup_by_key(|(s, p)| key(*s, *p));
-        let (cfg, protocol) = (&self.env_config, &self.protocol);
+        let (cfg, protocol, disk) = (&self.env_config, &self.protocol, &self.disk);
         let points = super::parallel::map_in_order(&missing, self.threads, |&(speed, push)| -> Result<SpeedPoint> {
-            let mut env = make(cfg)?;
-            let mut controller = baseline_controller(&cfg.name, speed, None)?;
             let profile = SpeedProfile::ramp(speed, RAMP_TIME);
-            let episodes = protocol.run(env.as_mut(), controller.as_mut(), Some(&profile), push)?;
+            let key =
+                super::cache::Key::episodes(cfg, protocol, &format!("controller {speed:?}"), Some(&profile), push)?;
+            let episodes = disk.episodes(&key, || {
+                let mut env = make(cfg)?;
+                let mut controller = baseline_controller(&cfg.name, speed, None)?;
+                protocol.run(env.as_mut(), controller.as_mut(), Some(&profile), push)
+            })?;
             Ok(SpeedPoint { commanded: speed, episodes })
         })?;
         for ((speed, push), point) in missing.into_iter().zip(points) {

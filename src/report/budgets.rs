@@ -26,6 +26,14 @@ impl PolicySource {
             PolicySource::Shipped(_) => load_policy(run_dir),
         }
     }
+
+    /// SHA-256 over the policy file and the run's `config.toml` (the evaluation cache's key).
+    pub fn digest(&self, run_dir: &Path) -> Result<String> {
+        let file = match self {
+            PolicySource::BudgetFile(f) | PolicySource::Shipped(f) => f.clone(),
+        };
+        crate::io::files_digest(&[file, run_dir.join("config.toml")])
+    }
 }
 
 /// The step of an exported policy, from the `step = N` line of its `source.toml`.
@@ -35,6 +43,17 @@ pub(crate) fn shipped_step(run_dir: &Path) -> Option<u64> {
     }
     crate::train::policy_ref::exported_step(run_dir)
 }
+
+/// An exported policy whose `source.toml` states no step (one imported from elsewhere without
+/// its budget): its one row is at [`UNKNOWN_BUDGET`].
+fn exported_without_step(run: &Run) -> bool {
+    run.dir.join(crate::train::checkpoint::POLICY_FILE).is_file()
+        && shipped_step(&run.dir).is_none()
+        && run.metrics.is_empty()
+}
+
+/// The budget of a policy whose training steps are not known (`format::budget` writes it so).
+pub const UNKNOWN_BUDGET: u64 = 0;
 
 /// The furthest step a run reached (its metrics, or its exported policy's step).
 pub fn reached(run: &Run) -> u64 {
@@ -47,7 +66,7 @@ pub(crate) fn policy_at(run: &Run, budget: u64) -> Result<PolicySource, String> 
     if file.is_file() {
         return Ok(PolicySource::BudgetFile(file));
     }
-    if shipped_step(&run.dir) == Some(budget) {
+    if shipped_step(&run.dir) == Some(budget) || (budget == UNKNOWN_BUDGET && exported_without_step(run)) {
         return Ok(PolicySource::Shipped(run.dir.join(crate::train::checkpoint::POLICY_FILE)));
     }
     let held = crate::train::budget_policy_steps(&run.dir);
@@ -65,10 +84,17 @@ pub(crate) fn policy_at(run: &Run, budget: u64) -> Result<PolicySource, String> 
 /// The budgets a set of runs is reported at: each standard budget some run reached; the full
 /// budget of each run trained to one off the standard list (e.g. 500k, where a published result
 /// sits) and kept its actor there; and the last step of each run that reached no standard budget
-/// (short runs), so that every run appears in some row.
+/// (short runs), so that every run appears in some row. An imported policy has one row, at the
+/// step its `source.toml` states (or [`UNKNOWN_BUDGET`]).
 pub fn budgets(runs: &[&Run]) -> Vec<u64> {
-    let mut out: Vec<u64> = POLICY_BUDGETS.iter().copied().filter(|&b| runs.iter().any(|r| reached(r) >= b)).collect();
+    // A policy imported from elsewhere is reported at the step its source states, and only there.
+    let (imported, runs): (Vec<&Run>, Vec<&Run>) = runs.iter().copied().partition(|r| r.imported.is_some());
+    let mut out: Vec<u64> = imported.iter().map(|r| shipped_step(&r.dir).unwrap_or(UNKNOWN_BUDGET)).collect();
+    out.extend(POLICY_BUDGETS.iter().copied().filter(|&b| runs.iter().any(|r| reached(r) >= b)));
     for r in runs {
+        if exported_without_step(r) {
+            out.push(UNKNOWN_BUDGET);
+        }
         let last = reached(r);
         if last < POLICY_BUDGETS[0] && last > 0 {
             out.push(last);

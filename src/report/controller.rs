@@ -97,9 +97,11 @@ pub(crate) fn controller_section(
     protocol: &Protocol,
     seed: u64,
     threads: usize,
+    cache: &crate::evaluation::EvalCache,
 ) -> Result<ControllerSection> {
     let mut family = ControllerFamily::new(env_config, *protocol)?;
     family.threads = threads;
+    family.disk = cache.clone();
     let grid = family.sweep(GRID_STEP, GRID_MAX)?;
     let best = best_point(&grid);
     let matchable = || rows.iter().enumerate().filter(|(_, r)| r.seeds() > 0 && compared(r));

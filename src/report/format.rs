@@ -38,6 +38,9 @@ pub fn rate(k: usize, n: usize) -> String {
 
 /// `300k`, `1M`.
 pub fn budget(steps: u64) -> String {
+    if steps == super::budgets::UNKNOWN_BUDGET {
+        return "steps unknown".into();
+    }
     // exact, unlike a tick label: an on-policy run ends past its budget (2,015,232 steps is
     // 2.015232M, not a second "2M")
     for (unit, suffix) in [(1_000_000u64, "M"), (1_000, "k")] {

@@ -10,6 +10,7 @@ use super::budgets::{policy_at, reached};
 use super::runs::{Group, Run};
 use crate::controller::measure::{mean_cost_of_transport, GaitEpisode};
 use crate::envs::{make, EnvConfig};
+use crate::evaluation::cache::{EvalCache, Key};
 use crate::evaluation::stats::{self, Interval};
 use crate::evaluation::{Protocol, Push};
 use crate::policy::AgentPolicy;
@@ -97,14 +98,16 @@ impl BudgetRow {
 
     /// The rows of external evaluations (`evaluation::external`) of one env: one per label,
     /// its directories' episodes as seeds. Each must follow `protocol` and have been played in
-    /// `env` (the report's env options and reward for that env); otherwise an error names the
-    /// directory and what differs.
+    /// one of `envs` (the env options and reward of the report's groups in that env, first
+    /// the default); otherwise an error names the directory and what differs from the first.
     pub(crate) fn external_rows(
         externals: &[crate::evaluation::external::External],
-        env: &EnvConfig,
+        envs: &[EnvConfig],
         protocol: &Protocol,
     ) -> Result<Vec<BudgetRow>> {
-        let ours = env.resolved_options()?;
+        let env = envs.first().context("no env to match external evaluations with")?;
+        let resolved = envs.iter().map(EnvConfig::resolved_options).collect::<Result<Vec<_>, _>>()?;
+        let ours = &resolved[0];
         let mut rows: Vec<BudgetRow> = Vec::new();
         for x in externals {
             anyhow::ensure!(
@@ -121,7 +124,8 @@ impl BudgetRow {
             let theirs = EnvConfig { name: env.name.clone(), options: x.meta.options.clone() }
                 .resolved_options()
                 .with_context(|| format!("{}: its env options", x.dir.display()))?;
-            if theirs != ours {
+            let matched = resolved.iter().position(|r| *r == theirs);
+            if matched.is_none() {
                 let differs: Vec<String> = theirs
                     .iter()
                     .filter(|(k, v)| ours.get(*k) != Some(*v))
@@ -133,12 +137,15 @@ impl BudgetRow {
                     })
                     .collect();
                 anyhow::bail!(
-                    "{}: played {} under other options or rewards than the report's runs: {}",
+                    "{}: played {} under other options or rewards than the report's runs (none of its {} \
+                     groups there matches; against the first: {})",
                     x.dir.display(),
                     x.meta.env,
+                    envs.len(),
                     differs.join(", ")
                 );
             }
+            let matched_env = &envs[matched.unwrap_or(0)];
             let group = Group {
                 env: x.meta.env.clone(),
                 algo: x.meta.label.clone(),
@@ -152,7 +159,7 @@ impl BudgetRow {
                 None => {
                     let mut row = BudgetRow::empty(group, budget);
                     row.external = true;
-                    row.env_config = Some(x.env.clone());
+                    row.env_config = Some(matched_env.clone());
                     rows.push(row);
                     rows.len() - 1
                 }
@@ -218,13 +225,15 @@ fn duplicate_seeds(evaluated: &[SeedResult]) -> Vec<u64> {
     seeds.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect()
 }
 
-/// Evaluates `runs` (one group) at `budget`, optionally under a push.
+/// Evaluates `runs` (one group) at `budget`, optionally under a push; episodes `cache` holds are
+/// read from it, the others played and kept there.
 pub(crate) fn evaluate_row(
     group: &Group,
     runs: &[&Run],
     budget: u64,
     protocol: &Protocol,
     push: Option<Push>,
+    cache: &EvalCache,
 ) -> Result<BudgetRow> {
     let mut row = BudgetRow::empty(group.clone(), budget);
     let mut machines = BTreeSet::new();
@@ -246,9 +255,13 @@ pub(crate) fn evaluate_row(
         };
         protocol.check_disjoint(cfg.seed, cfg.train.total_steps, cfg.train.eval_episodes)?;
         let env_config = cfg.env.for_evaluation();
-        let mut env = make(&env_config).with_context(|| format!("making the env of {}", run.dir.display()))?;
-        let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.algo().to_string() };
-        let episodes = protocol.run(env.as_mut(), &mut policy, None, push)?;
+        let policy_key = format!("agent {}", source.digest(&run.dir)?);
+        let key = Key::episodes(&env_config, protocol, &policy_key, None, push)?;
+        let episodes = cache.episodes(&key, || {
+            let mut env = make(&env_config).with_context(|| format!("making the env of {}", run.dir.display()))?;
+            let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.algo().to_string() };
+            protocol.run(env.as_mut(), &mut policy, None, push)
+        })?;
         row.env_config.get_or_insert(env_config);
         row.evaluated.push(SeedResult { run_dir: run.dir.clone(), seed: cfg.seed, episodes });
         machines.insert(machine_of(run, budget));

@@ -21,7 +21,7 @@ pub mod videos;
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
-use anyhow::Result;
+use anyhow::{Context, Result};
 
 use crate::evaluation::Protocol;
 use crate::io::write_bytes_atomic;
@@ -60,6 +60,9 @@ pub struct ReportOptions {
     pub external: Vec<PathBuf>,
     /// Committed robustness suites (`evaluation::robustness`), one section each in its env.
     pub robustness: Vec<PathBuf>,
+    /// Where held-out episodes and clips are kept between reports (`evaluation::cache`); off
+    /// computes everything.
+    pub cache: crate::evaluation::EvalCache,
 }
 
 impl Default for ReportOptions {
@@ -71,6 +74,7 @@ impl Default for ReportOptions {
             videos: false,
             external: Vec::new(),
             robustness: Vec::new(),
+            cache: crate::evaluation::EvalCache::off(),
         }
     }
 }
@@ -156,6 +160,8 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
     let mut summaries: Vec<((bool, usize, String), Vec<document::Block>)> = Vec::new();
     sections::protocol(&mut doc, opts);
 
+    // Every clip file this report shows, relative to `out`: the others in its videos folder go.
+    let mut filmed: std::collections::BTreeSet<String> = std::collections::BTreeSet::new();
     let mut report = Report {
         index: out.join("index.html"),
         readme: out.join("README.md"),
@@ -175,7 +181,8 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
             }
         }
         for suite in suites.iter().filter(|s| s.meta.env.name == *env) {
-            robustness::section(&mut doc, out, suite, opts.videos.then_some(opts.threads))?;
+            let clips = robustness::section(&mut doc, out, suite, opts.videos.then_some(opts.threads), &opts.cache)?;
+            filmed.extend(clips.iter().flat_map(|c| [c.video.clone(), c.gif.clone(), c.poster.clone()]));
         }
         let section = report.controllers.get(env);
         let clips = if opts.videos {
@@ -183,6 +190,7 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
         } else {
             Vec::new()
         };
+        filmed.extend(clips.iter().flat_map(|c| [c.video.clone(), c.gif.clone(), c.poster.clone()]));
         let runs_here: usize = env_groups.iter().map(|(_, rs)| rs.len()).sum();
         summaries.push((
             (section.is_none(), usize::MAX - runs_here, env.clone()),
@@ -213,7 +221,25 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
     )?;
     write_bytes_atomic(&report.index, doc.to_html().as_bytes())?;
     write_bytes_atomic(&report.readme, doc.to_markdown().as_bytes())?;
+    remove_unshown_videos(out, &filmed)?;
     Ok(report)
+}
+
+/// Removes the files in `out/videos/` that are none of `shown` (paths relative to `out`): clips
+/// of an earlier report that this one does not show. The folder is the report's own, so a clip
+/// kept from the cache stays and nothing stale is left beside it.
+fn remove_unshown_videos(out: &Path, shown: &std::collections::BTreeSet<String>) -> Result<()> {
+    let dir = out.join(videos::VIDEO_DIR);
+    for entry in std::fs::read_dir(&dir).into_iter().flatten().flatten() {
+        let rel = format!("{}/{}", videos::VIDEO_DIR, entry.file_name().to_string_lossy());
+        if entry.path().is_file() && !shown.contains(&rel) {
+            std::fs::remove_file(entry.path()).with_context(|| format!("removing {}", entry.path().display()))?;
+        }
+    }
+    if shown.is_empty() && dir.is_dir() {
+        std::fs::remove_dir(&dir).ok();
+    }
+    Ok(())
 }
 
 /// The paths given, or how many when they are many.

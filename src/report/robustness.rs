@@ -304,10 +304,16 @@ fn commits_line(cells: &[Cell]) -> String {
 /// The section: provenance, summary table, goal, then per axis its chart and cells.
 /// With `videos` (the threads to film with), each axis also gets its side-by-side clip
 /// ([`super::robustness_clips`]).
-pub(crate) fn section(doc: &mut Document, out: &Path, s: &SuiteData, videos: Option<usize>) -> Result<()> {
+pub(crate) fn section(
+    doc: &mut Document,
+    out: &Path,
+    s: &SuiteData,
+    videos: Option<usize>,
+    cache: &crate::evaluation::EvalCache,
+) -> Result<Vec<super::videos::Clip>> {
     let env = &s.meta.env.name;
     let clips = match videos {
-        Some(threads) => super::robustness_clips::film_axes(s, out, threads)?,
+        Some(threads) => super::robustness_clips::film_axes(s, out, threads, cache)?,
         None => Vec::new(),
     };
     doc.heading(2, "Robustness suite");
@@ -332,7 +338,7 @@ pub(crate) fn section(doc: &mut Document, out: &Path, s: &SuiteData, videos: Opt
         let (header, rows) = axis_table(s, axis);
         doc.table(&header.iter().map(String::as_str).collect::<Vec<_>>(), rows);
     }
-    Ok(())
+    Ok(clips.into_iter().map(|(_, clip)| clip).collect())
 }
 
 #[cfg(test)]

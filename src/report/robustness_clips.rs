@@ -77,7 +77,12 @@ fn word(o: Outcome) -> &'static str {
 
 /// Films one clip per axis into `out/videos/` (`threads` panels at a time). A clip whose replay
 /// ends differently from the suite's record says so in its caption.
-pub fn film_axes(s: &SuiteData, out: &std::path::Path, threads: usize) -> Result<Vec<(Axis, Clip)>> {
+pub fn film_axes(
+    s: &SuiteData,
+    out: &std::path::Path,
+    threads: usize,
+    cache: &crate::evaluation::EvalCache,
+) -> Result<Vec<(Axis, Clip)>> {
     let contenders = panels(s)?;
     let labels: Vec<&str> = contenders.iter().map(Contender::label).collect();
     let protocol = Protocol { episodes: s.meta.episodes, seed: s.meta.protocol_seed };
@@ -103,7 +108,7 @@ pub fn film_axes(s: &SuiteData, out: &std::path::Path, threads: usize) -> Result
         plans.push(ClipPlan::of_contenders(stem, caption, &contenders, cfg, push, seed)?);
         picks.push((*axis, p));
     }
-    let clips = film(&plans, &[], out, &protocol, threads)?;
+    let clips = film(&plans, &[], out, &protocol, threads, cache)?;
     Ok(picks
         .into_iter()
         .zip(clips)

@@ -25,6 +25,35 @@ pub struct Run {
     pub config: RunConfig,
     /// Its `metrics.csv` rows (empty when absent).
     pub metrics: Vec<MetricsRow>,
+    /// Where an imported policy came from (`source.toml`'s `library`, e.g. a Stable-Baselines3
+    /// model converted by `locobench.import_sb3`); None for locobench's own runs.
+    pub imported: Option<Imported>,
+}
+
+/// An exported policy trained elsewhere, as its `source.toml` describes it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Imported {
+    /// The library and its version.
+    pub library: String,
+    /// The model file it was converted from, and its SHA-256, where stated.
+    pub model_file: String,
+    /// That file's SHA-256, where stated.
+    pub model_sha256: String,
+}
+
+impl Imported {
+    /// The `source.toml` of `dir`, when it names a library the policy was trained with.
+    fn read(dir: &Path) -> Result<Option<Imported>> {
+        let path = dir.join("source.toml");
+        let Ok(text) = std::fs::read_to_string(&path) else { return Ok(None) };
+        let table: toml::Table = text.parse().with_context(|| format!("reading {}", path.display()))?;
+        let text_of = |k: &str| table.get(k).and_then(|v| v.as_str()).unwrap_or_default().to_string();
+        let library = text_of("library");
+        if library.is_empty() {
+            return Ok(None);
+        }
+        Ok(Some(Imported { library, model_file: text_of("model_file"), model_sha256: text_of("model_sha256") }))
+    }
 }
 
 impl Run {
@@ -37,7 +66,8 @@ impl Run {
         } else {
             Vec::new()
         };
-        Ok(Run { dir: dir.to_path_buf(), config, metrics })
+        let imported = Imported::read(dir)?;
+        Ok(Run { dir: dir.to_path_buf(), config, metrics, imported })
     }
 
     /// The env's registered name.
@@ -107,6 +137,16 @@ impl Run {
     /// by algorithm and reward whatever their directories are called; runs with other settings
     /// also by the name they were given.
     pub fn group(&self) -> Group {
+        if let Some(imported) = &self.imported {
+            // Its own row, never pooled with runs trained here.
+            return Group {
+                env: self.env().to_string(),
+                algo: self.algo().to_string(),
+                reward: self.reward_label(),
+                settings: format!("imported from {}", imported.library),
+                variant: format!("{} (imported, {})", self.variant_name(), imported.library),
+            };
+        }
         let settings = self.settings_label();
         Group {
             env: self.env().to_string(),
@@ -199,9 +239,11 @@ fn without_seed(name: &str) -> String {
 /// (a few levels deep) for them, e.g. a sweep directory.
 pub(crate) fn find_runs(paths: &[PathBuf]) -> Result<Vec<Run>> {
     fn walk(dir: &Path, depth: usize, out: &mut Vec<PathBuf>) -> Result<()> {
-        // Results kept without checkpoints (config.toml + metrics.csv) count too.
-        if dir.join("config.toml").is_file() && (dir.join("checkpoints").exists() || dir.join("metrics.csv").is_file())
-        {
+        // Results kept without checkpoints (config.toml + metrics.csv) count too, and so do
+        // exported policies (config.toml + policy.safetensors), those imported from elsewhere
+        // included.
+        let kept = ["checkpoints", "metrics.csv", crate::train::checkpoint::POLICY_FILE];
+        if dir.join("config.toml").is_file() && kept.iter().any(|k| dir.join(k).exists()) {
             out.push(dir.to_path_buf());
             return Ok(());
         }
@@ -227,7 +269,11 @@ pub(crate) fn find_runs(paths: &[PathBuf]) -> Result<Vec<Run>> {
         let before = dirs.len();
         walk(p, 4, &mut dirs)?;
         if dirs.len() == before {
-            bail!("no run directories (with config.toml and checkpoints/ or metrics.csv) under {}", p.display());
+            bail!(
+                "no run directories (with config.toml and checkpoints/, metrics.csv or an exported policy.safetensors) \
+                 under {}",
+                p.display()
+            );
         }
     }
     dirs.sort();
@@ -258,6 +304,7 @@ pub(crate) mod tests {
                 train: build_config(env, algo, &split_pairs(settings).unwrap()).unwrap(),
             },
             metrics: vec![],
+            imported: None,
         }
     }
 

@@ -160,10 +160,20 @@ pub fn held_out(
     doc.heading(2, "Held-out evaluation at fixed budgets");
     let jobs: Vec<(&Group, &Vec<&Run>, u64)> =
         groups.iter().flat_map(|(g, rs)| super::budgets::budgets(rs).into_iter().map(move |b| (*g, *rs, b))).collect();
-    let mut rows = map_in_order(&jobs, opts.threads, |(g, rs, b)| evaluate_row(g, rs, *b, &opts.protocol, None))?;
+    let mut rows =
+        map_in_order(&jobs, opts.threads, |(g, rs, b)| evaluate_row(g, rs, *b, &opts.protocol, None, &opts.cache))?;
     if !externals.is_empty() {
-        let env = rows.iter().find_map(|r| r.env_config.clone()).unwrap_or_else(|| EnvConfig::new(&groups[0].0.env));
-        rows.extend(BudgetRow::external_rows(externals, &env, &opts.protocol)?);
+        // Each external row joins the group played under its options and reward.
+        let mut envs: Vec<EnvConfig> = Vec::new();
+        for cfg in rows.iter().filter_map(|r| r.env_config.clone()) {
+            if !envs.contains(&cfg) {
+                envs.push(cfg);
+            }
+        }
+        if envs.is_empty() {
+            envs.push(EnvConfig::new(&groups[0].0.env));
+        }
+        rows.extend(BudgetRow::external_rows(externals, &envs, &opts.protocol)?);
     }
     let mut notes = Vec::new();
     let table = rows
@@ -259,8 +269,11 @@ pub fn held_out(
     }
     // What no learning scores under the same protocol.
     let env_config = rows.iter().find_map(|r| r.env_config.clone()).unwrap_or_else(|| EnvConfig::new(&groups[0].0.env));
-    let mut env = make(&env_config)?;
-    let random = opts.protocol.run(env.as_mut(), &mut RandomPolicy::new(0), None, None)?;
+    let key = crate::evaluation::cache::Key::episodes(&env_config, &opts.protocol, "random 0", None, None)?;
+    let random = opts.cache.episodes(&key, || {
+        let mut env = make(&env_config)?;
+        opts.protocol.run(env.as_mut(), &mut RandomPolicy::new(0), None, None)
+    })?;
     let returns: Vec<f64> = random.iter().map(|e| e.episode_return).collect();
     let ci = stats::stratified_bootstrap(&[returns], |v| stats::mean(&v[0]), stats::BOOTSTRAP_REPS, BOOTSTRAP_SEED);
     doc.paragraph(format!(
@@ -404,7 +417,8 @@ pub fn controller(
         r.env_config.as_ref().is_none_or(|c| c.resolved_options().ok().as_ref() == Some(&env_config.options))
     };
     let comparable: Vec<&BudgetRow> = rows.iter().filter(|r| same_env(r)).collect();
-    let mut section = controller_section(&env_config, rows, same_env, &opts.protocol, BOOTSTRAP_SEED, opts.threads)?;
+    let mut section =
+        controller_section(&env_config, rows, same_env, &opts.protocol, BOOTSTRAP_SEED, opts.threads, &opts.cache)?;
 
     doc.heading(2, "Controller across commanded speeds");
     doc.table(
@@ -535,6 +549,7 @@ fn pushes(
     let protocol = Protocol { episodes: opts.push_episodes, ..opts.protocol };
     let mut family = crate::evaluation::ControllerFamily::new(env_config, protocol)?;
     family.threads = opts.threads;
+    family.disk = opts.cache.clone();
     // Each algorithm's best row, and the controller at its speed.
     let compared: std::collections::BTreeSet<usize> = section.matched.iter().map(|m| m.row).collect();
     let pushed_rows: Vec<(usize, &Group, &Vec<&Run>)> = super::videos::best_rows(rows, |i| compared.contains(&i))
@@ -555,7 +570,7 @@ fn pushes(
         pushed_rows.iter().flat_map(|(i, _, _)| PUSH_LEVELS.iter().map(move |&dv| (*i, dv))).collect();
     let rl = map_in_order(&rl_jobs, opts.threads, |&(i, dv)| {
         let (_, g, rs) = pushed_rows.iter().find(|(j, _, _)| *j == i).unwrap();
-        evaluate_row(g, rs, rows[i].budget, &protocol, Some(Push::lateral(dv))).map(|r| r.falls())
+        evaluate_row(g, rs, rows[i].budget, &protocol, Some(Push::lateral(dv)), &opts.cache).map(|r| r.falls())
     })?;
     let mut out = Vec::new();
     if let Some(b) = &section.best {
@@ -699,6 +714,20 @@ pub fn runs(doc: &mut Document, runs: &[Run]) {
                 } else {
                     format!("policies at {}", held.iter().map(|&s| budget(s)).collect::<Vec<_>>().join(", "))
                 };
+                if let Some(x) = &r.imported {
+                    let file =
+                        if x.model_file.is_empty() { "no model file stated".into() } else { x.model_file.clone() };
+                    let sha =
+                        if x.model_sha256.is_empty() { String::new() } else { format!(", SHA-256 {}", x.model_sha256) };
+                    let steps = super::budgets::shipped_step(&r.dir)
+                        .map_or("its training steps not stated".into(), |s| format!("trained for {}", budget(s)));
+                    return format!(
+                        "`{}`: {}, imported from {} ({file}{sha}), {steps}",
+                        r.dir.display(),
+                        r.group().label(),
+                        x.library
+                    );
+                }
                 format!(
                     "`{}`: {} seed {}, reached {}, {policies}; {}",
                     r.dir.display(),
@@ -736,7 +765,7 @@ pub(crate) fn gaits(
     if plans.is_empty() {
         return Ok(Vec::new());
     }
-    let clips = super::videos::film(&plans, groups, out, &opts.protocol, opts.threads)?;
+    let clips = super::videos::film(&plans, groups, out, &opts.protocol, opts.threads, &opts.cache)?;
     doc.heading(2, "Gaits");
     doc.paragraph(format!(
         "Per algorithm, its best row's policy (the row with the highest lower 95% bound of its mean return; the \

@@ -13,6 +13,7 @@ use super::heldout::BudgetRow;
 use super::runs::{Group, Run};
 use crate::controller::baseline::baseline_controller;
 use crate::envs::EnvConfig;
+use crate::evaluation::cache::{EvalCache, Key};
 use crate::evaluation::parallel::map_in_order;
 use crate::evaluation::{Protocol, Push};
 use crate::policy::AgentPolicy;
@@ -246,19 +247,29 @@ pub fn plan(
     plans
 }
 
-/// Films and writes every planned clip into `out/videos/`, panels filmed `threads` at a time.
+/// Films and writes every planned clip into `out/videos/`, panels filmed `threads` at a time. A
+/// clip `cache` holds whose files are already in `out/videos/`, byte for byte, is kept as it is.
 pub fn film(
     plans: &[ClipPlan],
     runs: &[(&Group, &Vec<&Run>)],
     out: &Path,
     protocol: &Protocol,
     threads: usize,
+    cache: &EvalCache,
 ) -> Result<Vec<Clip>> {
     let dir = out.join(VIDEO_DIR);
     std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
     let first_seed = protocol.reset_seeds().first().copied().context("the protocol has no episodes")?;
-    let jobs: Vec<(usize, usize)> =
-        plans.iter().enumerate().flat_map(|(c, p)| (0..p.panels.len()).map(move |k| (c, k))).collect();
+    let keys =
+        plans.iter().map(|p| clip_key(p, runs, p.episode_seed.unwrap_or(first_seed))).collect::<Result<Vec<Key>>>()?;
+    let kept: Vec<Option<Clip>> =
+        plans.iter().zip(&keys).map(|(p, k)| cache.lookup(k).and_then(|body| kept_clip(p, &body, &dir))).collect();
+    let jobs: Vec<(usize, usize)> = plans
+        .iter()
+        .enumerate()
+        .filter(|(c, _)| kept[*c].is_none())
+        .flat_map(|(c, p)| (0..p.panels.len()).map(move |k| (c, k)))
+        .collect();
     let panels = map_in_order(&jobs, threads, |&(c, k)| {
         let plan = &plans[c];
         film_panel(&plan.panels[k], &plan.env, plan.push, runs, plan.episode_seed.unwrap_or(first_seed), plan.panel)
@@ -266,12 +277,93 @@ pub fn film(
     })?;
     let mut clips = Vec::new();
     let mut at = 0;
-    for plan in plans {
+    for ((plan, key), kept) in plans.iter().zip(&keys).zip(kept) {
+        if let Some(clip) = kept {
+            cache.count_read();
+            clips.push(clip);
+            continue;
+        }
         let mine = &panels[at..at + plan.panels.len()];
         at += plan.panels.len();
-        clips.push(write_clip(plan, mine, &dir)?);
+        let clip = write_clip(plan, mine, &dir)?;
+        cache.store(key, &clip_entry(&clip, out)?)?;
+        clips.push(clip);
     }
     Ok(clips)
+}
+
+/// Everything a clip's files depend on besides the code: its env and episode, each panel's
+/// policy (the digest of its weights and run config), label and command, push, size and cut.
+fn clip_key(plan: &ClipPlan, runs: &[(&Group, &Vec<&Run>)], episode_seed: u64) -> Result<Key> {
+    let mut what = vec![
+        format!("stem = {}", plan.stem),
+        crate::evaluation::cache::env_line(&plan.env)?,
+        format!("episode seed = {episode_seed}"),
+        format!("push = {:?}", plan.push),
+        format!("panel = {:?}", plan.panel),
+        format!("until decided = {}", plan.until_decided),
+    ];
+    for actor in &plan.panels {
+        what.push(match actor {
+            Actor::Learned { run_dir, budget, label } => {
+                let run = find_run(runs, run_dir)?;
+                let source = policy_at(run, *budget).map_err(|why| anyhow::anyhow!("{}: {why}", run_dir.display()))?;
+                format!("learned {} at {budget}, {label:?}", source.digest(run_dir)?)
+            }
+            Actor::Policy { source, label } => {
+                let digest = crate::train::resolve_policy(&source.reference, source.budget)?.digest()?;
+                format!("policy {digest}, {label:?}")
+            }
+            Actor::Controller { speed } => format!("controller {speed:?}"),
+        });
+    }
+    Ok(Key::clip(&what.join("\n")))
+}
+
+fn find_run<'a>(runs: &[(&Group, &Vec<&'a Run>)], run_dir: &Path) -> Result<&'a Run> {
+    runs.iter()
+        .flat_map(|(_, rs)| rs.iter().copied())
+        .find(|r| r.dir == run_dir)
+        .with_context(|| format!("{} is not among the report's runs", run_dir.display()))
+}
+
+/// A clip's cache entry: its measures and each file's SHA-256.
+fn clip_entry(clip: &Clip, out: &Path) -> Result<String> {
+    let digest = |rel: &str| crate::io::files_digest(&[out.join(rel)]);
+    let fell: Vec<String> = clip.fell.iter().map(bool::to_string).collect();
+    Ok(format!(
+        "duration = {:?}\nfps = {:?}\nfell = {}\nmp4 = {}\ngif = {}\njpg = {}\n",
+        clip.duration,
+        clip.fps,
+        fell.join(","),
+        digest(&clip.video)?,
+        digest(&clip.gif)?,
+        digest(&clip.poster)?
+    ))
+}
+
+/// The clip of `plan` from its cache entry, when its three files in `dir` are the ones the entry
+/// names; None (film it) otherwise.
+fn kept_clip(plan: &ClipPlan, body: &str, dir: &Path) -> Option<Clip> {
+    let field = |name: &str| body.lines().find_map(|l| l.strip_prefix(name)?.strip_prefix(" = "));
+    let file = |ext: &str| format!("{}.{ext}", plan.stem);
+    for ext in ["mp4", "gif", "jpg"] {
+        if crate::io::files_digest(&[dir.join(file(ext))]).ok()? != field(ext)? {
+            return None;
+        }
+    }
+    let size = |ext: &str| std::fs::metadata(dir.join(file(ext))).map(|m| m.len()).ok();
+    Some(Clip {
+        stem: plan.stem.clone(),
+        caption: plan.caption.clone(),
+        video: format!("{VIDEO_DIR}/{}", file("mp4")),
+        gif: format!("{VIDEO_DIR}/{}", file("gif")),
+        poster: format!("{VIDEO_DIR}/{}", file("jpg")),
+        duration: field("duration")?.parse().ok()?,
+        fps: field("fps")?.parse().ok()?,
+        bytes: (size("mp4")?, size("gif")?),
+        fell: field("fell")?.split(',').map(|f| f.parse().ok()).collect::<Option<Vec<bool>>>()?,
+    })
 }
 
 fn film_panel(
@@ -288,11 +380,7 @@ fn film_panel(
     let fps = MAX_FPS.min(MAX_FRAMES / episode_time);
     match actor {
         Actor::Learned { run_dir, budget, label, .. } => {
-            let run = runs
-                .iter()
-                .flat_map(|(_, rs)| rs.iter())
-                .find(|r| &r.dir == run_dir)
-                .with_context(|| format!("{} is not among the report's runs", run_dir.display()))?;
+            let run = find_run(runs, run_dir)?;
             let source = policy_at(run, *budget).map_err(|why| anyhow::anyhow!("{}: {why}", run_dir.display()))?;
             let (cfg, agent) = source.load(run_dir, *budget)?;
             let mut policy = AgentPolicy { agent: agent.as_ref(), label: label.clone() };

@@ -160,6 +160,12 @@ impl PolicyRef {
         }
     }
 
+    /// SHA-256 over its weights file and its run's `config.toml`: everything its actions
+    /// depend on, for the evaluation cache's keys.
+    pub fn digest(&self) -> Result<String> {
+        crate::io::files_digest(&[self.weights_file(), self.run_dir()?.join("config.toml")])
+    }
+
     /// Whether it holds every network (a checkpoint) or the actor alone.
     pub fn has_critics(&self) -> bool {
         matches!(self, PolicyRef::Checkpoint(_))

@@ -63,6 +63,7 @@ pub fn plan(suite: &Suite, agents: Vec<Contender>, choices: &[ControllerChoice],
     let grid = if needs_grid {
         let mut family = ControllerFamily::new(&suite.env, suite.protocol)?;
         family.threads = suite.threads;
+        family.disk = suite.cache.clone();
         family.sweep(GRID_STEP, GRID_MAX)?
     } else {
         Vec::new()

@@ -10,6 +10,7 @@ use crate::controller::baseline::{baseline_controller, baseline_env_like, RAMP_T
 use crate::controller::command::SpeedProfile;
 use crate::controller::measure::{mean_cost_of_transport, GaitEpisode};
 use crate::envs::{make, EnvConfig};
+use crate::evaluation::cache::Key;
 use crate::evaluation::stats::{self, wilson, Interval};
 use crate::evaluation::Protocol;
 use crate::policy::AgentPolicy;
@@ -236,6 +237,9 @@ pub struct Suite {
     pub protocol: Protocol,
     /// Cells evaluated at once.
     pub threads: usize,
+    /// Where each contender's episodes on each cell are kept between runs (`evaluation::cache`;
+    /// off unless set).
+    pub cache: crate::evaluation::EvalCache,
 }
 
 impl Suite {
@@ -272,23 +276,31 @@ impl Suite {
         let episodes = match contender {
             Contender::Controller { speed, .. } => {
                 let cfg = baseline_env_like(&cfg)?;
-                let mut env = make(&cfg)?;
-                let mut controller = baseline_controller(&cfg.name, *speed, None)?;
                 let profile = SpeedProfile::ramp(*speed, RAMP_TIME);
-                self.protocol.run(env.as_mut(), controller.as_mut(), Some(&profile), push)?
+                let key = Key::episodes(&cfg, &self.protocol, &format!("controller {speed:?}"), Some(&profile), push)?;
+                self.cache.episodes(&key, || {
+                    let mut env = make(&cfg)?;
+                    let mut controller = baseline_controller(&cfg.name, *speed, None)?;
+                    self.protocol.run(env.as_mut(), controller.as_mut(), Some(&profile), push)
+                })?
             }
             Contender::Agent { label, seeds } => {
                 let mut all = Vec::new();
                 for source in seeds {
-                    let (run, agent) = resolve_policy(&source.reference, source.budget)?
+                    let policy_ref = resolve_policy(&source.reference, source.budget)?;
+                    let (run, agent) = policy_ref
                         .load()
                         .with_context(|| format!("loading {label} from {}", source.reference.display()))?;
                     if run.env.name != cfg.name {
                         bail!("{label} was trained on {}, not on the suite's env {}", run.env.name, cfg.name);
                     }
-                    let mut env = make(&cfg)?;
-                    let mut policy = AgentPolicy { agent: agent.as_ref(), label: label.clone() };
-                    all.extend(self.protocol.run(env.as_mut(), &mut policy, None, push)?);
+                    let key =
+                        Key::episodes(&cfg, &self.protocol, &format!("agent {}", policy_ref.digest()?), None, push)?;
+                    all.extend(self.cache.episodes(&key, || {
+                        let mut env = make(&cfg)?;
+                        let mut policy = AgentPolicy { agent: agent.as_ref(), label: label.clone() };
+                        self.protocol.run(env.as_mut(), &mut policy, None, push)
+                    })?);
                 }
                 all
             }
@@ -433,8 +445,13 @@ mod tests {
 
     #[test]
     fn a_policy_from_another_env_is_refused() {
-        let suite =
-            Suite { env: EnvConfig::new("ant"), axes: vec![], protocol: Protocol { episodes: 1, seed: 0 }, threads: 1 };
+        let suite = Suite {
+            env: EnvConfig::new("ant"),
+            axes: vec![],
+            protocol: Protocol { episodes: 1, seed: 0 },
+            threads: 1,
+            cache: Default::default(),
+        };
         let policy = Contender::Agent {
             label: "ppo".into(),
             seeds: vec![PolicySource {
