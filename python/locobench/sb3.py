@@ -86,7 +86,9 @@ def import_sb3(model, out_dir, env, *, vec_normalize=None, options=None):
     exported locobench policy in ``out_dir`` for ``env`` (an env id such as
     ``"locobench/Minitaur-v0"`` or name, with ``options``), with the observation statistics of
     ``vec_normalize`` (a ``VecNormalize`` or the path of its ``.pkl``) when the model was trained
-    behind one. Returns the policy's path; ``locobench eval --policy OUT_DIR`` evaluates it.
+    behind one. Returns the policy's path; ``locobench eval --policy OUT_DIR`` evaluates it, and
+    ``locobench report --runs OUT_DIR`` makes it a row labelled as imported, with its source and,
+    where the model counted any (``num_timesteps``), the steps it was trained for.
 
     Unsupported policies (CNN, multi-input, recurrent, gSDE, custom feature extractors,
     activations other than the actor's) are a ValueError naming what is not supported.
@@ -99,10 +101,10 @@ def import_sb3(model, out_dir, env, *, vec_normalize=None, options=None):
         source_file = os.fspath(model)
         model = _load_model(source_file)
     name = type(model).__name__
+    _check_mlp_policy(model)
     if name not in _ALGOS:
         raise ValueError(f"{name} is not supported: import_sb3 converts PPO, SAC, TD3 and DDPG")
     algo = _ALGOS[name]
-    _check_mlp_policy(model)
     core = _core_env(env, options, None)
     obs_dim, act_dim = len(core.observation_bounds[0]), len(core.action_bounds[0])
     if model.observation_space.shape != (obs_dim,) or model.action_space.shape != (act_dim,):
@@ -150,6 +152,13 @@ def import_sb3(model, out_dir, env, *, vec_normalize=None, options=None):
                 vec_normalize = pickle.load(f)
         if not getattr(vec_normalize, "norm_obs", True):
             vec_normalize = None
+    # Explicit either way: locobench's PPO normalises observations by default, SB3's only behind
+    # VecNormalize.
+    train["normalize_observations"] = vec_normalize is not None
+    if algo == "ppo" and vec_normalize is None:
+        # PPO's actor always holds its statistics; switched off, they are Gymnasium's prior, unused.
+        tensors["actor.obs_mean"], tensors["actor.obs_var"] = np.zeros(obs_dim), np.ones(obs_dim)
+        tensors["actor.obs_count"] = np.array([1e-4])
     if vec_normalize is not None:
         rms = vec_normalize.obs_rms
         mean, var = np.asarray(rms.mean, dtype=np.float64), np.asarray(rms.var, dtype=np.float64)
@@ -158,7 +167,6 @@ def import_sb3(model, out_dir, env, *, vec_normalize=None, options=None):
         clip, eps = float(vec_normalize.clip_obs), float(vec_normalize.epsilon)
         if eps != 1e-8:
             raise ValueError(f"VecNormalize epsilon {eps} is not supported (locobench normalises with 1e-8)")
-        train["normalize_observations"] = True
         if algo == "ppo":
             tensors["actor.obs_mean"] = mean
             tensors["actor.obs_var"] = var
@@ -186,7 +194,11 @@ def import_sb3(model, out_dir, env, *, vec_normalize=None, options=None):
         f"model_file = {_toml(source_file or '')}",
         f"model_sha256 = {_toml(digest)}",
         f"vec_normalize = {_toml(vec_normalize is not None)}",
-    ]) + "\n"
+    ] + (
+        # The budget it was trained for, as SB3 counts it: `locobench report --runs OUT_DIR`
+        # makes its row at that budget.
+        [f"step = {int(model.num_timesteps)}"] if int(getattr(model, "num_timesteps", 0) or 0) > 0 else []
+    )) + "\n"
     payload = [(k, list(np.shape(v)), np.asarray(v, dtype=np.float64).ravel().tolist()) for k, v in tensors.items()]
     return _core.import_policy(os.fspath(out_dir), payload, config, source)
 
