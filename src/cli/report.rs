@@ -97,10 +97,12 @@ pub fn run(args: ReportArgs) -> Result<()> {
         let (read, computed, damaged) = cache.counts();
         let pruned = if args.prune_cache { cache.prune_unused()? } else { 0 };
         println!(
-            "evaluation cache {}: {read} read, {computed} computed{}{}",
+            "evaluation cache {}: {read} read, {computed} computed{}{}; {:.2} s on keys, lookups and writes (summed \
+             over threads)",
             dir.display(),
             if damaged > 0 { format!(" ({damaged} damaged entries recomputed)") } else { String::new() },
-            if args.prune_cache { format!(", {pruned} unused removed") } else { String::new() }
+            if args.prune_cache { format!(", {pruned} unused removed") } else { String::new() },
+            cache.overhead_seconds()
         );
     }
     println!(

@@ -242,8 +242,8 @@ pub(crate) fn report_timing(results: &Path) -> Result<String> {
     let path = newest(results, "report-timing.csv")?;
     let rows = read(&path)?;
     let mut out = quoting(&path)?
-        + "\n\n| evaluation cache | videos | wall time | read from the cache | computed | index.html | videos | whole report | clips |\n\
-           |---|---|---|---|---|---|---|---|---|\n";
+        + "\n\n| evaluation cache | videos | wall time | read from the cache | computed | cache's own time | index.html | videos | whole report | clips |\n\
+           |---|---|---|---|---|---|---|---|---|---|\n";
     let mb = |b: f64| format!("{:.1} MB", b / 1e6);
     let cache =
         |r: &super::csv_rows::Row| if r.text("cache").is_empty() { "cold" } else { r.text("cache") }.to_string();
@@ -258,12 +258,17 @@ pub(crate) fn report_timing(results: &Path) -> Result<String> {
         let wall = r.num("wall_s");
         let _ = writeln!(
             out,
-            "| {} | {} | {} | {} | {} | {:.0} KB | {} | {} | {:.0} |",
+            "| {} | {} | {} | {} | {} | {} | {:.0} KB | {} | {} | {:.0} |",
             cache(r),
             if r.text("videos") == "true" { "yes" } else { "no" },
             if wall < 120.0 { format!("{wall:.1} s") } else { format!("{:.1} min", wall / 60.0) },
             count(r, "read"),
             count(r, "computed"),
+            if r.text("cache_overhead_s").is_empty() {
+                "–".into()
+            } else {
+                format!("{} s", r.text("cache_overhead_s"))
+            },
             r.num("index_html_bytes") / 1e3,
             mb(r.num("videos_bytes")),
             mb(r.num("report_bytes")),

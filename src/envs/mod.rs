@@ -19,6 +19,7 @@ pub mod minitaur;
 mod mujoco_env;
 mod options;
 mod planar_walker;
+pub mod push;
 mod registry;
 mod simulation;
 mod task;

@@ -12,7 +12,7 @@
 //! atomically, so a killed report leaves none half-written.
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::atomic::{AtomicU64, AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 use anyhow::{bail, Context, Result};
@@ -93,6 +93,8 @@ struct Counts {
     read: AtomicUsize,
     computed: AtomicUsize,
     damaged: AtomicUsize,
+    /// Nanoseconds spent on keys, lookups and writes, summed over threads.
+    overhead_ns: AtomicU64,
 }
 
 /// A cache directory, or none (every result computed, nothing kept). Clones share the
@@ -130,15 +132,36 @@ impl EvalCache {
         self.dir.as_ref().map(|d| d.join(format!("{}.txt", key.digest())))
     }
 
+    /// Runs `f`, counting its time as the cache's overhead (building keys, hashing policies,
+    /// reading and writing entries): what a report spends on the cache beyond evaluating.
+    pub fn timed<T>(&self, f: impl FnOnce() -> T) -> T {
+        let start = std::time::Instant::now();
+        let out = f();
+        self.counts.overhead_ns.fetch_add(start.elapsed().as_nanos() as u64, Ordering::Relaxed);
+        out
+    }
+
+    /// Seconds of overhead so far ([`EvalCache::timed`]), summed over threads.
+    pub fn overhead_seconds(&self) -> f64 {
+        self.counts.overhead_ns.load(Ordering::Relaxed) as f64 * 1e-9
+    }
+
     /// The body kept under `key`, when its entry is there and whole. A damaged entry
     /// (unreadable, cut short, another key) is reported on stderr and counts as absent.
     pub fn lookup(&self, key: &Key) -> Option<String> {
+        self.timed(|| self.lookup_untimed(key))
+    }
+
+    fn lookup_untimed(&self, key: &Key) -> Option<String> {
         let path = self.path(key)?;
         self.used.lock().unwrap_or_else(|p| p.into_inner()).insert(path.clone());
         let text = match std::fs::read_to_string(&path) {
             Ok(t) => t,
             Err(e) if e.kind() == std::io::ErrorKind::NotFound => return None,
-            Err(e) => return self.damaged(key, &anyhow::Error::from(e)),
+            Err(e) => {
+                self.damaged(key, &e.into());
+                return None;
+            }
         };
         let whole = (|| -> Result<String> {
             let rest = text.strip_prefix(HEADER).and_then(|r| r.strip_prefix('\n')).context("no header line")?;
@@ -148,15 +171,14 @@ impl EvalCache {
             }
             Ok(body.strip_suffix("--- end\n").context("cut short")?.to_string())
         })();
-        whole.map_err(|e| self.damaged::<()>(key, &e)).ok()
+        whole.map_err(|e| self.damaged(key, &e)).ok()
     }
 
     /// Reports a damaged entry on stderr (it is then recomputed and rewritten).
-    pub fn damaged<T>(&self, key: &Key, why: &anyhow::Error) -> Option<T> {
+    fn damaged(&self, key: &Key, why: &anyhow::Error) {
         self.counts.damaged.fetch_add(1, Ordering::Relaxed);
         let path = self.path(key).unwrap_or_default();
         eprintln!("warning: evaluation cache entry {} is damaged ({why:#}); recomputing it", path.display());
-        None
     }
 
     /// Counts a result taken from the cache.
@@ -169,25 +191,25 @@ impl EvalCache {
         self.counts.computed.fetch_add(1, Ordering::Relaxed);
         let Some(path) = self.path(key) else { return Ok(()) };
         let text = format!("{HEADER}\n{}\n---\n{body}--- end\n", key.text());
-        crate::io::write_bytes_atomic(&path, text.as_bytes())
-            .with_context(|| format!("evaluation cache {}: writing an entry", path.display()))
+        self.timed(|| {
+            crate::io::write_bytes_atomic(&path, text.as_bytes())
+                .with_context(|| format!("evaluation cache {}: writing an entry", path.display()))
+        })
     }
 
     /// The episodes under `key`, read from the cache or computed by `compute` and kept.
     pub fn episodes(&self, key: &Key, compute: impl FnOnce() -> Result<Vec<GaitEpisode>>) -> Result<Vec<GaitEpisode>> {
         if let Some(body) = self.lookup(key) {
-            match parse_episodes(&body) {
+            match self.timed(|| parse_episodes(&body)) {
                 Ok(episodes) => {
                     self.count_read();
                     return Ok(episodes);
                 }
-                Err(e) => {
-                    self.damaged::<()>(key, &e);
-                }
+                Err(e) => self.damaged(key, &e),
             }
         }
         let episodes = compute()?;
-        self.store(key, &format_episodes(&episodes))?;
+        self.store(key, &self.timed(|| format_episodes(&episodes)))?;
         Ok(episodes)
     }
 

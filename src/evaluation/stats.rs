@@ -13,6 +13,9 @@ pub(crate) const LEVEL: f64 = 0.95;
 /// Bootstrap resamples (rliable's default is 50,000; the statistics here are cheap).
 pub(crate) const BOOTSTRAP_REPS: usize = 20_000;
 
+/// Seed of every bootstrap in the report and the evaluation summaries.
+pub const BOOTSTRAP_SEED: u64 = 2021;
+
 /// The arithmetic mean; NaN for no values.
 pub fn mean(xs: &[f64]) -> f64 {
     if xs.is_empty() {
@@ -168,9 +171,53 @@ impl Verdict {
     }
 }
 
+/// An interval and what it was resampled over.
+#[derive(Debug, Clone, Copy)]
+pub struct Estimate {
+    /// The statistic and its 95% interval.
+    pub interval: Interval,
+    /// "seeds", or "episodes" for a single seed.
+    pub over: &'static str,
+}
+
+/// `statistic` of per-seed values with its 95% bootstrap interval: resampling seeds (each seed
+/// summarised by the mean of its values) when there are two or more, else the one seed's values.
+pub fn estimate(per_seed: &[Vec<f64>], statistic: fn(&[f64]) -> f64, seed: u64) -> Estimate {
+    if per_seed.len() >= 2 {
+        let scores: Vec<f64> = per_seed.iter().map(|v| mean(v)).collect();
+        let i = stratified_bootstrap(&[scores], |s| statistic(&s[0]), BOOTSTRAP_REPS, seed);
+        Estimate { interval: i, over: "seeds" }
+    } else {
+        let values = per_seed.first().cloned().unwrap_or_default();
+        let i = stratified_bootstrap(&[values], |s| statistic(&s[0]), BOOTSTRAP_REPS, seed);
+        Estimate { interval: i, over: "episodes" }
+    }
+}
+
+/// `estimate [low, high]`, each number written by `f`; the estimate alone for a zero-width interval.
+pub fn interval(i: Interval, f: impl Fn(f64) -> String) -> String {
+    if i.low == i.high {
+        f(i.estimate)
+    } else {
+        format!("{} [{}, {}]", f(i.estimate), f(i.low), f(i.high))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn estimates_resample_seeds_or_the_single_seeds_episodes() {
+        let two = estimate(&[vec![1.0, 3.0], vec![5.0, 7.0]], mean, 1);
+        assert_eq!(two.over, "seeds");
+        assert_eq!(two.interval.estimate, 4.0);
+        // Two seed means, 2 and 6: every resample's mean is 2, 4 or 6.
+        assert!(two.interval.low >= 2.0 && two.interval.high <= 6.0);
+        let one = estimate(&[vec![1.0, 2.0, 3.0, 10.0]], iqm, 1);
+        assert_eq!(one.over, "episodes");
+        assert_eq!(one.interval.estimate, 2.5);
+    }
 
     #[test]
     fn spread_and_iqm_match_hand_computation() {

@@ -9,9 +9,8 @@ use super::stats::{self, wilson, Interval};
 use super::{ControllerFamily, Protocol, Push};
 use crate::controller::measure::{mean_cost_of_transport, GaitEpisode};
 use crate::envs::{make, EnvConfig};
+use crate::evaluation::stats::{estimate, BOOTSTRAP_SEED};
 use crate::policy::Policy;
-use crate::report::heldout::estimate;
-use crate::report::BOOTSTRAP_SEED;
 
 /// The held-out statistics of one policy.
 #[derive(Debug, Clone)]
@@ -68,7 +67,7 @@ impl HeldOutSummary {
 
     /// The lines `locobench eval` prints under its heading.
     pub fn lines(&self) -> Vec<String> {
-        let i = |v: Interval| crate::report::format::interval(v, |x| format!("{x:.3}"));
+        let i = |v: Interval| crate::evaluation::stats::interval(v, |x| format!("{x:.3}"));
         let mut out = vec![
             format!("  return  mean {} (95% CI over episodes)", i(self.mean)),
             format!("  return  IQM  {}", i(self.iqm)),

@@ -7,8 +7,8 @@ use anyhow::{ensure, Result};
 
 use super::video::VideoWriter;
 use super::{Film, Frame, RenderSettings, Renderer};
+use crate::envs::push::{Push, Pushed};
 use crate::envs::{make, Env, EnvConfig};
-use crate::evaluation::Push;
 use crate::policy::Policy;
 
 /// One filmed episode.
@@ -57,7 +57,7 @@ pub fn film_episode(
     let mut pushed;
     let env: &mut dyn Env = match push {
         Some(p) => {
-            pushed = crate::evaluation::push::Pushed::new(env.as_mut(), p)?;
+            pushed = Pushed::new(env.as_mut(), p)?;
             &mut pushed
         }
         None => env.as_mut(),

@@ -1,5 +1,5 @@
 //! How numbers read in the report's tables.
-use crate::evaluation::stats::{wilson, Interval};
+use crate::evaluation::stats::wilson;
 
 /// Returns span from about 0.01 (short Minitaur episodes) to 10,000 (HalfCheetah): more
 /// decimals below 1.
@@ -21,14 +21,7 @@ pub fn fixed(v: f64, digits: usize) -> String {
     }
 }
 
-/// `estimate [low, high]`.
-pub fn interval(i: Interval, f: impl Fn(f64) -> String) -> String {
-    if i.low == i.high {
-        f(i.estimate)
-    } else {
-        format!("{} [{}, {}]", f(i.estimate), f(i.low), f(i.high))
-    }
-}
+pub use crate::evaluation::stats::interval;
 
 /// `k/n (low-high)`: a count with the Wilson interval of its rate.
 pub fn rate(k: usize, n: usize) -> String {
@@ -59,6 +52,7 @@ pub fn budget(steps: u64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::evaluation::stats::Interval;
 
     #[test]
     fn numbers_read_at_their_scale() {

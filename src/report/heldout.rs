@@ -11,7 +11,7 @@ use super::runs::{Group, Run};
 use crate::controller::measure::{mean_cost_of_transport, GaitEpisode};
 use crate::envs::{make, EnvConfig};
 use crate::evaluation::cache::{EvalCache, Key};
-use crate::evaluation::stats::{self, Interval};
+use crate::evaluation::stats;
 use crate::evaluation::{Protocol, Push};
 use crate::policy::AgentPolicy;
 use crate::train::provenance;
@@ -56,28 +56,7 @@ pub struct BudgetRow {
     pub external: bool,
 }
 
-/// An interval and what it was resampled over.
-#[derive(Debug, Clone, Copy)]
-pub struct Estimate {
-    /// The statistic and its 95% interval.
-    pub interval: Interval,
-    /// "seeds", or "episodes" for a single seed.
-    pub over: &'static str,
-}
-
-/// `statistic` of per-seed values with its 95% bootstrap interval: resampling seeds (each seed
-/// summarised by the mean of its values) when there are two or more, else the one seed's values.
-pub fn estimate(per_seed: &[Vec<f64>], statistic: fn(&[f64]) -> f64, seed: u64) -> Estimate {
-    if per_seed.len() >= 2 {
-        let scores: Vec<f64> = per_seed.iter().map(|v| stats::mean(v)).collect();
-        let i = stats::stratified_bootstrap(&[scores], |s| statistic(&s[0]), stats::BOOTSTRAP_REPS, seed);
-        Estimate { interval: i, over: "seeds" }
-    } else {
-        let values = per_seed.first().cloned().unwrap_or_default();
-        let i = stats::stratified_bootstrap(&[values], |s| statistic(&s[0]), stats::BOOTSTRAP_REPS, seed);
-        Estimate { interval: i, over: "episodes" }
-    }
-}
+pub use crate::evaluation::stats::{estimate, Estimate};
 
 impl BudgetRow {
     /// A row of `group` at `budget` with nothing evaluated or recorded yet.
@@ -255,8 +234,10 @@ pub(crate) fn evaluate_row(
         };
         protocol.check_disjoint(cfg.seed, cfg.train.total_steps, cfg.train.eval_episodes)?;
         let env_config = cfg.env.for_evaluation();
-        let policy_key = format!("agent {}", source.digest(&run.dir)?);
-        let key = Key::episodes(&env_config, protocol, &policy_key, None, push)?;
+        let key = cache.timed(|| -> Result<Key> {
+            let policy_key = format!("agent {}", source.digest(&run.dir)?);
+            Key::episodes(&env_config, protocol, &policy_key, None, push)
+        })?;
         let episodes = cache.episodes(&key, || {
             let mut env = make(&env_config).with_context(|| format!("making the env of {}", run.dir.display()))?;
             let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.algo().to_string() };
@@ -294,22 +275,5 @@ pub(crate) fn machine_of(run: &Run, budget: u64) -> String {
             parts.join(" then ")
         }
         _ => "not recorded".to_string(),
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn estimates_resample_seeds_or_the_single_seeds_episodes() {
-        let two = estimate(&[vec![1.0, 3.0], vec![5.0, 7.0]], stats::mean, 1);
-        assert_eq!(two.over, "seeds");
-        assert_eq!(two.interval.estimate, 4.0);
-        // Two seed means, 2 and 6: every resample's mean is 2, 4 or 6.
-        assert!(two.interval.low >= 2.0 && two.interval.high <= 6.0);
-        let one = estimate(&[vec![1.0, 2.0, 3.0, 10.0]], stats::iqm, 1);
-        assert_eq!(one.over, "episodes");
-        assert_eq!(one.interval.estimate, 2.5);
     }
 }

@@ -38,8 +38,7 @@ pub(crate) const CONTROLLER_CSV: &str = "controller.csv";
 pub(crate) const CURVES_CSV: &str = "curves.csv";
 pub(crate) const VERSUS_CONTROLLER_CSV: &str = "versus_controller.csv";
 
-/// Seed of every bootstrap in the report.
-pub const BOOTSTRAP_SEED: u64 = 2021;
+pub use crate::evaluation::stats::BOOTSTRAP_SEED;
 
 /// Episodes per seed of the training-return rolling statistics.
 pub(crate) const ROLLING_WINDOW: usize = 50;
@@ -182,7 +181,7 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
         }
         for suite in suites.iter().filter(|s| s.meta.env.name == *env) {
             let clips = robustness::section(&mut doc, out, suite, opts.videos.then_some(opts.threads), &opts.cache)?;
-            filmed.extend(clips.iter().flat_map(|c| [c.video.clone(), c.gif.clone(), c.poster.clone()]));
+            filmed.extend(clips.iter().flat_map(videos::Clip::files));
         }
         let section = report.controllers.get(env);
         let clips = if opts.videos {
@@ -190,7 +189,7 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
         } else {
             Vec::new()
         };
-        filmed.extend(clips.iter().flat_map(|c| [c.video.clone(), c.gif.clone(), c.poster.clone()]));
+        filmed.extend(clips.iter().flat_map(videos::Clip::files));
         let runs_here: usize = env_groups.iter().map(|(_, rs)| rs.len()).sum();
         summaries.push((
             (section.is_none(), usize::MAX - runs_here, env.clone()),

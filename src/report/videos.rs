@@ -131,6 +131,13 @@ pub struct Clip {
     pub fell: Vec<bool>,
 }
 
+impl Clip {
+    /// Its MP4, GIF and poster, relative to the report.
+    pub fn files(&self) -> [String; 3] {
+        [self.video.clone(), self.gif.clone(), self.poster.clone()]
+    }
+}
+
 /// How rows are ranked: by the lower end of the 95% interval of their mean held-out return, then
 /// by the mean. A row whose return is high but uncertain (few seeds that disagree, or frequent
 /// falls) ranks below one that is almost as high and sure.
@@ -302,6 +309,8 @@ fn clip_key(plan: &ClipPlan, runs: &[(&Group, &Vec<&Run>)], episode_seed: u64) -
         format!("push = {:?}", plan.push),
         format!("panel = {:?}", plan.panel),
         format!("until decided = {}", plan.until_decided),
+        // The OpenGL the frames are drawn with (Mesa's OSMesa, or EGL on a GPU's driver).
+        format!("gl = {:?}", crate::render::gl::Backend::from_env()?),
     ];
     for actor in &plan.panels {
         what.push(match actor {

@@ -12,10 +12,9 @@ use crate::controller::measure::{mean_cost_of_transport, GaitEpisode};
 use crate::envs::{make, EnvConfig};
 use crate::evaluation::cache::Key;
 use crate::evaluation::stats::{self, wilson, Interval};
+use crate::evaluation::stats::{estimate, BOOTSTRAP_SEED};
 use crate::evaluation::Protocol;
 use crate::policy::AgentPolicy;
-use crate::report::heldout::estimate;
-use crate::report::BOOTSTRAP_SEED;
 use crate::train::resolve_policy;
 
 /// Who plays the suite.
