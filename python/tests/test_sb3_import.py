@@ -198,6 +198,7 @@ def test_unsupported_sb3_models_are_refused_by_name(tmp_path, sb3):
             "Tanh activations are not supported")
     refused(sb3.SAC("MlpPolicy", env, device="cpu"), r"observations \(4,\).*hopper", "hopper")
     refused(sb3.A2C("MlpPolicy", env, device="cpu"), "A2C is not supported")
+    refused(sb3.SAC("MlpPolicy", env, device="cpu"), "unknown env 'locobench/Nope-v0'", "locobench/Nope-v0")
 
     class Images(gym.Env):  # the smallest image NatureCNN takes
         observation_space = gym.spaces.Box(0, 255, (36, 36, 3), np.uint8)
@@ -248,6 +249,15 @@ def test_an_imported_policy_is_a_report_row_labelled_with_its_source(tmp_path, b
     assert "its training steps not stated" in md
     held_out = (report / "held_out.csv").read_text()
     assert "td3-sb3 (imported" in held_out
+
+    # An imported policy whose env this build does not know: an error naming it, no report.
+    config = tmp_path / "td3-other-seed0" / "config.toml"
+    config.write_text(config.read_text().replace('name = "minitaur"', 'name = "minitaur-x"'))
+    elsewhere = tmp_path / "report-2"
+    done = subprocess.run([str(binary), "report", "--runs", str(tmp_path / "td3-other-seed0"), "--out", str(elsewhere),
+                           "--episodes", "2"], capture_output=True, text=True)
+    assert done.returncode != 0 and "td3-other-seed0: its env in config.toml" in done.stderr, done.stderr
+    assert "unknown environment 'minitaur-x'" in done.stderr and not (elsewhere / "index.html").exists()
 
 
 def test_evaluate_applies_a_vecnormalizes_frozen_statistics(tmp_path):

@@ -60,6 +60,9 @@ impl Run {
     /// Reads `config.toml` and `metrics.csv` from `dir`.
     pub fn load(dir: &Path) -> Result<Run> {
         let config = read_run_config(dir)?;
+        // An env this build does not know (a policy imported for another version, a typo) is an
+        // error naming the run before the report writes anything.
+        config.env.resolved_options().with_context(|| format!("{}: its env in config.toml", dir.display()))?;
         let path = dir.join("metrics.csv");
         let metrics = if path.exists() {
             metrics::read(&path).with_context(|| format!("reading {}", path.display()))?
