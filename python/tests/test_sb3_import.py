@@ -28,8 +28,8 @@ def _forward(layers, x, hidden):
     return x
 
 
-def _config(algo, hidden, extra=""):
-    env = _core.Env("minitaur", [], [])
+def _config(algo, hidden, extra="", options=()):
+    env = _core.Env("minitaur", list(options), [])
     return (f'format = 3\nseed = 0\ncrate_version = "test"\n\n[env]\nname = "minitaur"\n\n[env.options]\n'
             f"{env.options}\n[train]\nalgo = \"{algo}\"\nhidden = {hidden}\n{extra}")
 
@@ -294,3 +294,31 @@ def test_evaluate_applies_a_vecnormalizes_frozen_statistics(tmp_path):
         locobench.evaluate(Model(), "hopper", episodes=1, vec_normalize=tmp_path / "junk.pkl")
     with pytest.raises(ValueError, match="normalises its observations itself"):
         locobench.evaluate(locobench.load_policy(ROOT_POLICY), episodes=1, vec_normalize=norm)
+
+
+def test_external_episodes_join_the_group_played_under_their_options(tmp_path, binary):
+    """A report with two groups in one env (the shipped PPO under the default reward, an imported
+    policy under energy weight 0): episodes evaluated outside under energy weight 0 join as a row
+    compared in that group's env; under options no group has, they are refused by name."""
+    rng = np.random.default_rng(5)
+    layers = _mlp(rng, [OBS, 16, ACT])
+    tensors = {f"actor.{i}.{p}": t for i, (w, b) in enumerate(layers) for p, t in (("weight", w), ("bias", b))}
+    energy0 = tmp_path / "energy0-seed0"
+    _core.import_policy(str(energy0), _payload(tensors), _config("td3", [16], options=[("energy_weight", "0.0")]),
+                        'library = "test 1.0"\nstep = 1000\n')
+    zero = lambda obs: np.zeros(ACT)  # noqa: E731
+    locobench.evaluate(zero, "minitaur", episodes=2, reward={"energy": 0.0}, out=tmp_path / "zero-energy0", label="zero")
+    locobench.evaluate(zero, "minitaur", episodes=2, reward={"drift": 0.5}, out=tmp_path / "zero-drift", label="zero")
+    ppo = pathlib.Path(__file__).resolve().parents[2] / "models" / "policies" / "minitaur-ppo"
+
+    def report(external):
+        return subprocess.run([str(binary), "report", "--runs", str(ppo), str(energy0), "--out", str(tmp_path / "r"),
+                               "--episodes", "2", "--push-episodes", "0", "--no-cache", "--external", str(external)],
+                              capture_output=True, text=True)
+
+    done = report(tmp_path / "zero-energy0")
+    assert done.returncode == 0, done.stderr
+    assert "| zero (external) | steps unknown | 1 of 1 | 2 |" in (tmp_path / "r" / "README.md").read_text()
+    refused = report(tmp_path / "zero-drift")
+    assert refused.returncode != 0 and "zero-drift: played minitaur under other options or rewards" in refused.stderr
+    assert "none of its 2 groups there matches" in refused.stderr and "drift_weight" in refused.stderr, refused.stderr
