@@ -62,9 +62,15 @@ for d in "${runs[@]}"; do
 done
 # Peers evaluated outside locobench (locobench.evaluate(out=...)), one row per label with a seed per
 # directory (benches/sb3_peer.py): Stable-Baselines3's PPO on Minitaur with rl-baselines3-zoo's
-# settings and on HalfCheetah with locobench's own PPO settings.
+# settings and on HalfCheetah with locobench's own PPO settings; SB3's SAC and TD3 on Minitaur with
+# rl-baselines3-zoo's settings (benches/sb3_offpolicy_peer.py), at the last budget each run reached.
 external=()
-for d in $r/minitaur/sb3-ppo-seed*-1m/external $r/half-cheetah/sb3-ppo*-seed*-1m/external; do
+offpolicy=()
+for run in $r/minitaur/sb3-{sac,td3}-seed*; do
+  last=$(ls -d "$run"/external-* 2>/dev/null | sort -V | tail -1)
+  [ -n "$last" ] && offpolicy+=("$last")
+done
+for d in $r/minitaur/sb3-ppo-seed*-1m/external $r/half-cheetah/sb3-ppo*-seed*-1m/external "${offpolicy[@]}"; do
   [ -d "$d" ] && external+=(--external "$d")
 done
 # The newest committed robustness suite of each env (cargo bench --bench robustness) becomes that
