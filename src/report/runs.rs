@@ -35,7 +35,7 @@ pub struct Run {
 pub struct Imported {
     /// The library and its version.
     pub library: String,
-    /// The model file it was converted from, and its SHA-256, where stated.
+    /// The model file it was converted from, where stated.
     pub model_file: String,
     /// That file's SHA-256, where stated.
     pub model_sha256: String,
