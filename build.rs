@@ -87,7 +87,7 @@ fn record_code_versions() {
     let mut eval = Vec::new();
     files_under(
         Path::new("src"),
-        &["src/report", "src/cli", "src/docgen", "src/sweep", "src/record", "src/render", "src/main.rs", "src/args.rs"],
+        &["src/report", "src/cli", "src/sweep", "src/record", "src/render", "src/main.rs", "src/args.rs"],
         &mut eval,
     );
     files_under(Path::new("models"), &["models/policies"], &mut eval);

@@ -1,5 +1,5 @@
 //! Where the networks train: `--device cpu|cuda[:N]`. The CPU runs the exact fused path
-//! ([`crate::numeric`]); a CUDA device runs the device-generic path ([`crate::agents::generic`]),
+//! ([`crate::numeric`]); a CUDA device runs the device-generic path (`agents::common::device`),
 //! which needs a build with the `cuda` feature (`scripts/build-cuda.sh`).
 use std::fmt;
 use std::str::FromStr;

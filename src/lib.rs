@@ -5,7 +5,6 @@ pub mod agents;
 pub mod args;
 pub mod controller;
 pub mod device;
-pub mod docgen;
 pub mod envs;
 pub mod evaluation;
 pub mod io;

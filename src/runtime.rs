@@ -22,7 +22,7 @@ pub fn configure_process() {
             std::env::set_var(var, "1");
         }
     }
-    crate::agents::keep_freed_memory();
+    crate::numeric::allocator::keep_freed_memory();
 }
 
 /// The per-thread settings, held while the guard lives; dropping it restores the thread's float
@@ -35,16 +35,16 @@ pub struct Runtime {
 impl Runtime {
     /// `threads`: 2 gives the calling thread a helper on the second core, 0 or 1 none.
     pub fn enter(threads: usize) -> Runtime {
-        crate::agents::keep_freed_memory();
-        let float_mode = crate::agents::float_mode();
-        crate::agents::flush_denormals_to_zero();
+        crate::numeric::allocator::keep_freed_memory();
+        let float_mode = crate::numeric::denormals::float_mode();
+        crate::numeric::denormals::flush_denormals_to_zero();
         Runtime { float_mode, _helper: (threads >= 2).then(HelperGuard::start) }
     }
 }
 
 impl Drop for Runtime {
     fn drop(&mut self) {
-        crate::agents::set_float_mode(self.float_mode);
+        crate::numeric::denormals::set_float_mode(self.float_mode);
     }
 }
 

@@ -8,7 +8,7 @@ pub use super::dpg::DpgConfig;
 pub use super::dqn::DqnConfig;
 pub use super::ppo::PpoConfig;
 pub use super::sac::SacConfig;
-pub use crate::agents::squashed::TanhCorrection;
+pub use crate::agents::common::squashed::TanhCorrection;
 
 /// A learning algorithm, as named in `--algo` and `config.toml`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]

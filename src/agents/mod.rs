@@ -4,21 +4,17 @@
 //! Agents work in the normalised action space [-1, 1]^n; the trainer maps actions to the
 //! environment's bounds. All randomness (initialisation, exploration, target smoothing, SAC's
 //! sampling) comes from RNGs the caller seeds, never from a library's global RNG.
-pub mod buffer;
+pub mod common;
 pub mod config;
-mod critics;
 pub mod crossq;
-mod dpg;
+pub mod dpg;
 pub mod dqn;
-pub mod generic;
-pub(crate) mod nets;
-pub mod noise;
-pub mod normalize;
-pub mod objectives;
 pub mod ppo;
 pub mod registry;
-pub(crate) mod sac;
-pub mod squashed;
+pub mod sac;
+
+/// What the algorithms share, at the paths it had before it moved to [`common`].
+pub use common::{buffer, noise, normalize, objectives, squashed};
 
 use candle_core::{Result, Var};
 use rand_chacha::ChaCha8Rng;
@@ -27,7 +23,8 @@ pub use crate::numeric::allocator::keep_freed_memory;
 pub use crate::numeric::denormals::{float_mode, flush_denormals_to_zero, set_float_mode};
 /// The optimiser and the helper thread live in [`crate::numeric`]; these paths stay for callers.
 pub use crate::numeric::{optim, second_core};
-pub use buffer::{Batch, ReplayBuffer};
+pub use common::buffer::{Batch, ReplayBuffer};
+pub use common::normalize::NormalizedAgent;
 pub use config::{
     Algo, CrossqConfig, DpgConfig, DqnConfig, OtherAlgorithmKeys, PpoConfig, SacConfig, SacVersion, TanhCorrection,
     TrainConfig, WeightInit,
@@ -35,7 +32,6 @@ pub use config::{
 pub use crossq::CrossqAgent;
 pub use dpg::DeterministicAgent;
 pub use dqn::BranchingDqnAgent;
-pub use normalize::NormalizedAgent;
 pub use ppo::PpoAgent;
 pub use sac::SacAgent;
 
@@ -75,6 +71,34 @@ pub trait Agent: Send {
     /// Restores a counter saved by `counters`; unknown names are ignored.
     fn set_counter(&mut self, name: &str, value: u64);
 }
+
+/// The [`Agent`] methods a wrapper hands to its `inner` agent unchanged (`algo`, `begin_episode`,
+/// `optimizers`, `counters`, `set_counter`): written once for every wrapper
+/// ([`NormalizedAgent`], the device path's error explainer).
+macro_rules! delegate_to_inner {
+    () => {
+        fn algo(&self) -> $crate::agents::Algo {
+            self.inner.algo()
+        }
+
+        fn begin_episode(&mut self) {
+            self.inner.begin_episode()
+        }
+
+        fn optimizers(&mut self) -> Vec<(&'static str, &mut dyn $crate::numeric::optim::Optimizer)> {
+            self.inner.optimizers()
+        }
+
+        fn counters(&self) -> Vec<(&'static str, u64)> {
+            self.inner.counters()
+        }
+
+        fn set_counter(&mut self, name: &str, value: u64) {
+            self.inner.set_counter(name, value)
+        }
+    };
+}
+pub(crate) use delegate_to_inner;
 
 /// An off-policy learner: it updates from replay minibatches (TD3, DDPG, SAC, CrossQ, the
 /// branching DQN). PPO learns from its own rollouts (`train::on_policy`) and is an [`Agent`] only.
@@ -131,7 +155,7 @@ pub fn make_agent_on(
 }
 
 /// Builds the on-policy learner a config asks for on `device`: the fused agent on the CPU, the
-/// device-generic one ([`generic`]) elsewhere, from the same initial weights. An off-policy
+/// device-generic one ([`common::device`]) elsewhere, from the same initial weights. An off-policy
 /// algorithm is an error.
 pub fn make_on_policy_on(
     cfg: &TrainConfig,
@@ -146,16 +170,16 @@ pub fn make_on_policy_on(
     if device == crate::device::ComputeDevice::Cpu {
         return Ok(build(cfg, obs_dim, act_dim, rng)?);
     }
-    let what = generic::memory::describe(cfg, &device.to_string());
-    let agent = generic::make_generic_on_policy(cfg, obs_dim, act_dim, rng, &device.open()?)
+    let what = common::device::memory::describe(cfg, &device.to_string());
+    let agent = common::device::make_generic_on_policy(cfg, obs_dim, act_dim, rng, &device.open()?)
         .map_err(|e| explained(e, &what))?;
-    Ok(Box::new(generic::memory::Explained { inner: agent, what }))
+    Ok(Box::new(common::device::memory::Explained { inner: agent, what }))
 }
 
-/// `e`, with a device's out-of-memory error explained (see [`generic::memory::explain`]).
+/// `e`, with a device's out-of-memory error explained (see [`common::device::memory::explain`]).
 fn explained(e: anyhow::Error, what: &str) -> anyhow::Error {
     match e.downcast::<candle_core::Error>() {
-        Ok(e) => anyhow::Error::new(generic::memory::explain(e, what)),
+        Ok(e) => anyhow::Error::new(common::device::memory::explain(e, what)),
         Err(e) => e,
     }
 }
@@ -179,7 +203,7 @@ pub fn make_learner(
 }
 
 /// [`make_learner`] on `device`: the fused agent on the CPU, the device-generic one
-/// ([`generic`]) elsewhere, from the same initial weights.
+/// ([`common::device`]) elsewhere, from the same initial weights.
 pub fn make_learner_on(
     cfg: &TrainConfig,
     obs_dim: usize,
@@ -190,10 +214,10 @@ pub fn make_learner_on(
     if device == crate::device::ComputeDevice::Cpu {
         return Ok(make_learner(cfg, obs_dim, act_dim, rng)?);
     }
-    let what = generic::memory::describe(cfg, &device.to_string());
-    let agent =
-        generic::make_generic_agent(cfg, obs_dim, act_dim, rng, &device.open()?).map_err(|e| explained(e, &what))?;
-    let agent: Box<dyn OffPolicyAgent> = Box::new(generic::memory::Explained { inner: agent, what });
+    let what = common::device::memory::describe(cfg, &device.to_string());
+    let agent = common::device::make_generic_agent(cfg, obs_dim, act_dim, rng, &device.open()?)
+        .map_err(|e| explained(e, &what))?;
+    let agent: Box<dyn OffPolicyAgent> = Box::new(common::device::memory::Explained { inner: agent, what });
     Ok(if cfg.normalize_observations { Box::new(NormalizedAgent::new(agent, obs_dim)?) } else { agent })
 }
 

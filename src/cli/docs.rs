@@ -17,14 +17,14 @@ pub struct DocsArgs {
 
 pub fn run(args: DocsArgs) -> Result<()> {
     if args.check {
-        let stale = locobench::docgen::stale(&args.root)?;
+        let stale = super::docgen::stale(&args.root)?;
         if !stale.is_empty() {
             bail!("generated sections out of date (run `locobench docs`): {}", stale.join(", "));
         }
         println!("every generated section is up to date");
         return Ok(());
     }
-    let changed = locobench::docgen::write(&args.root)?;
+    let changed = super::docgen::write(&args.root)?;
     if changed.is_empty() {
         println!("every generated section is up to date");
     } else {

@@ -1,6 +1,7 @@
 //! The `locobench` command line.
 mod baseline;
 mod device;
+mod docgen;
 mod docs;
 mod envs;
 mod eval;

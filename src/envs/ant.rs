@@ -9,7 +9,7 @@ use super::options::read_by_name;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{legged_step, locomotion_metrics, planar_position, LeggedWeights, Task, TaskStep};
 use super::world::World;
-use super::{BoxSpace, EnvError};
+use super::EnvError;
 use crate::mujoco::Model;
 
 pub(crate) const MODEL_XML: &str = include_str!("../../models/ant.xml");
@@ -133,10 +133,6 @@ impl Task for AntTask {
 
     fn observation_dim(&self, m: &Model) -> usize {
         m.nq() - 2 + m.nv() + 6 * (m.nbody() - 1)
-    }
-
-    fn action_space(&self, model: &Model) -> BoxSpace {
-        BoxSpace::uniform(model.nu(), -1.0, 1.0)
     }
 
     fn observe(&self, sim: &Simulation, out: &mut Vec<f64>) {

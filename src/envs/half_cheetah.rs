@@ -5,7 +5,7 @@ use serde::{Deserialize, Serialize};
 use super::mujoco_env::MujocoEnv;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{quadratic_cost, Task, TaskStep};
-use super::{BoxSpace, EnvError};
+use super::EnvError;
 use crate::mujoco::Model;
 
 pub(crate) const MODEL_XML: &str = include_str!("../../models/half_cheetah.xml");
@@ -63,10 +63,6 @@ impl Task for HalfCheetahTask {
 
     fn observation_dim(&self, model: &Model) -> usize {
         model.nq() - 1 + model.nv()
-    }
-
-    fn action_space(&self, model: &Model) -> BoxSpace {
-        BoxSpace::uniform(model.nu(), -1.0, 1.0)
     }
 
     fn observe(&self, sim: &Simulation, out: &mut Vec<f64>) {

@@ -7,7 +7,7 @@ use super::mujoco_env::MujocoEnv;
 use super::options::read_by_name;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{legged_step, locomotion_metrics, planar_position, quadratic_cost, LeggedWeights, Task, TaskStep};
-use super::{BoxSpace, EnvError};
+use super::EnvError;
 use crate::mujoco::Model;
 
 pub(crate) const MODEL_XML: &str = include_str!("../../models/humanoid.xml");
@@ -123,11 +123,6 @@ impl Task for HumanoidTask {
             + part(o.include_cvel_in_observation, 6 * nb)
             + part(o.include_qfrc_actuator_in_observation, m.nv() - 6)
             + part(o.include_cfrc_ext_in_observation, 6 * nb)
-    }
-
-    fn action_space(&self, m: &Model) -> BoxSpace {
-        let ctrl = m.actuator_ctrlrange();
-        BoxSpace::new((0..m.nu()).map(|i| ctrl[2 * i]).collect(), (0..m.nu()).map(|i| ctrl[2 * i + 1]).collect())
     }
 
     fn observe(&self, sim: &Simulation, out: &mut Vec<f64>) {

@@ -6,7 +6,7 @@ use super::mujoco_env::MujocoEnv;
 use super::options::Check;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{Task, TaskStep};
-use super::{BoxSpace, EnvError};
+use super::EnvError;
 use crate::mujoco::Model;
 
 pub(crate) const MODEL_XML: &str = include_str!("../../models/inverted_pendulum.xml");
@@ -69,10 +69,6 @@ impl Task for InvertedPendulumTask {
 
     fn observation_dim(&self, model: &Model) -> usize {
         model.nq() + model.nv()
-    }
-
-    fn action_space(&self, model: &Model) -> BoxSpace {
-        BoxSpace::uniform(model.nu(), -3.0, 3.0)
     }
 
     fn observe(&self, sim: &Simulation, out: &mut Vec<f64>) {

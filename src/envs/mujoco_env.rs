@@ -2,11 +2,11 @@
 use std::sync::Arc;
 
 use super::options::{check_by_name, read_by_name};
-use super::simulation::{EnvCore, Simulation, StepOutcome};
+use super::simulation::{env_core_accessors, EnvCore, Simulation, StepOutcome};
 use super::task::{Task, Timing};
 use super::world::Delay;
 use super::{Env, EnvError, EnvSpec, Info, Step};
-use crate::mujoco::{Data, Model};
+use crate::mujoco::Model;
 
 /// An environment made of a [`Task`] on a MuJoCo [`Simulation`]: clipping, reset noise, time limit and
 /// instability handling are shared here.
@@ -53,10 +53,6 @@ impl<T: Task> MujocoEnv<T> {
 }
 
 impl<T: Task> Env for MujocoEnv<T> {
-    fn spec(&self) -> &EnvSpec {
-        &self.core.spec
-    }
-
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
         self.core.reset_with_noise(seed, self.timing.reset_noise_scale, T::VELOCITY_NOISE)?;
         self.delay = (self.latency > 0).then(|| Delay::new(self.latency, self.timing.frame_skip));
@@ -88,15 +84,5 @@ impl<T: Task> Env for MujocoEnv<T> {
         Ok(self.core.finish_step(observation, outcome.terminated, info))
     }
 
-    fn data(&self) -> &Data {
-        &self.core.sim.data
-    }
-
-    fn data_mut(&mut self) -> &mut Data {
-        &mut self.core.sim.data
-    }
-
-    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        Ok(self.core.sim.data.set_state(qpos, qvel)?)
-    }
+    env_core_accessors!();
 }

@@ -7,7 +7,7 @@ use serde::Serialize;
 use super::options::read_by_name;
 use super::simulation::{Simulation, VelocityNoise};
 use super::task::{quadratic_cost, Task, TaskStep};
-use super::{BoxSpace, EnvError};
+use super::EnvError;
 use crate::mujoco::Model;
 
 /// The reward weights and settings every planar walker's options carry, read from them by name.
@@ -52,10 +52,6 @@ impl<R: WalkerRule> Task for PlanarWalkerTask<R> {
 
     fn observation_dim(&self, model: &Model) -> usize {
         model.nq() - 1 + model.nv()
-    }
-
-    fn action_space(&self, model: &Model) -> BoxSpace {
-        BoxSpace::uniform(model.nu(), -1.0, 1.0)
     }
 
     fn observe(&self, sim: &Simulation, out: &mut Vec<f64>) {

@@ -151,6 +151,29 @@ pub enum VelocityNoise {
     Uniform,
 }
 
+/// The [`Env`](super::Env) methods that read or write an environment's [`EnvCore`] (its `core`
+/// field) and nothing else: written once for [`MujocoEnv`](super::MujocoEnv) and the Minitaur.
+macro_rules! env_core_accessors {
+    () => {
+        fn spec(&self) -> &$crate::envs::EnvSpec {
+            &self.core.spec
+        }
+
+        fn data(&self) -> &$crate::mujoco::Data {
+            &self.core.sim.data
+        }
+
+        fn data_mut(&mut self) -> &mut $crate::mujoco::Data {
+            &mut self.core.sim.data
+        }
+
+        fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), $crate::envs::EnvError> {
+            Ok(self.core.sim.data.set_state(qpos, qvel)?)
+        }
+    };
+}
+pub(crate) use env_core_accessors;
+
 /// The state every MuJoCo environment keeps, and the parts of reset/step they all share.
 pub(crate) struct EnvCore {
     pub(crate) sim: Simulation,

@@ -51,8 +51,13 @@ pub trait Task: Send + Sized + 'static {
     fn options(&self) -> &Self::Options;
     /// Length of the observation.
     fn observation_dim(&self, model: &Model) -> usize;
-    /// The action bounds.
-    fn action_space(&self, model: &Model) -> BoxSpace;
+    /// The action bounds: by default each actuator's `ctrlrange` in the model, as Gymnasium's
+    /// MuJoCo envs take them (`MujocoEnv._set_action_space`, gymnasium/envs/mujoco/mujoco_env.py).
+    fn action_space(&self, model: &Model) -> BoxSpace {
+        let ctrl = model.actuator_ctrlrange();
+        let nu = model.nu();
+        BoxSpace::new((0..nu).map(|i| ctrl[2 * i]).collect(), (0..nu).map(|i| ctrl[2 * i + 1]).collect())
+    }
     /// Appends the current observation to `out`.
     fn observe(&self, sim: &Simulation, out: &mut Vec<f64>);
     /// Diagnostics at reset (positions).

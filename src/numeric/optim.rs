@@ -33,7 +33,7 @@ impl From<Var> for Param {
 }
 
 /// An optimiser's state as a checkpoint holds it: named tensors (on the CPU) and a step count.
-/// The fused [`Adam`] and the device-generic one (`agents::generic::adam`) write the same names,
+/// The fused [`Adam`] and the device-generic one (`agents::common::device::adam`) write the same names,
 /// so a checkpoint moves between them.
 pub trait Optimizer {
     /// Moments as named CPU tensors plus the step count.

@@ -6,17 +6,24 @@ use crate::envs::EnvConfig;
 
 #[derive(Debug, Clone, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub(crate) struct Anchor {
+/// One published return: what was trained where, for how long, with what result, and the source.
+pub struct Anchor {
+    /// Our environment name.
     pub env: String,
+    /// Our algorithm name.
     pub algo: String,
+    /// The published return.
     #[serde(rename = "return")]
     pub value: f64,
+    /// Its spread (`spread` says over what), when published.
     pub std: Option<f64>,
+    /// Environment steps of training behind it.
     pub steps: u64,
     /// Training seeds behind the value, when the source says.
     pub seeds: Option<usize>,
     /// What the ± is taken over, when it is not seeds.
     pub(crate) spread: Option<String>,
+    /// Where the figure comes from (paper, repository and file).
     pub source: String,
     /// The value is a mean of training-episode returns: the last this many episodes at `steps`
     /// (Freeman's 50-episode rolling mean) ...
@@ -103,7 +110,7 @@ struct File {
 }
 
 /// The anchors bundled with the crate.
-pub(crate) fn bundled_anchors() -> Vec<Anchor> {
+pub fn bundled_anchors() -> Vec<Anchor> {
     toml::from_str::<File>(include_str!("../../baselines/published_returns.toml"))
         .expect("baselines/published_returns.toml parses")
         .anchor
@@ -115,6 +122,7 @@ pub(crate) fn bundled_anchors() -> Vec<Anchor> {
 pub(crate) struct PublishedCurve {
     pub env: String,
     pub algo: String,
+    /// Where the figure comes from (paper, repository and file).
     pub source: String,
     pub seeds: usize,
     pub steps: Vec<u64>,

@@ -37,7 +37,7 @@ impl PolicySource {
 }
 
 /// The step of an exported policy, from the `step = N` line of its `source.toml`.
-pub(crate) fn shipped_step(run_dir: &Path) -> Option<u64> {
+pub fn shipped_step(run_dir: &Path) -> Option<u64> {
     if !run_dir.join(crate::train::checkpoint::POLICY_FILE).is_file() {
         return None;
     }

@@ -2,7 +2,7 @@
 //! (`evaluation`), at fixed step budgets, beside published results and, on Minitaur and Ant,
 //! beside the controller across its speeds and under pushes; as `index.html` (self-contained, no
 //! network) and `README.md`, with SVG charts beside them.
-pub(crate) mod anchors;
+pub mod anchors;
 pub mod budgets;
 pub mod controller;
 pub mod curves;
@@ -34,9 +34,12 @@ pub use format::fmt_return;
 
 /// The held-out rows and the controller grids as data, beside the report (what docs quote).
 pub const HELD_OUT_CSV: &str = "held_out.csv";
-pub(crate) const CONTROLLER_CSV: &str = "controller.csv";
-pub(crate) const CURVES_CSV: &str = "curves.csv";
-pub(crate) const VERSUS_CONTROLLER_CSV: &str = "versus_controller.csv";
+/// The controller's grid of speeds, as data.
+pub const CONTROLLER_CSV: &str = "controller.csv";
+/// The learning curves, as data.
+pub const CURVES_CSV: &str = "curves.csv";
+/// Each learned row against the controller at its speed, as data.
+pub const VERSUS_CONTROLLER_CSV: &str = "versus_controller.csv";
 
 pub use crate::evaluation::stats::BOOTSTRAP_SEED;
 

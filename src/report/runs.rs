@@ -220,7 +220,7 @@ impl Group {
     }
 
     /// Algorithm, reward and settings in full.
-    pub(crate) fn description(&self) -> String {
+    pub fn description(&self) -> String {
         let settings = if self.settings.is_empty() { "shipped settings".to_string() } else { self.settings.clone() };
         format!("{}, {}, {settings}", self.algo, self.reward)
     }
@@ -240,7 +240,7 @@ fn without_seed(name: &str) -> String {
 
 /// Every run directory in `paths`: each path is a run directory itself or is searched
 /// (a few levels deep) for them, e.g. a sweep directory.
-pub(crate) fn find_runs(paths: &[PathBuf]) -> Result<Vec<Run>> {
+pub fn find_runs(paths: &[PathBuf]) -> Result<Vec<Run>> {
     fn walk(dir: &Path, depth: usize, out: &mut Vec<PathBuf>) -> Result<()> {
         // Results kept without checkpoints (config.toml + metrics.csv) count too, and so do
         // exported policies (config.toml + policy.safetensors), those imported from elsewhere

@@ -11,7 +11,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use safetensors::{Dtype, SafeTensors, View};
 
-use crate::agents::buffer::{BufferSnapshot, ReplayBuffer};
+use crate::agents::common::buffer::{BufferSnapshot, ReplayBuffer};
 
 /// One named tensor's bytes, borrowed where they can be.
 struct Column<'a> {

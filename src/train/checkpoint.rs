@@ -17,7 +17,7 @@ use anyhow::{bail, Context, Result};
 use candle_core::{Device, Tensor};
 use serde::{Deserialize, Serialize};
 
-use crate::agents::buffer::ReplayBuffer;
+use crate::agents::common::buffer::ReplayBuffer;
 use crate::agents::{Agent, Losses};
 use crate::io::write_bytes_atomic;
 
@@ -49,6 +49,33 @@ pub struct TrainState {
     /// The best in-training evaluation mean so far.
     #[serde(default)]
     pub best_eval_mean: Option<f64>,
+}
+
+/// The step budgets results are reported at (Henderson et al. 2018 and the TD3/SAC papers report
+/// 100k-1M). A run writes its actor at each one it passes, and at its own last step, to
+/// `policies/step-<N>.safetensors`, so a report evaluates every run at the same budget even when
+/// some went further.
+pub(crate) const POLICY_BUDGETS: [u64; 3] = [100_000, 300_000, 1_000_000];
+pub(crate) const BUDGET_POLICY_DIR: &str = "policies";
+
+/// Where a run keeps its actor at `step`.
+pub(crate) fn budget_policy_path(run_dir: &Path, step: u64) -> PathBuf {
+    run_dir.join(BUDGET_POLICY_DIR).join(format!("step-{step}.safetensors"))
+}
+
+/// The steps at which a run directory holds a policy file (`policies/step-<N>.safetensors`).
+pub fn budget_policy_steps(run_dir: &Path) -> Vec<u64> {
+    let mut steps: Vec<u64> = std::fs::read_dir(run_dir.join(BUDGET_POLICY_DIR))
+        .into_iter()
+        .flatten()
+        .flatten()
+        .filter_map(|e| {
+            let name = e.file_name().into_string().ok()?;
+            name.strip_prefix("step-")?.strip_suffix(".safetensors")?.parse().ok()
+        })
+        .collect();
+    steps.sort_unstable();
+    steps
 }
 
 /// The file of a checkpoint that lists the others' lengths and checksums.
@@ -367,12 +394,8 @@ pub(crate) fn newest_intact(run_dir: &Path, trainer_file: &str) -> Result<PathBu
 /// and temporary files of the run directory, its `policies/` and its checkpoints. Call with the
 /// run lock held.
 pub(crate) fn remove_leftovers(run_dir: &Path) -> Result<()> {
-    let mut dirs = vec![
-        run_dir.to_path_buf(),
-        checkpoints_dir(run_dir),
-        run_dir.join(super::BUDGET_POLICY_DIR),
-        run_dir.join("videos"),
-    ];
+    let mut dirs =
+        vec![run_dir.to_path_buf(), checkpoints_dir(run_dir), run_dir.join(BUDGET_POLICY_DIR), run_dir.join("videos")];
     // A checkpoint's checksums are rewritten in place when its buffer is pruned.
     dirs.extend(step_dirs(&checkpoints_dir(run_dir)).into_iter().map(|(_, dir)| dir));
     for dir in dirs {

@@ -16,17 +16,20 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{Context, Result};
 use candle_core::{Device, Tensor};
-use rand::seq::SliceRandom;
 use rand_chacha::ChaCha8Rng;
 
+use super::checkpoint::POLICY_BUDGETS;
 use super::checkpoint::{self, TrainState};
+use super::control::{Outcome, RunControl, RunSummary};
 use super::evaluate::evaluate;
 use super::fault::{self, Point};
 use super::metrics::MetricsRow;
-use super::scaffold::{self, Scaffold};
+use super::policy_ref::PolicyRef;
+use super::run_config::RunConfig;
+use super::scaffold::{self, finish_run, save_budget_policy, Scaffold};
 use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
-use super::{finish_run, save_budget_policy, Outcome, RunConfig, RunControl, RunSummary, POLICY_BUDGETS};
-use crate::agents::ppo::{PpoBatch, PpoLosses, RunningMeanStd};
+use crate::agents::ppo::update::{update, Rollout};
+use crate::agents::ppo::{PpoLosses, RunningMeanStd};
 use crate::agents::{make_on_policy_on, Losses, OnPolicyAgent, PpoConfig, TrainConfig};
 use crate::envs::{make, Env, VecEnv, VecEnvSnapshot};
 use crate::policy::to_space;
@@ -39,19 +42,6 @@ const RETURN_EPSILON: f64 = 1e-8;
 /// evaluation protocol's check against training seeds (`train_episode_seed`) covers PPO runs too.
 fn training_seeds(run_seed: u64, copy: usize, copies: usize, episode: u64) -> u64 {
     train_episode_seed(run_seed, episode * copies as u64 + copy as u64)
-}
-
-/// One rollout, time-major (`t * copies + i`).
-struct Rollout {
-    obs: Vec<f32>,
-    actions: Vec<f32>,
-    log_probs: Vec<f32>,
-    values: Vec<f32>,
-    rewards: Vec<f32>,
-    /// The transition ended its episode (terminated, truncated or unstable).
-    dones: Vec<bool>,
-    /// The physics blew up: not a real transition, left out of the update.
-    unstable: Vec<bool>,
 }
 
 struct OnPolicyTrainer {
@@ -77,17 +67,18 @@ struct OnPolicyTrainer {
     episode_lengths: Vec<u64>,
 }
 
-/// Starts a new PPO run (the run directory and `config.toml` are already in place).
+/// Starts a new PPO run in `run_dir` (checked to be free), from `init_from`'s weights if given.
 pub(super) fn train(
     run_dir: &Path,
     run: &RunConfig,
-    init_from: Option<&super::PolicyRef>,
+    init_from: Option<&PolicyRef>,
     control: &RunControl,
 ) -> Result<RunSummary> {
     let mut t = OnPolicyTrainer::new(run_dir, run, control)?;
     if let Some(policy) = init_from {
         policy.load_into(&*t.agent)?;
     }
+    let _lock = scaffold::create_run_dir(run_dir, run, control)?;
     t.obs = t.envs.reset(run.seed)?;
     t.agent.observe(&t.obs)?;
     t.run(control)
@@ -113,6 +104,7 @@ pub(super) fn resume(
         t.read_rollout_state(&saved).with_context(|| format!("{} is corrupt", ckpt.join(ROLLOUT_FILE).display()))?;
     t.obs = t.envs.restore(&snapshot)?;
     t.metrics = metrics;
+    scaffold::record_stretch(run_dir, state.step, control)?;
     t.run(control)
 }
 
@@ -206,15 +198,7 @@ impl OnPolicyTrainer {
         let (n, steps) = (self.settings.num_envs, self.settings.num_steps);
         let gamma = self.cfg().gamma;
         let reward_scale = self.cfg().reward_scale;
-        let mut r = Rollout {
-            obs: Vec::new(),
-            actions: Vec::new(),
-            log_probs: Vec::new(),
-            values: Vec::new(),
-            rewards: Vec::new(),
-            dones: Vec::new(),
-            unstable: Vec::new(),
-        };
+        let mut r = Rollout::default();
         let space = self.envs.spec().action_space.clone();
         for _ in 0..steps {
             let x = self.agent.normalize(&self.obs)?;
@@ -317,54 +301,11 @@ impl OnPolicyTrainer {
         Ok(r)
     }
 
-    /// GAE over the rollout, then `update_epochs` passes of shuffled minibatches.
+    /// PPO's update on the rollout, bootstrapped from the values of the observations it ended on.
     fn update(&mut self, r: &Rollout) -> Result<PpoLosses> {
-        let n = self.settings.num_envs;
-        let steps = self.settings.num_steps;
-        let (gamma, lambda) = (self.cfg().gamma as f32, self.settings.gae_lambda as f32);
         let next_values = self.agent.values(&self.agent.normalize(&self.obs)?)?;
-        let mut advantages = vec![0.0f32; steps * n];
-        for (i, &bootstrap) in next_values.iter().enumerate() {
-            let mut last = 0.0f32;
-            for t in (0..steps).rev() {
-                let k = t * n + i;
-                if r.unstable[k] {
-                    last = 0.0;
-                    continue;
-                }
-                let next_value = if t + 1 == steps { bootstrap } else { r.values[k + n] };
-                let not_done = if r.dones[k] { 0.0 } else { 1.0 };
-                let delta = r.rewards[k] + gamma * next_value * not_done - r.values[k];
-                last = delta + gamma * lambda * not_done * last;
-                advantages[k] = last;
-            }
-        }
-        let returns: Vec<f32> = advantages.iter().zip(&r.values).map(|(a, v)| a + v).collect();
-        let mut indices: Vec<usize> = (0..steps * n).filter(|&k| !r.unstable[k]).collect();
-        let (obs_dim, act_dim) = (r.obs.len() / (steps * n), r.actions.len() / (steps * n));
-        let minibatch = indices.len().div_ceil(self.settings.num_minibatches).max(1);
-        let mut last = PpoLosses::default();
-        for _ in 0..self.settings.update_epochs {
-            indices.shuffle(&mut self.rng);
-            for chunk in indices.chunks(minibatch) {
-                let rows = |src: &[f32], width: usize| -> Vec<f32> {
-                    chunk.iter().flat_map(|&k| src[k * width..(k + 1) * width].iter().copied()).collect()
-                };
-                let batch = PpoBatch {
-                    obs: rows(&r.obs, obs_dim),
-                    actions: rows(&r.actions, act_dim),
-                    log_probs: rows(&r.log_probs, 1),
-                    advantages: rows(&advantages, 1),
-                    returns: rows(&returns, 1),
-                    values: rows(&r.values, 1),
-                };
-                last = self.agent.learn(&batch)?;
-            }
-            if self.settings.target_kl.is_some_and(|kl| last.approx_kl > kl) {
-                break;
-            }
-        }
-        Ok(last)
+        let gamma = self.cfg().gamma;
+        Ok(update(self.agent.as_mut(), r, &next_values, &self.settings, gamma, &mut self.rng)?)
     }
 
     fn save(&mut self, wall_time: f64) -> Result<PathBuf> {

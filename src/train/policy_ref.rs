@@ -15,7 +15,11 @@ use anyhow::{bail, Context, Result};
 
 use crate::agents::Agent;
 
-use super::{budget_policy_path, budget_policy_steps, checkpoint, RunConfig, BUDGET_POLICY_DIR};
+use super::checkpoint::{self, budget_policy_path, budget_policy_steps, BUDGET_POLICY_DIR};
+use super::run_config::{read_run_config, RunConfig};
+use super::seeds::init_rng;
+use crate::agents::make_agent_on;
+use crate::envs::make;
 
 /// A resolved policy reference.
 #[derive(Debug, Clone, PartialEq, Eq)]
@@ -189,7 +193,7 @@ impl PolicyRef {
 
     /// [`PolicyRef::load`] with the networks on `device` (the device-generic path off the CPU).
     pub fn load_on(&self, device: ComputeDevice) -> Result<(RunConfig, Box<dyn Agent>)> {
-        let (run, agent) = super::run_dir::run_agent(&self.run_dir()?, device)?;
+        let (run, agent) = run_agent(&self.run_dir()?, device)?;
         self.load_into(agent.as_ref())?;
         Ok((run, agent))
     }
@@ -201,4 +205,13 @@ impl PolicyRef {
             _ => checkpoint::load_actor(&self.weights_file(), agent),
         }
     }
+}
+
+/// The config of the run in `dir` and a freshly initialised agent of its shape on `device`.
+fn run_agent(dir: &Path, device: ComputeDevice) -> Result<(RunConfig, Box<dyn Agent>)> {
+    let run = read_run_config(dir)?;
+    let env = make(&run.env)?;
+    let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
+    let agent = make_agent_on(&run.train, obs_dim, act_dim, &mut init_rng(run.seed), device)?;
+    Ok((run, agent))
 }

@@ -195,7 +195,7 @@ pub fn resume_caveat_for(
     device: crate::device::ComputeDevice,
 ) -> Result<Option<String>> {
     let rows = read(run_dir)?;
-    Ok(resume_caveat(rows.last(), &Stretch::here(0, threads, super::git_commit().as_deref()).on(device)))
+    Ok(resume_caveat(rows.last(), &Stretch::here(0, threads, git_commit().as_deref()).on(device)))
 }
 
 /// A commit shortened to `n` hex digits for display, keeping a `-dirty` mark (built with
@@ -203,6 +203,11 @@ pub fn resume_caveat_for(
 pub fn short_commit(commit: &str, n: usize) -> String {
     let (hash, dirty) = commit.strip_suffix("-dirty").map_or((commit, ""), |h| (h, "-dirty"));
     format!("{}{dirty}", &hash[..hash.len().min(n)])
+}
+
+/// The commit this binary was built from (build.rs), not whatever the source tree holds now.
+pub(crate) fn git_commit() -> Option<String> {
+    option_env!("LOCOBENCH_GIT_COMMIT").map(str::to_string)
 }
 
 #[cfg(test)]

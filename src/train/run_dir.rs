@@ -1,18 +1,20 @@
 //! Reading a run directory from its files (no process needed): how far it has got, which
-//! checkpoint a path means, the policy it holds, and exporting that policy. Starting, resuming
-//! and the loop itself live in `train/mod.rs`; the config file format in `run_config.rs`.
+//! checkpoint a path means, the policy it holds, and exporting that policy. Starting and resuming
+//! live in `train/mod.rs`, the loops in `off_policy.rs` and `on_policy.rs`, the config file
+//! format in `run_config.rs`.
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 
-use crate::agents::{make_agent, make_agent_on, Agent};
-use crate::device::ComputeDevice;
-use crate::envs::make;
+use crate::agents::{make_agent, Agent};
 use crate::io::write_bytes_atomic;
 
+use super::checkpoint::{budget_policy_path, budget_policy_steps};
 use super::policy_ref::{resolve_policy, PolicyRef};
+use super::run_config::{read_run_config, RunConfig};
 use super::seeds::init_rng;
-use super::{checkpoint, metrics, read_run_config, RunConfig};
+use super::{checkpoint, metrics};
+use crate::envs::make;
 
 /// How far a run directory has got, from its files alone (no process needed).
 #[derive(Debug, Clone, PartialEq)]
@@ -154,33 +156,9 @@ pub fn load_policy(path: &Path) -> Result<(RunConfig, Box<dyn Agent>)> {
 
 /// The actor a run wrote when it passed `step` (`train::POLICY_BUDGETS`, or its last step).
 pub fn load_budget_policy(run_dir: &Path, step: u64) -> Result<(RunConfig, Box<dyn Agent>)> {
-    let file = super::budget_policy_path(run_dir, step);
+    let file = budget_policy_path(run_dir, step);
     if !file.is_file() {
         bail!("{} has no policy at step {step} (expected {})", run_dir.display(), file.display());
     }
     PolicyRef::Budget { run_dir: run_dir.to_path_buf(), step }.load()
-}
-
-/// The steps at which a run directory holds a policy file (`policies/step-<N>.safetensors`).
-pub fn budget_policy_steps(run_dir: &Path) -> Vec<u64> {
-    let mut steps: Vec<u64> = std::fs::read_dir(run_dir.join(super::BUDGET_POLICY_DIR))
-        .into_iter()
-        .flatten()
-        .flatten()
-        .filter_map(|e| {
-            let name = e.file_name().into_string().ok()?;
-            name.strip_prefix("step-")?.strip_suffix(".safetensors")?.parse().ok()
-        })
-        .collect();
-    steps.sort_unstable();
-    steps
-}
-
-/// The config of the run in `dir` and a freshly initialised agent of its shape on `device`.
-pub(super) fn run_agent(dir: &Path, device: ComputeDevice) -> Result<(RunConfig, Box<dyn Agent>)> {
-    let run = read_run_config(dir)?;
-    let env = make(&run.env)?;
-    let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
-    let agent = make_agent_on(&run.train, obs_dim, act_dim, &mut init_rng(run.seed), device)?;
-    Ok((run, agent))
 }

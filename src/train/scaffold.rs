@@ -1,23 +1,138 @@
-//! What both training loops (the off-policy one in `mod.rs`, PPO's rollouts in `on_policy.rs`)
-//! set up, run and tear down the same way: the numeric runtime, the stop signals, the progress
-//! bar, the clock (wall time and steps per second), the recording, the clips and the TensorBoard
-//! events, each evaluation's logging and cadence, and the finish.
+//! What both training loops (`off_policy.rs`, `on_policy.rs`) set up, run and tear down the same
+//! way: the run directory, the numeric runtime, the stop signals, the progress bar, the clock
+//! (wall time and steps per second), the recording, the clips and the TensorBoard events, each
+//! evaluation's logging and cadence, the budget policies, and the finish.
 use std::path::Path;
 use std::time::Instant;
 
-use anyhow::Result;
-use indicatif::ProgressBar;
+use anyhow::{bail, Context, Result};
+use indicatif::{ProgressBar, ProgressStyle};
 
+use super::checkpoint;
+use super::checkpoint::{budget_policy_path, BUDGET_POLICY_DIR};
+use super::control::{EvaluationEvent, Outcome, RunControl, RunSummary};
 use super::evaluate::Evaluation;
+use super::metrics;
 use super::metrics::MetricsRow;
+use super::provenance;
 use super::recording::{TrainingClips, TrainingRecorder};
+use super::run_config::RunConfig;
+use super::run_lock::RunLock;
 use super::stop::{stop_signals, StopSignals};
 use super::tensorboard::EventWriter;
-use super::{log_evaluation, progress_bar, Outcome, RunControl, RunSummary};
 use crate::agents::Agent;
 use crate::envs::EnvConfig;
+use crate::io::write_bytes_atomic;
 use crate::record::Recording;
 use crate::runtime::Runtime;
+
+/// Every agent acts in [-1, 1]^n mapped onto the action space's bounds (the branching DQN's
+/// levels are spread over them), so an unbounded action dimension is refused up front.
+pub(crate) fn check_bounded_actions(env: &str, space: &crate::envs::BoxSpace, algo: crate::agents::Algo) -> Result<()> {
+    if let Some(i) = (0..space.dim()).find(|&i| !(space.low[i].is_finite() && space.high[i].is_finite())) {
+        bail!(
+            "{env}'s action dimension {i} is unbounded ([{}, {}]): {} acts within finite bounds{}",
+            space.low[i],
+            space.high[i],
+            algo.name(),
+            if algo == crate::agents::Algo::Dqn { " (its levels are spread over each dimension's range)" } else { "" }
+        );
+    }
+    Ok(())
+}
+
+/// The training progress bar (hidden unless `show`), at `position` of `total` steps.
+pub(super) fn progress_bar(show: bool, total: u64, position: u64) -> ProgressBar {
+    let bar = if show { ProgressBar::new(total) } else { ProgressBar::hidden() };
+    bar.set_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} steps, {per_sec} {msg}")
+            .expect("valid template")
+            .progress_chars("=> "),
+    );
+    bar.set_position(position);
+    bar
+}
+
+/// Writes the actor as the run's policy at `step` (`policies/step-<step>.safetensors`).
+pub(super) fn save_budget_policy(run_dir: &Path, step: u64, agent: &dyn Agent) -> Result<()> {
+    let dir = run_dir.join(BUDGET_POLICY_DIR);
+    std::fs::create_dir_all(&dir).with_context(|| format!("creating {}", dir.display()))?;
+    checkpoint::save_actor(&budget_policy_path(run_dir, step), agent)
+}
+
+/// Appends an evaluation's row (`row` with `evaluation`'s figures), rewrites `metrics.csv`, logs
+/// the row to the recording, with a rollout of the policy at every `control.record_every`-th
+/// evaluation, and runs `control`'s evaluation hook. Returns whether the hook finishes the run.
+#[allow(clippy::too_many_arguments)]
+pub(super) fn log_evaluation(
+    run_dir: &Path,
+    metrics: &mut Vec<MetricsRow>,
+    row: MetricsRow,
+    evaluation: &Evaluation,
+    recorder: Option<&mut TrainingRecorder>,
+    clips: Option<&mut TrainingClips>,
+    mut events: Option<&mut EventWriter>,
+    control: &RunControl,
+    agent: &dyn Agent,
+    run_seed: u64,
+) -> Result<bool> {
+    let (step, wall_time) = (row.step, row.wall_time);
+    metrics.push(row.with_evaluation(evaluation));
+    metrics::write(&run_dir.join(metrics::FILE), metrics)?;
+    if let Some(e) = events.as_deref_mut() {
+        e.row(metrics.last().expect("just pushed"))?;
+    }
+    if let Some(c) = clips {
+        let evaluations = metrics.iter().filter(|m| m.kind == "eval").count() as u64;
+        if let (Some(clip), Some(e)) = (c.evaluation(agent, step, run_seed, evaluations)?, events) {
+            e.gif("eval/video", step, &clip.gif, clip.width, clip.height)?;
+        }
+    }
+    if let Some(r) = recorder {
+        r.curves(metrics.last().expect("just pushed"))?;
+        let evaluations = metrics.iter().filter(|m| m.kind == "eval").count() as u64;
+        if (evaluations - 1).is_multiple_of(control.record_every.max(1)) {
+            r.evaluation_rollout(agent, step, run_seed)?;
+        }
+    }
+    match &control.on_evaluation {
+        Some(hook) => (hook.0)(&EvaluationEvent { step, wall_time, evaluation, agent }),
+        None => Ok(false),
+    }
+}
+
+/// What both training loops do once their last checkpoint is written: rewrite the run's
+/// `metrics.csv` in full, move the recording (if any) to its name, and hand the summary back.
+pub(super) fn finish_run(
+    metrics: &[MetricsRow],
+    recording: Option<Recording>,
+    summary: RunSummary,
+) -> Result<RunSummary> {
+    metrics::write(&summary.run_dir.join(metrics::FILE), metrics)?;
+    if let Some(r) = recording {
+        r.finish()?;
+    }
+    Ok(summary)
+}
+
+/// Creates the run directory of a new run, locks it for the process's lifetime (the returned
+/// lock), and writes its `config.toml` and the first line of `provenance.csv`.
+pub(super) fn create_run_dir(run_dir: &Path, run: &RunConfig, control: &RunControl) -> Result<RunLock> {
+    std::fs::create_dir_all(run_dir).with_context(|| format!("creating {}", run_dir.display()))?;
+    let lock = RunLock::acquire(run_dir)?;
+    write_bytes_atomic(&run_dir.join("config.toml"), run.to_toml()?.as_bytes())?;
+    record_stretch(run_dir, 0, control)?;
+    Ok(lock)
+}
+
+/// Appends the stretch that starts at `step` (this machine, thread count, device, commit) to the
+/// run's `provenance.csv`.
+pub(super) fn record_stretch(run_dir: &Path, step: u64, control: &RunControl) -> Result<()> {
+    provenance::append(
+        run_dir,
+        provenance::Stretch::here(step, control.threads, provenance::git_commit().as_deref()).on(control.device),
+    )
+}
 
 /// One stretch of a training run, from its (re)start to its last checkpoint. The recording it
 /// writes to (`control.record`) is the caller's, opened by [`open_recording`], because the
@@ -127,7 +242,7 @@ impl<'a> Scaffold<'a> {
     }
 
     /// The stretch's summary, once its last checkpoint is written; the recorder lets go of the
-    /// recording, which [`super::finish_run`] then closes.
+    /// recording, which [`finish_run`] then closes.
     pub fn summary(
         self,
         run_dir: &Path,
@@ -165,5 +280,16 @@ mod tests {
         // rollouts of 8 steps: due at the rollout that passes a multiple
         let due: Vec<u64> = (1..=5).map(|i| i * 8).filter(|&s| crossed(s - 8, s, 10)).collect();
         assert_eq!(due, vec![16, 24, 32, 40]);
+    }
+
+    use crate::agents::Algo;
+    use crate::envs::BoxSpace;
+
+    #[test]
+    fn unbounded_action_spaces_are_refused_naming_the_dimension() {
+        let space = BoxSpace::new(vec![-1.0, f64::NEG_INFINITY], vec![1.0, 2.0]);
+        let err = super::check_bounded_actions("toy", &space, Algo::Dqn).unwrap_err().to_string();
+        assert!(err.contains("toy's action dimension 1 is unbounded") && err.contains("levels"), "{err}");
+        assert!(super::check_bounded_actions("toy", &BoxSpace::uniform(3, -0.4, 0.4), Algo::Td3).is_ok());
     }
 }

@@ -15,9 +15,9 @@ use serde::{Deserialize, Serialize};
 use self::leg_model::{motor_angles_from_leg_model, NUM_MOTORS};
 use self::motor::{MotorParams, MAX_TORQUE, OBSERVED_TORQUE_LIMIT, OVERHEAT_SECONDS, OVERHEAT_TORQUE};
 use super::options::Check;
-use super::simulation::{unstable_step, EnvCore, Simulation};
+use super::simulation::{env_core_accessors, unstable_step, EnvCore, Simulation};
 use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
-use crate::mujoco::{Data, Model};
+use crate::mujoco::Model;
 
 pub(crate) const MODEL_XML: &str = include_str!("../../../models/minitaur.xml");
 
@@ -385,10 +385,6 @@ enum Command {
 }
 
 impl Env for Minitaur {
-    fn spec(&self) -> &EnvSpec {
-        &self.core.spec
-    }
-
     fn reset(&mut self, seed: Option<u64>) -> Result<(Vec<f64>, Info), EnvError> {
         self.core.rng.reseed(seed);
         self.params = [Self::nominal_motor(&self.opts); NUM_MOTORS];
@@ -504,15 +500,5 @@ impl Env for Minitaur {
         Ok(self.core.finish_step(observation, terminated, info))
     }
 
-    fn data(&self) -> &Data {
-        &self.core.sim.data
-    }
-
-    fn data_mut(&mut self) -> &mut Data {
-        &mut self.core.sim.data
-    }
-
-    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        Ok(self.core.sim.data.set_state(qpos, qvel)?)
-    }
+    env_core_accessors!();
 }
