@@ -20,6 +20,8 @@ ENV_IDS = {
     "inverted-pendulum": "locobench/InvertedPendulum-v5",
     "walker2d": "locobench/Walker2d-v5",
     "hopper": "locobench/Hopper-v5",
+    "minitaur-command": "locobench/MinitaurCommand-v0",
+    "ant-command": "locobench/AntCommand-v0",
 }
 
 _RENDER_MODES = ["rgb_array", "rgb_array_list"]
@@ -133,6 +135,18 @@ class LocobenchEnv(gym.Env):
     def set_state(self, qpos, qvel):
         """Overwrites the simulation's positions and velocities (Gymnasium MujocoEnv's set_state)."""
         self._core.set_state(np.asarray(qpos, dtype=np.float64).tolist(), np.asarray(qvel, dtype=np.float64).tolist())
+
+    @property
+    def command(self):
+        """On a command task (``locobench/MinitaurCommand-v0``, ``locobench/AntCommand-v0``): the
+        velocity command in force, (forward speed m/s, yaw rate rad/s); None on other envs."""
+        return self._core.command
+
+    def set_command(self, speed, yaw_rate=0.0):
+        """On a command task: holds this command (forward speed m/s, yaw rate rad/s, positive
+        turning left) from the next step until the next reset, as a joystick would. The random
+        redraws and any schedule stop until then. Other envs raise ValueError."""
+        self._core.set_command(float(speed), float(yaw_rate))
 
     @property
     def state(self):

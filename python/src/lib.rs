@@ -104,6 +104,19 @@ impl PyEnv {
         self.env().set_state(&qpos, &qvel).map_err(value_error)
     }
 
+    /// On a command task: the velocity command in force, (forward speed m/s, yaw rate rad/s);
+    /// None on other envs.
+    #[getter]
+    fn command(&self) -> Option<(f64, f64)> {
+        self.env().command().map(|[v, w]| (v, w))
+    }
+
+    /// On a command task: holds this command (forward speed m/s, yaw rate rad/s) from the next
+    /// step until the next reset. Other envs raise ValueError.
+    fn set_command(&self, speed: f64, yaw_rate: f64) -> PyResult<()> {
+        self.env().set_command(speed, yaw_rate).map_err(value_error)
+    }
+
     /// Positions and velocities of the simulation now.
     #[getter]
     fn state(&self) -> (Vec<f64>, Vec<f64>) {

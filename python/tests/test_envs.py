@@ -250,3 +250,27 @@ def test_matches_gymnasiums_own_mujoco_env_on_replayed_actions(name, gym_id, ste
         assert abs(r1 - r2) < 1e-6 and term1 == term2
         if term1:
             break
+
+
+def test_a_command_task_takes_a_joystick_command_on_a_live_env():
+    env = gym.make("locobench/MinitaurCommand-v0", schedule="0:0.5:0")
+    obs, _ = env.reset(seed=0)
+    assert env.unwrapped.command == (0.5, 0.0)
+    assert tuple(obs[-2:]) == (0.5, 0.0)
+    env.unwrapped.set_command(1.0, 0.2)
+    obs, reward, *_ , info = env.step(env.action_space.sample() * 0)
+    assert env.unwrapped.command == (1.0, 0.2)
+    assert tuple(obs[-2:]) == (1.0, 0.2)
+    assert info["metrics"]["command_speed"] == 1.0
+    assert abs(sum(info["reward_terms"].values()) - reward) < 1e-12
+    # the held command lasts until the next reset, which goes back to the schedule
+    env.reset(seed=1)
+    assert env.unwrapped.command == (0.5, 0.0)
+
+
+def test_only_command_tasks_take_a_command():
+    env = gym.make("locobench/Minitaur-v0")
+    env.reset(seed=0)
+    assert env.unwrapped.command is None
+    with pytest.raises(ValueError, match="takes no velocity command"):
+        env.unwrapped.set_command(1.0, 0.0)

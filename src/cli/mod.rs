@@ -11,6 +11,7 @@ mod report;
 mod robustness;
 mod rollout;
 mod sweep;
+mod track;
 mod train;
 
 use anyhow::Result;
@@ -47,6 +48,11 @@ enum Command {
     /// Run the Raibert/QP baseline controller and report how it walks.
     #[command(after_help = "Example:\n  locobench baseline --env minitaur --speed 0.5,1.0,1.5 --episodes 50 --seed 0")]
     Baseline(baseline::BaselineArgs),
+    /// How closely the controller or a policy follows velocity commands on a command task.
+    #[command(
+        after_help = "Example:\n  locobench track --env minitaur-command --speeds 0.25,0.5,1.0,1.5 --yaw-rates -0.3,0,0.3 --episodes 10"
+    )]
+    Track(track::TrackArgs),
     /// Write a rerun recording (.rrd) of a policy's rollouts: checkpoint, raibert, random, zero.
     #[command(
         after_help = "Example:\n  locobench record --env minitaur --policy raibert --speed 1.0 --out minitaur.rrd"
@@ -84,6 +90,7 @@ pub fn run() -> Result<()> {
         Command::Eval(args) => eval::run(args),
         Command::Export(args) => export::run(args),
         Command::Baseline(args) => baseline::run(args),
+        Command::Track(args) => track::run(args),
         Command::Record(args) => record::run(args),
         Command::Report(args) => report::run(args),
         Command::Sweep(args) => sweep::run(args),

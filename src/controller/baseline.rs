@@ -13,7 +13,9 @@ use crate::policy::Policy;
 /// The env config the baseline runs in (Minitaur switches to its torque action mode).
 pub fn baseline_env(env: &str) -> Result<EnvConfig> {
     Ok(match env {
-        "minitaur" => EnvConfig::new("minitaur").with_overrides(&[("action_mode".into(), "\"torque\"".into())])?,
+        "minitaur" | "minitaur-command" => {
+            EnvConfig::new(env).with_overrides(&[("action_mode".into(), "\"torque\"".into())])?
+        }
         "ant" => EnvConfig::new("ant"),
         other => bail!("the Raibert baseline exists for minitaur and ant, not '{other}'"),
     })
@@ -43,10 +45,11 @@ pub fn baseline_controller(env: &str, speed: f64, gait: Option<GaitKind>) -> Res
 pub fn baseline_controller_for(env: &str, command: Command, gait: Option<GaitKind>) -> Result<Box<dyn Policy>> {
     command.validate()?;
     Ok(match env {
-        "minitaur" => {
+        "minitaur" | "minitaur-command" => {
             let defaults = MinitaurGaitParams::default();
             Box::new(MinitaurController::new(MinitaurGaitParams {
                 command,
+                on_command_task: env == "minitaur-command",
                 gait: gait.unwrap_or(defaults.gait),
                 ..defaults
             })?)

@@ -28,8 +28,10 @@ use crate::policy::{Policy, Telemetry};
 
 #[derive(Debug, Clone)]
 pub(crate) struct MinitaurGaitParams {
-    /// Forward speed profile and yaw rate.
+    /// Forward speed profile and yaw rate (on a command task: the task's stream instead).
     pub command: Command,
+    /// Built for a command task: named after it rather than after `command`.
+    pub(crate) on_command_task: bool,
     pub gait: GaitKind,
     pub(crate) stance_duration: f64,
     pub(crate) duty_factor: f64,
@@ -68,6 +70,7 @@ impl Default for MinitaurGaitParams {
     fn default() -> Self {
         MinitaurGaitParams {
             command: Command::straight(0.35, 1.0),
+            on_command_task: false,
             gait: GaitKind::Bound,
             stance_duration: 0.1,
             duty_factor: 0.7,
@@ -114,6 +117,15 @@ pub(crate) struct ControllerStats {
     pub(crate) touchdown_miss: f64,
 }
 
+/// How fast the speed set-point follows a command task's speed (m/s^2): the straight-line
+/// command's ramp (1.5 m/s within `baseline::RAMP_TIME`, 1 s).
+const COMMAND_ACCELERATION: f64 = 1.5;
+
+/// On a command task, the command its observation ends with: (speed m/s, yaw rate rad/s).
+fn observed_command(spec: &crate::envs::EnvSpec, obs: &[f64]) -> Option<[f64; 2]> {
+    (spec.name == "minitaur-command").then(|| [obs[obs.len() - 2], obs[obs.len() - 1]])
+}
+
 /// Where each leg's motors sit in the action vector: (outer, inner).
 fn motor_slots(leg: usize) -> (usize, usize) {
     if leg < 2 {
@@ -132,6 +144,8 @@ pub(crate) struct MinitaurController {
     speed_integral: f64,
     /// Commanded heading, the integral of the yaw-rate command (rad).
     heading_goal: f64,
+    /// On a command task: the speed set-point, moving towards the command (m/s).
+    reference: Option<f64>,
     /// Integral of the heading error (rad s).
     heading_integral: f64,
     was_stance: [bool; LEGS],
@@ -158,6 +172,7 @@ impl MinitaurController {
             time: 0.0,
             speed_integral: 0.0,
             heading_goal: 0.0,
+            reference: None,
             heading_integral: 0.0,
             was_stance: [true; LEGS],
             liftoff: [Vector3::zeros(); LEGS],
@@ -177,9 +192,10 @@ impl MinitaurController {
     /// Torques (actuator order) for the current state.
     pub fn torques(&mut self, env: &dyn Env, obs: &[f64]) -> Result<[f64; 8]> {
         let spec = env.spec();
-        if spec.name != "minitaur" || spec.action_space.high[0] < 1.5 {
+        if !["minitaur", "minitaur-command"].contains(&spec.name) || spec.action_space.high[0] < 1.5 {
             bail!(
-                "the Minitaur controller needs the minitaur env in its torque action mode (action_mode = \"torque\")"
+                "the Minitaur controller needs the minitaur or minitaur-command env in its torque action mode \
+                 (action_mode = \"torque\")"
             );
         }
         let d = env.data();
@@ -210,8 +226,17 @@ impl MinitaurController {
         if self.stats.ticks == 0 {
             self.heading_goal = yaw;
         }
-        let v_des = p.command.speed.at(self.time);
-        let yaw_rate_des = p.command.yaw_rate;
+        let (v_des, yaw_rate_des) = match observed_command(spec, obs) {
+            // A command task's stream: its speed reached at a bounded acceleration.
+            Some([speed, yaw_rate]) => {
+                let v = self.reference.unwrap_or(local_vel.x.max(0.0));
+                let step = COMMAND_ACCELERATION * dt;
+                let v = v + (speed - v).clamp(-step, step);
+                self.reference = Some(v);
+                (v, yaw_rate)
+            }
+            None => (p.command.speed.at(self.time), p.command.yaw_rate),
+        };
 
         let legs = self.gait.legs();
         self.last_phase = legs.map(|l| (l.in_stance, l.progress));
@@ -350,13 +375,19 @@ impl MinitaurController {
 
 impl Policy for MinitaurController {
     fn name(&self) -> String {
-        self.params.command.controller_name(&format!("{:?}", self.params.gait).to_lowercase())
+        let gait = format!("{:?}", self.params.gait).to_lowercase();
+        if self.params.on_command_task {
+            format!("raibert-{gait}@command")
+        } else {
+            self.params.command.controller_name(&gait)
+        }
     }
     fn begin_episode(&mut self, _episode: usize) {
         self.gait.reset();
         self.time = 0.0;
         self.speed_integral = 0.0;
         self.heading_goal = 0.0;
+        self.reference = None;
         self.heading_integral = 0.0;
         self.was_stance = [true; LEGS];
         self.last_foot = [None; LEGS];

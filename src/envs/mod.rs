@@ -10,6 +10,7 @@
 //! step returns the last good observation, zero reward, `truncated = true` and
 //! [`Info::unstable`] set. Learners must not store that transition (it is not a real one).
 mod ant;
+pub mod command;
 mod error;
 mod half_cheetah;
 mod hopper;
@@ -36,7 +37,7 @@ pub use inverted_pendulum::{InvertedPendulum, InvertedPendulumOptions};
 pub use minitaur::{Minitaur, MinitaurOptions};
 pub use mujoco_env::MujocoEnv;
 pub use registry::{
-    env_names, lookup, make, model_xml, parse_overrides, reward_weight_option, EnvConfig, EnvEntry, ENVS,
+    env_names, lookup, make, model_xml, parse_overrides, reward_weight_option, EnvConfig, EnvEntry, Registered, ENVS,
 };
 pub use simulation::{Simulation, VelocityNoise};
 pub use task::{Task, TaskStep, Timing};
@@ -158,6 +159,21 @@ pub trait Env: Send {
     /// Overwrites positions and velocities mid-episode (Gymnasium's `set_state`), e.g. to start
     /// from a recorded state. Lengths are checked; the values are the caller's responsibility.
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError>;
+    /// On a velocity-command task (`envs::command`): the command in force, (forward speed m/s,
+    /// yaw rate rad/s). None on every other env.
+    fn command(&self) -> Option<[f64; 2]> {
+        None
+    }
+    /// On a velocity-command task: holds this command from the next step until the next reset
+    /// (a joystick). Every other env refuses.
+    fn set_command(&mut self, speed: f64, yaw_rate: f64) -> Result<(), EnvError> {
+        let _ = (speed, yaw_rate);
+        Err(EnvError::InvalidOption {
+            env: self.spec().name.to_string(),
+            message: "this env takes no velocity command; the command tasks are minitaur-command and ant-command"
+                .into(),
+        })
+    }
 }
 
 /// Refuses an action of the wrong length or with a NaN or infinite entry.

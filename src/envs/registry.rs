@@ -5,17 +5,19 @@ use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 
 use super::ant::AntTask;
+use super::command::{CommandBase, CommandEnv, CommandOptions};
 use super::half_cheetah::HalfCheetahTask;
 use super::hopper::HopperTask;
 use super::humanoid::HumanoidTask;
 use super::inverted_pendulum::InvertedPendulumTask;
 use super::walker2d::Walker2dTask;
-use super::{minitaur, Env, EnvError, Minitaur, MinitaurOptions, MujocoEnv, Task};
+use super::{minitaur, Ant, Env, EnvError, Minitaur, MinitaurOptions, MujocoEnv, Task};
 
 /// An environment type the registry can build from its options.
-pub(crate) trait Registered: Env + Sized + 'static {
+pub trait Registered: Env + Sized + 'static {
     /// Its options, every field defaulted (`#[serde(default, deny_unknown_fields)]`).
     type Options: DeserializeOwned + Serialize;
+    /// The environment `options` describe, checked.
     fn build(options: Self::Options) -> Result<Self, EnvError>;
 }
 
@@ -30,6 +32,13 @@ impl Registered for Minitaur {
     type Options = MinitaurOptions;
     fn build(options: MinitaurOptions) -> Result<Self, EnvError> {
         Minitaur::new(options)
+    }
+}
+
+impl<B: CommandBase> Registered for CommandEnv<B> {
+    type Options = CommandOptions<B>;
+    fn build(options: Self::Options) -> Result<Self, EnvError> {
+        CommandEnv::new(options)
     }
 }
 
@@ -104,6 +113,18 @@ pub const ENVS: &[EnvEntry] = &[
             ("shake", "shake_weight"),
         ],
     ),
+    entry::<CommandEnv<Minitaur>>("minitaur-command", minitaur::MODEL_XML, COMMAND_REWARD),
+    entry::<CommandEnv<Ant>>("ant-command", super::ant::MODEL_XML, COMMAND_REWARD),
+];
+
+const COMMAND_REWARD: &[(&str, &str)] = &[
+    ("tracking_speed", "tracking_speed_weight"),
+    ("tracking_yaw_rate", "tracking_yaw_rate_weight"),
+    ("orientation", "orientation_weight"),
+    ("body_rates", "body_rates_weight"),
+    ("vertical_velocity", "vertical_velocity_weight"),
+    ("action_rate", "action_rate_weight"),
+    ("energy", "energy_weight"),
 ];
 
 /// The declaration of `name`, or an error listing the known names.

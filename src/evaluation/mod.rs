@@ -11,6 +11,7 @@ pub mod robustness;
 pub mod speed_grid;
 pub mod stats;
 pub mod summary;
+pub mod tracking;
 pub mod walking;
 
 pub use cache::EvalCache;

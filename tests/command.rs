@@ -1,0 +1,128 @@
+//! The velocity-command tasks: what they observe, how they reward, their command stream, and the
+//! controller following it.
+use locobench::controller::baseline::{baseline_controller_for, baseline_env};
+use locobench::controller::command::Command;
+use locobench::envs::command::{BaseMotion, REWARD_TERMS};
+use locobench::envs::{make, EnvConfig};
+use locobench::evaluation::tracking::tracking_grid;
+use locobench::evaluation::Protocol;
+
+fn env(name: &str, options: &[(&str, &str)]) -> Box<dyn locobench::envs::Env> {
+    let pairs: Vec<(String, String)> = options.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+    make(&EnvConfig::new(name).with_overrides(&pairs).unwrap()).unwrap()
+}
+
+#[test]
+fn the_observation_is_the_base_s_then_velocities_then_the_command() {
+    for (name, base) in [("minitaur-command", "minitaur"), ("ant-command", "ant")] {
+        let mut e = env(name, &[("schedule", "\"0:0.7:-0.2\"")]);
+        let base_dim = make(&EnvConfig::new(base)).unwrap().spec().observation_space.dim();
+        assert_eq!(e.spec().observation_space.dim(), base_dim + 8, "{name}");
+        assert_eq!(e.spec().reward_terms, REWARD_TERMS.to_vec());
+        let (obs, _) = e.reset(Some(3)).unwrap();
+        assert_eq!(obs.len(), base_dim + 8);
+        assert_eq!(&obs[obs.len() - 2..], &[0.7, -0.2], "{name}: the command ends the observation");
+        let m = BaseMotion::of(
+            e.data(),
+            e.data().model().body_id(if base == "ant" { "torso" } else { "base" }).unwrap(),
+            0,
+        );
+        assert_eq!(&obs[base_dim..base_dim + 3], &m.velocity);
+        assert_eq!(&obs[base_dim + 3..base_dim + 6], &m.angular_velocity);
+    }
+}
+
+#[test]
+fn reward_terms_match_a_hand_computation_and_sum_to_the_reward() {
+    let mut e = env("minitaur-command", &[("schedule", "\"0:0.5:0.1\""), ("only_positive_rewards", "false")]);
+    e.reset(Some(0)).unwrap();
+    let dt = e.spec().dt;
+    let action = vec![0.3; 8];
+    let step = e.step(&action).unwrap();
+    let body = e.data().model().body_id("base").unwrap();
+    let m = BaseMotion::of(e.data(), body, 0);
+    let term = |n: &str| step.info.term(n).unwrap();
+    let speed_error = (m.velocity[0] - 0.5).powi(2) + m.velocity[1].powi(2);
+    assert!((term("tracking_speed") - dt * (-speed_error / 0.25).exp()).abs() < 1e-12);
+    let yaw_error = (m.yaw_rate - 0.1).powi(2);
+    assert!((term("tracking_yaw_rate") - 0.5 * dt * (-yaw_error / 0.25).exp()).abs() < 1e-12);
+    assert!((term("orientation") + dt * (m.gravity[0].powi(2) + m.gravity[1].powi(2))).abs() < 1e-12);
+    assert!(
+        (term("body_rates") + 0.05 * dt * (m.angular_velocity[0].powi(2) + m.angular_velocity[1].powi(2))).abs()
+            < 1e-12
+    );
+    assert!((term("vertical_velocity") + 2.0 * dt * m.velocity[2].powi(2)).abs() < 1e-12);
+    // the first step's action rate is against a zero action: 8 x 0.3^2 (leg mode acts in [-1, 1])
+    assert!((term("action_rate") + 0.01 * dt * 8.0 * 0.09).abs() < 1e-12);
+    let energy = step.info.metric("mechanical_energy").unwrap();
+    assert!((term("energy") + 0.001 * energy.abs()).abs() < 1e-12);
+    assert_eq!(term("positive_clip"), 0.0);
+    let sum: f64 = step.info.reward_terms.iter().map(|(_, v)| v).sum();
+    assert_eq!(step.reward, sum);
+}
+
+#[test]
+fn a_negative_step_is_lifted_to_zero_by_a_named_term() {
+    // Every tracking weight off: what is left is costs, clipped to zero.
+    let mut e = env("minitaur-command", &[("tracking_speed_weight", "0"), ("tracking_yaw_rate_weight", "0")]);
+    e.reset(Some(0)).unwrap();
+    let step = e.step(&[1.0, -1.0, 1.0, -1.0, 1.0, -1.0, 1.0, -1.0]).unwrap();
+    assert_eq!(step.reward, 0.0);
+    assert!(step.info.term("positive_clip").unwrap() > 0.0);
+}
+
+#[test]
+fn the_same_seed_gives_the_same_command_stream_and_another_seed_another() {
+    let stream = |seed: u64| {
+        let mut e = env("minitaur-command", &[("resample_time_range", "[0.5, 1.0]")]);
+        let (obs, _) = e.reset(Some(seed)).unwrap();
+        let mut commands = vec![[obs[obs.len() - 2], obs[obs.len() - 1]]];
+        for _ in 0..300 {
+            let s = e.step(&[0.0; 8]).unwrap();
+            if s.done() {
+                break;
+            }
+            commands.push([s.observation[s.observation.len() - 2], s.observation[s.observation.len() - 1]]);
+        }
+        commands
+    };
+    let a = stream(4);
+    assert_eq!(a, stream(4));
+    assert_ne!(a, stream(5));
+    let distinct = a.windows(2).filter(|w| w[0] != w[1]).count();
+    assert!(distinct >= 2, "a 3 s stream redrawn every 0.5-1 s changes: {distinct}");
+    for c in &a {
+        assert!(c == &[0.0, 0.0] || ((0.0..=2.5).contains(&c[0]) && (-0.5..=0.5).contains(&c[1])), "{c:?}");
+    }
+}
+
+#[test]
+fn bad_command_options_are_errors_naming_the_option() {
+    let err = |options: &[(&str, &str)]| {
+        let pairs: Vec<(String, String)> = options.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+        match make(&EnvConfig::new("minitaur-command").with_overrides(&pairs).unwrap()) {
+            Ok(_) => panic!("{options:?} was accepted"),
+            Err(e) => e.to_string(),
+        }
+    };
+    assert!(err(&[("speed_range", "[1.0, 0.5]")]).contains("speed_range"));
+    assert!(err(&[("yaw_rate_range", "[0.3, 0.3]")]).contains("yaw_rate_range"));
+    assert!(err(&[("schedule", "\"0:1:0 2:0:0 1:1:0\"")]).contains("times must increase"));
+    assert!(err(&[("standing_probability", "1.5")]).contains("standing_probability"));
+    assert!(err(&[("tracking_speed_weight", "-1")]).contains("tracking_speed_weight"));
+    assert!(err(&[("no_such_term_weight", "1")]).contains("no_such_term_weight"));
+}
+
+#[test]
+fn the_controller_follows_the_stream_it_is_given() {
+    let cfg = baseline_env("minitaur-command").unwrap();
+    let mut controller = baseline_controller_for("minitaur-command", Command::straight(0.0, 0.0), None).unwrap();
+    let grid =
+        tracking_grid(&cfg, controller.as_mut(), &[0.5, 1.0], &[0.0], Protocol { episodes: 2, seed: 0 }).unwrap();
+    for p in &grid {
+        assert_eq!(p.falls(), 0, "{} m/s", p.speed);
+        let achieved = p.achieved_speed().estimate;
+        assert!((achieved - p.speed).abs() < 0.1, "commanded {} m/s, achieved {achieved}", p.speed);
+        assert!(p.speed_rms().estimate < 0.15);
+    }
+}
