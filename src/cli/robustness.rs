@@ -7,7 +7,8 @@ use locobench::evaluation::{EvalCache, Protocol, DEFAULT_EPISODES};
 
 #[derive(clap::Args, Debug)]
 pub struct RobustnessArgs {
-    /// The env (minitaur: 13 axes; ant: 9).
+    /// The env (minitaur: 13 axes; ant: 9); a command task (minitaur-command, ant-command) takes
+    /// its base's axes, and `--option schedule="0:1.0:0"` matches every contender's command.
     #[arg(long, default_value = "minitaur")]
     pub env: String,
     /// A trained policy as LABEL=REFERENCE, or LABEL=REFERENCE@BUDGET for a committed result
@@ -44,13 +45,16 @@ pub struct RobustnessArgs {
     /// with an earlier one, plays only what is new.
     #[arg(long, value_name = "DIR")]
     pub cache: Option<PathBuf>,
+    /// Options over the suite's environment, e.g. `--option schedule="0:1.0:0"` on a command task.
+    #[command(flatten)]
+    pub env_options: super::EnvOptionArgs,
 }
 
 pub fn run(args: RobustnessArgs) -> Result<()> {
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
     let agents = Contender::parse_agents(&args.policies)?;
     let suite = Suite {
-        env: EnvConfig::new(&args.env),
+        env: args.env_options.apply(EnvConfig::new(&args.env))?,
         axes: select(&args.env, &args.axes)?,
         protocol: Protocol { episodes: args.episodes, seed: args.seed },
         threads: args.threads.unwrap_or_else(locobench::evaluation::parallel::default_threads),

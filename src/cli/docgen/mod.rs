@@ -8,6 +8,7 @@
 //! <!-- end generated: NAME -->
 //! ```
 mod benchmarks;
+mod command;
 mod csv_rows;
 mod envs;
 mod gpu;
@@ -42,6 +43,11 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
     Ok(vec![
         Section { file: "README.md", name: "results", text: results::glance(&report)? },
         Section { file: "docs/training.md", name: "curves", text: results::curves(&report)? },
+        Section {
+            file: "docs/training.md",
+            name: "minitaur-probes",
+            text: command::probes(root, "benches/results/minitaur/probes-100k/probes.csv")?,
+        },
         Section { file: "docs/controller.md", name: "controller-speeds", text: results::controller(&report)? },
         Section { file: "docs/benchmarks.md", name: "speed", text: benchmarks::speed(&root.join(BENCH_RESULTS_DIR))? },
         Section {
@@ -86,6 +92,11 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
             )?,
         },
         Section { file: "docs/environments.md", name: "envs", text: envs::table()? },
+        Section {
+            file: "docs/environments.md",
+            name: "minitaur-tracking",
+            text: command::tracking(root, "minitaur")?,
+        },
         Section {
             file: "docs/robustness.md",
             name: "robustness",

@@ -144,8 +144,8 @@ pub const ANT_AXES: &[Axis] = &[
 /// The axes of `env`'s suite; an error for an env without one.
 pub fn axes_of(env: &str) -> Result<&'static [Axis]> {
     match env {
-        "minitaur" => Ok(MINITAUR_AXES),
-        "ant" => Ok(ANT_AXES),
+        "minitaur" | "minitaur-command" => Ok(MINITAUR_AXES),
+        "ant" | "ant-command" => Ok(ANT_AXES),
         other => bail!("the robustness suite covers minitaur and ant, not '{other}'"),
     }
 }
