@@ -19,6 +19,7 @@ use anyhow::{bail, Context, Result};
 
 use super::protocol::Protocol;
 use super::push::Push;
+use super::tracking::TrackingEpisode;
 use crate::controller::command::SpeedProfile;
 use crate::controller::measure::GaitEpisode;
 use crate::envs::EnvConfig;
@@ -50,6 +51,18 @@ impl Key {
         Ok(Key(format!(
             "what = episodes\ncode = {EVAL_CODE}\n{}\n{}\nprotocol = {} episodes, seed {}\npolicy = {policy}\n\
              profile = {profile:?}\npush = {push:?}",
+            machine_line(),
+            env_line(env)?,
+            protocol.episodes,
+            protocol.seed,
+        )))
+    }
+
+    /// The key of `policy`'s tracking episodes under `protocol` in `env`, a command task holding
+    /// one command (its resolved options name it).
+    pub fn tracking(env: &EnvConfig, protocol: &Protocol, policy: &str) -> Result<Key> {
+        Ok(Key(format!(
+            "what = tracking\ncode = {EVAL_CODE}\n{}\n{}\nprotocol = {} episodes, seed {}\npolicy = {policy}",
             machine_line(),
             env_line(env)?,
             protocol.episodes,
@@ -213,6 +226,26 @@ impl EvalCache {
         Ok(episodes)
     }
 
+    /// The tracking episodes under `key`, read from the cache or computed by `compute` and kept.
+    pub fn tracking(
+        &self,
+        key: &Key,
+        compute: impl FnOnce() -> Result<Vec<TrackingEpisode>>,
+    ) -> Result<Vec<TrackingEpisode>> {
+        if let Some(body) = self.lookup(key) {
+            match self.timed(|| parse_tracking(&body)) {
+                Ok(episodes) => {
+                    self.count_read();
+                    return Ok(episodes);
+                }
+                Err(e) => self.damaged(key, &e),
+            }
+        }
+        let episodes = compute()?;
+        self.store(key, &self.timed(|| format_tracking(&episodes)))?;
+        Ok(episodes)
+    }
+
     /// (read, computed, damaged) so far.
     pub fn counts(&self) -> (usize, usize, usize) {
         let c = &self.counts;
@@ -269,6 +302,45 @@ const FIELDS: [&str; 14] = [
 
 /// One line per episode: the scalar fields, then `terms` and `diagnostics` as `name=value`, tab
 /// separated. Floats are written shortest-round-trip, so they read back to the same bits.
+const TRACKING_FIELDS: [&str; 6] = ["speed_rms", "yaw_rate_rms", "fell", "cost_of_transport", "settle_time", "speed"];
+
+fn format_tracking(episodes: &[TrackingEpisode]) -> String {
+    let mut out = format!("{}\n", TRACKING_FIELDS.join("\t"));
+    for e in episodes {
+        let settle = e.settle_time.map_or("none".to_string(), |t| format!("{t:?}"));
+        out += &format!(
+            "{:?}\t{:?}\t{}\t{:?}\t{settle}\t{:?}\n",
+            e.speed_rms, e.yaw_rate_rms, e.fell, e.cost_of_transport, e.speed
+        );
+    }
+    out
+}
+
+fn parse_tracking(body: &str) -> Result<Vec<TrackingEpisode>> {
+    let mut lines = body.lines();
+    if lines.next() != Some(TRACKING_FIELDS.join("\t").as_str()) {
+        bail!("other columns");
+    }
+    let number = |s: &str| s.parse::<f64>().with_context(|| format!("{s:?} is not a number"));
+    lines
+        .enumerate()
+        .map(|(i, line)| {
+            let c: Vec<&str> = line.split('\t').collect();
+            if c.len() != TRACKING_FIELDS.len() {
+                bail!("episode {}: {} columns, not {}", i + 1, c.len(), TRACKING_FIELDS.len());
+            }
+            Ok(TrackingEpisode {
+                speed_rms: number(c[0])?,
+                yaw_rate_rms: number(c[1])?,
+                fell: c[2].parse::<bool>().with_context(|| format!("{:?} is not true or false", c[2]))?,
+                cost_of_transport: number(c[3])?,
+                settle_time: if c[4] == "none" { None } else { Some(number(c[4])?) },
+                speed: number(c[5])?,
+            })
+        })
+        .collect()
+}
+
 fn format_episodes(episodes: &[GaitEpisode]) -> String {
     let mut out = format!("{}\tterms\tdiagnostics\n", FIELDS.join("\t"));
     for e in episodes {
@@ -363,6 +435,36 @@ mod tests {
         format_episodes(std::slice::from_ref(a)) == format_episodes(std::slice::from_ref(b))
             && a.episode_return.to_bits() == b.episode_return.to_bits()
             && a.speed_error.to_bits() == b.speed_error.to_bits()
+    }
+
+    #[test]
+    fn tracking_episodes_read_back_to_the_same_bits() {
+        let episodes = vec![
+            TrackingEpisode {
+                speed_rms: 0.1 + 0.2,
+                yaw_rate_rms: f64::NAN,
+                fell: true,
+                cost_of_transport: 1.0 / 3.0,
+                settle_time: None,
+                speed: -0.0,
+            },
+            TrackingEpisode {
+                speed_rms: 1e-300,
+                yaw_rate_rms: 0.5,
+                fell: false,
+                cost_of_transport: f64::NAN,
+                settle_time: Some(0.49),
+                speed: 2.5,
+            },
+        ];
+        let back = parse_tracking(&format_tracking(&episodes)).unwrap();
+        for (a, b) in episodes.iter().zip(&back) {
+            assert_eq!(a.speed_rms.to_bits(), b.speed_rms.to_bits());
+            assert_eq!(a.yaw_rate_rms.is_nan(), b.yaw_rate_rms.is_nan());
+            assert_eq!((a.fell, a.settle_time, a.speed.to_bits()), (b.fell, b.settle_time, b.speed.to_bits()));
+            assert_eq!(a.cost_of_transport.is_nan(), b.cost_of_transport.is_nan());
+        }
+        assert!(parse_tracking("other\tcolumns\n").is_err());
     }
 
     #[test]

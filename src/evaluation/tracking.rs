@@ -96,6 +96,37 @@ impl TrackingPoint {
     }
 }
 
+/// `env` holding the command (`speed`, `yaw_rate`) for the whole episode.
+pub fn point_env(env: &EnvConfig, speed: f64, yaw_rate: f64) -> EnvConfig {
+    let mut cfg = env.clone();
+    cfg.options.insert("schedule".into(), toml::Value::String(format!("0:{speed}:{yaw_rate}")));
+    cfg
+}
+
+/// Plays `policy` on `env` (a command task, holding one command: [`point_env`]) on the
+/// protocol's held-out episodes.
+pub fn tracking_episodes(env: &EnvConfig, policy: &mut dyn Policy, protocol: Protocol) -> Result<Vec<TrackingEpisode>> {
+    ensure!(
+        env.name.ends_with("-command"),
+        "the tracking grid needs a command task (minitaur-command, ant-command), not {}",
+        env.name
+    );
+    let command = match env.options.get("schedule").and_then(|s| s.as_str()) {
+        Some(s) => crate::envs::command::Schedule::parse(s)
+            .map_err(|e| anyhow::anyhow!("schedule: {e}"))?
+            .map(|s| s.at(0.0))
+            .ok_or_else(|| anyhow::anyhow!("the tracking grid needs one command (a schedule)"))?,
+        None => anyhow::bail!("the tracking grid needs one command (a schedule)"),
+    };
+    let mut e = make(env)?;
+    protocol
+        .reset_seeds()
+        .iter()
+        .enumerate()
+        .map(|(i, &seed)| track_episode(e.as_mut(), policy, i, seed, command))
+        .collect()
+}
+
 /// Plays `policy` on `env` (a command task) at every (speed, yaw rate) of the grid, on the
 /// protocol's held-out episodes.
 pub fn tracking_grid(
@@ -105,25 +136,12 @@ pub fn tracking_grid(
     yaw_rates: &[f64],
     protocol: Protocol,
 ) -> Result<Vec<TrackingPoint>> {
-    ensure!(
-        env.name.ends_with("-command"),
-        "the tracking grid needs a command task (minitaur-command, ant-command), not {}",
-        env.name
-    );
     ensure!(!speeds.is_empty() && !yaw_rates.is_empty(), "the tracking grid needs at least one speed and one yaw rate");
     let mut points = Vec::new();
     for &yaw_rate in yaw_rates {
         for &speed in speeds {
             ensure!(speed.is_finite() && yaw_rate.is_finite(), "grid commands must be finite");
-            let mut cfg = env.clone();
-            cfg.options.insert("schedule".into(), toml::Value::String(format!("0:{speed}:{yaw_rate}")));
-            let mut e = make(&cfg)?;
-            let episodes = protocol
-                .reset_seeds()
-                .iter()
-                .enumerate()
-                .map(|(i, &seed)| track_episode(e.as_mut(), policy, i, seed, [speed, yaw_rate]))
-                .collect::<Result<Vec<_>>>()?;
+            let episodes = tracking_episodes(&point_env(env, speed, yaw_rate), policy, protocol)?;
             points.push(TrackingPoint { speed, yaw_rate, episodes });
         }
     }

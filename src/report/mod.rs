@@ -16,6 +16,7 @@ pub mod robustness;
 pub mod robustness_clips;
 pub mod runs;
 mod sections;
+pub mod tracking;
 pub mod videos;
 
 use std::collections::BTreeMap;
@@ -173,11 +174,14 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
     };
     for (env, env_groups) in &envs {
         doc.heading(1, env.as_str());
+        tracking::section(&mut doc, out, env, env_groups, opts)?;
         report.groups.extend(sections::learning_curves(&mut doc, out, env, env_groups)?);
         let here: Vec<_> = externals.iter().filter(|x| x.meta.env == *env).cloned().collect();
         let rows = sections::held_out(&mut doc, env_groups, opts, &here)?;
         sections::published(&mut doc, env, &rows, env_groups);
-        if crate::controller::baseline::baseline_env(env).is_ok() {
+        // On a command task the controller follows the task's commands, not a speed: the tracking
+        // section above compares it.
+        if crate::controller::baseline::baseline_env(env).is_ok() && !env.ends_with("-command") {
             if let Some(c) = sections::controller(&mut doc, out, env, env_groups, &rows, opts)? {
                 report.controllers.insert(env.clone(), c);
             }

@@ -34,7 +34,8 @@ pub(crate) fn tracking(root: &Path, env: &str) -> Result<String> {
     files.sort();
     ensure!(!files.is_empty(), "no {env}-*-grid.csv in {}", dir.display());
     let mut out = String::new();
-    let names: Vec<String> = files.iter().map(|f| format!("{GRIDS_DIR}/{}", f.file_name().unwrap().to_string_lossy())).collect();
+    let names: Vec<String> =
+        files.iter().map(|f| format!("{GRIDS_DIR}/{}", f.file_name().unwrap().to_string_lossy())).collect();
     let _ = writeln!(
         out,
         "From {} ({GRIDS_DIR}/README.md says how each was made). Errors are RMS after the first second of each \
@@ -76,7 +77,9 @@ pub(crate) fn probes(root: &Path, csv: &str) -> Result<String> {
          names the machine and commit). SAC on `minitaur`, seed 0, one change each from the preset; held-out: 50 \
          episodes, protocol seed 0, 95% bootstrap intervals.\n\n"
     );
-    out.push_str("| probe | change | steps | held-out return | falls | final temperature | truncated episode ends | wall s |\n");
+    out.push_str(
+        "| probe | change | steps | held-out return | falls | final temperature | truncated episode ends | wall s |\n",
+    );
     out.push_str("|---|---|---|---|---|---|---|---|\n");
     for r in rows {
         let _ = writeln!(

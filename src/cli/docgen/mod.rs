@@ -92,11 +92,7 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
             )?,
         },
         Section { file: "docs/environments.md", name: "envs", text: envs::table()? },
-        Section {
-            file: "docs/environments.md",
-            name: "minitaur-tracking",
-            text: command::tracking(root, "minitaur")?,
-        },
+        Section { file: "docs/environments.md", name: "minitaur-tracking", text: command::tracking(root, "minitaur")? },
         Section {
             file: "docs/robustness.md",
             name: "robustness",
