@@ -126,3 +126,31 @@ fn the_controller_follows_the_stream_it_is_given() {
         assert!(p.speed_rms().estimate < 0.15);
     }
 }
+
+#[test]
+fn the_ant_controller_follows_a_changing_command_by_rebuilding_for_each() {
+    let cfg = baseline_env("ant-command")
+        .unwrap()
+        .with_overrides(&[("schedule".into(), "\"0:0.5:0 20:0:0\"".into())])
+        .unwrap();
+    let mut env = make(&cfg).unwrap();
+    let mut controller = baseline_controller_for("ant-command", Command::straight(0.0, 0.0), None).unwrap();
+    assert_eq!(controller.name(), "raibert-row@command");
+    let (mut obs, _) = env.reset(Some(1)).unwrap();
+    controller.begin_episode(0);
+    let (mut walked, mut stood) = (Vec::new(), Vec::new());
+    for t in 0..800 {
+        let step = env.step(&controller.act(env.as_ref(), &obs).unwrap()).unwrap();
+        assert!(!step.done(), "fell or ended at step {t}");
+        let v = step.info.metric("forward_velocity").unwrap();
+        if (100..400).contains(&t) {
+            walked.push(v);
+        } else if t >= 600 {
+            stood.push(v);
+        }
+        obs = step.observation;
+    }
+    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
+    assert!(mean(&walked) > 0.2, "walking at 0.5 m/s commanded: {}", mean(&walked));
+    assert!(mean(&stood).abs() < mean(&walked) / 2.0, "stopping: {} after {}", mean(&stood), mean(&walked));
+}

@@ -142,7 +142,7 @@ impl AntController {
 
     pub(crate) fn controls(&mut self, env: &dyn Env) -> Result<Vec<f64>> {
         let spec = env.spec();
-        if spec.name != "ant" {
+        if !["ant", "ant-command"].contains(&spec.name) {
             bail!("the Ant controller drives the ant environment only");
         }
         let d = env.data();

@@ -310,7 +310,7 @@ impl AntRowController {
     }
 
     pub(crate) fn controls(&mut self, env: &dyn Env) -> Result<Vec<f64>> {
-        if env.spec().name != "ant" {
+        if !["ant", "ant-command"].contains(&env.spec().name) {
             bail!("the Ant controller drives the ant environment only");
         }
         if self.joints.is_none() {

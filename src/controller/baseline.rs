@@ -16,7 +16,7 @@ pub fn baseline_env(env: &str) -> Result<EnvConfig> {
         "minitaur" | "minitaur-command" => {
             EnvConfig::new(env).with_overrides(&[("action_mode".into(), "\"torque\"".into())])?
         }
-        "ant" => EnvConfig::new("ant"),
+        "ant" | "ant-command" => EnvConfig::new(env),
         other => bail!("the Raibert baseline exists for minitaur and ant, not '{other}'"),
     })
 }
@@ -53,6 +53,10 @@ pub fn baseline_controller_for(env: &str, command: Command, gait: Option<GaitKin
                 gait: gait.unwrap_or(defaults.gait),
                 ..defaults
             })?)
+        }
+        "ant-command" => {
+            let name = format!("raibert-{}@command", if gait == Some(GaitKind::Trot) { "trot" } else { "row" });
+            Box::new(super::follow::CommandFollower::new(name, |c, g| baseline_controller_for("ant", c, g), gait))
         }
         "ant" => match gait.unwrap_or(GaitKind::Row) {
             GaitKind::Row => Box::new(AntRowController::new(AntRowParams::for_command(command))?),

@@ -7,6 +7,7 @@ pub mod ant;
 pub mod ant_row;
 pub mod baseline;
 pub mod command;
+mod follow;
 pub mod force_qp;
 pub mod fourbar;
 pub mod gait;
