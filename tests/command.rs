@@ -154,3 +154,57 @@ fn the_ant_controller_follows_a_changing_command_by_rebuilding_for_each() {
     assert!(mean(&walked) > 0.2, "walking at 0.5 m/s commanded: {}", mean(&walked));
     assert!(mean(&stood).abs() < mean(&walked) / 2.0, "stopping: {} after {}", mean(&stood), mean(&walked));
 }
+
+mod notch {
+    use locobench::envs::notch::direction;
+    use locobench::envs::{make, EnvConfig};
+
+    fn walker(options: &[(&str, &str)]) -> Box<dyn locobench::envs::Env> {
+        let pairs: Vec<(String, String)> = options.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+        make(&EnvConfig::new("walker2d-notch").with_overrides(&pairs).unwrap()).unwrap()
+    }
+
+    #[test]
+    fn each_action_moves_its_joint_target_a_notch_and_the_targets_are_observed() {
+        assert_eq!([direction(-1.0), direction(0.0), direction(1.0), direction(0.3)], [-1.0, 0.0, 1.0, 0.0]);
+        let mut e = walker(&[("notch", "0.1")]);
+        let (obs, _) = e.reset(Some(0)).unwrap();
+        assert_eq!(obs.len(), 17 + 6);
+        let start: Vec<f64> = obs[17..].to_vec();
+        // the targets start at the joints' angles, within the joints' ranges
+        let ranges = e.data().model().jnt_range().to_vec();
+        for (j, (target, q)) in start.iter().zip(&e.data().qpos()[3..9]).enumerate() {
+            assert_eq!(*target, q.clamp(ranges[2 * (3 + j)], ranges[2 * (3 + j) + 1]));
+        }
+        // the feet (joints 2 and 5, range ±45 degrees) start near 0, a notch from either limit
+        let step = e.step(&[0.0, 0.0, 1.0, 0.0, 0.0, -1.0]).unwrap();
+        let t = &step.observation[17..];
+        assert!((t[2] - (start[2] + 0.1)).abs() < 1e-12 && (t[5] - (start[5] - 0.1)).abs() < 1e-12);
+        assert_eq!([t[0], t[1], t[3], t[4]], [start[0], start[1], start[3], start[4]]);
+        // a thigh at its upper limit (0 rad) stays there when pushed further up
+        let mut at_limit = start.clone();
+        for _ in 0..40 {
+            let s = e.step(&[1.0, 0.0, 0.0, 0.0, 0.0, 0.0]).unwrap();
+            at_limit = s.observation[17..].to_vec();
+        }
+        assert_eq!(at_limit[0], 0.0);
+    }
+
+    #[test]
+    fn holding_every_target_keeps_the_walker_standing() {
+        let mut e = walker(&[]);
+        e.reset(Some(0)).unwrap();
+        for t in 0..1000 {
+            let s = e.step(&[0.0; 6]).unwrap();
+            assert!(!s.terminated, "fell at step {t}");
+        }
+    }
+
+    #[test]
+    fn a_notch_of_zero_or_below_is_refused_naming_it() {
+        for bad in ["0", "-0.1"] {
+            let e = make(&EnvConfig::new("walker2d-notch").with_overrides(&[("notch".into(), bad.into())]).unwrap());
+            assert!(e.err().unwrap().to_string().contains("notch must be"), "{bad}");
+        }
+    }
+}

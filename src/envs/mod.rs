@@ -18,6 +18,7 @@ mod humanoid;
 mod inverted_pendulum;
 pub mod minitaur;
 mod mujoco_env;
+pub mod notch;
 mod options;
 mod planar_walker;
 pub mod push;

@@ -75,3 +75,32 @@ pub(crate) fn read_by_name<T: serde::de::DeserializeOwned, O: serde::Serialize>(
     let value = toml::Value::try_from(options).expect("options serialise");
     value.try_into().unwrap_or_else(|e| panic!("the options lack a field {}: {e}", std::any::type_name::<T>()))
 }
+
+/// A wrapper env's options in one flat table: the keys `own_defaults` has go to the wrapper's own
+/// settings (missing ones keep those defaults), every other key to the base env's options, which
+/// refuse a key they do not know. serde's `flatten` would accept any key, so the split is by name.
+pub(crate) fn split_wrapped<B: serde::de::DeserializeOwned, S: serde::Serialize + serde::de::DeserializeOwned>(
+    table: toml::Table,
+    own_defaults: &S,
+) -> Result<(B, S), String> {
+    let mut own = toml::Table::try_from(own_defaults).map_err(|e| e.to_string())?;
+    let mut base = toml::Table::new();
+    for (key, value) in table {
+        if own.contains_key(&key) {
+            own.insert(key, value);
+        } else {
+            base.insert(key, value);
+        }
+    }
+    Ok((
+        toml::Value::Table(base).try_into().map_err(|e: toml::de::Error| e.message().to_string())?,
+        toml::Value::Table(own).try_into().map_err(|e: toml::de::Error| e.message().to_string())?,
+    ))
+}
+
+/// The flat table of a wrapper env's options: the base's keys, then its own.
+pub(crate) fn join_wrapped<B: serde::Serialize, S: serde::Serialize>(base: &B, own: &S) -> Result<toml::Table, String> {
+    let mut table = toml::Table::try_from(base).map_err(|e| e.to_string())?;
+    table.extend(toml::Table::try_from(own).map_err(|e| e.to_string())?);
+    Ok(table)
+}

@@ -115,6 +115,7 @@ pub const ENVS: &[EnvEntry] = &[
     ),
     entry::<CommandEnv<Minitaur>>("minitaur-command", minitaur::MODEL_XML, COMMAND_REWARD),
     entry::<CommandEnv<Ant>>("ant-command", super::ant::MODEL_XML, COMMAND_REWARD),
+    entry::<super::notch::NotchWalker>(super::notch::NAME, super::walker2d::MODEL_XML, PLANAR_WALKER_REWARD),
 ];
 
 const COMMAND_REWARD: &[(&str, &str)] = &[

@@ -55,6 +55,14 @@ pub fn train(
     control: &RunControl,
 ) -> Result<RunSummary> {
     train.validate()?;
+    if env.name == crate::envs::notch::NAME && train.algo != crate::agents::Algo::Dqn {
+        bail!(
+            "{} moves joint targets by notches (down, hold, up): only the branching DQN (--algo dqn) acts in it, \
+             not {}",
+            env.name,
+            train.algo.name()
+        );
+    }
     let mut env = env;
     env.options = env.resolved_options()?;
     // Before --force may remove the directory under a running trainer.

@@ -36,6 +36,7 @@ use serde::{Deserialize, Serialize};
 
 pub use process::{CommandProcess, Schedule};
 
+use super::options::{join_wrapped, split_wrapped};
 use super::registry::Registered;
 use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
@@ -187,30 +188,15 @@ impl<B: CommandBase> Default for CommandOptions<B> {
 
 impl<B: CommandBase> Serialize for CommandOptions<B> {
     fn serialize<S: serde::Serializer>(&self, serializer: S) -> Result<S::Ok, S::Error> {
-        use serde::ser::Error;
-        let mut table = toml::Table::try_from(&self.base).map_err(S::Error::custom)?;
-        table.extend(toml::Table::try_from(&self.command).map_err(S::Error::custom)?);
-        table.serialize(serializer)
+        join_wrapped(&self.base, &self.command).map_err(serde::ser::Error::custom)?.serialize(serializer)
     }
 }
 
 impl<'de, B: CommandBase> Deserialize<'de> for CommandOptions<B> {
     fn deserialize<D: serde::Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
-        use serde::de::Error;
         let table = toml::Table::deserialize(deserializer)?;
-        let mut command = toml::Table::try_from(B::command_defaults()).map_err(D::Error::custom)?;
-        let mut base = toml::Table::new();
-        for (key, value) in table {
-            if command.contains_key(&key) {
-                command.insert(key, value);
-            } else {
-                base.insert(key, value);
-            }
-        }
-        Ok(CommandOptions {
-            base: toml::Value::Table(base).try_into().map_err(D::Error::custom)?,
-            command: toml::Value::Table(command).try_into().map_err(D::Error::custom)?,
-        })
+        let (base, command) = split_wrapped(table, &B::command_defaults()).map_err(serde::de::Error::custom)?;
+        Ok(CommandOptions { base, command })
     }
 }
 
