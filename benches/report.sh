@@ -55,6 +55,9 @@ runs=(
   # with 256-wide critics, policies at 100k and 300k
   $r/minitaur/sac-energy0-*500k
   $r/{half-cheetah,ant,humanoid}/crossq-256-seed{0,1,2}
+  # PPO on the velocity-command task (minitaur-command), with its policies: the report's
+  # same-command section puts them beside the controller on the same commands
+  $r/minitaur-command/ppo-seed{0,1,2}-6m
 )
 existing=()
 for d in "${runs[@]}"; do

@@ -13,8 +13,8 @@ use serde::{Deserialize, Serialize};
 
 use super::options::{join_wrapped, split_wrapped};
 use super::registry::Registered;
+use super::simulation::base_state_accessors;
 use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step, Walker2d, Walker2dOptions};
-use crate::mujoco::Data;
 
 /// The registered name.
 pub const NAME: &str = "walker2d-notch";
@@ -186,15 +186,5 @@ impl Env for NotchWalker {
         Ok(Step { observation: self.last_obs.clone(), ..step })
     }
 
-    fn data(&self) -> &Data {
-        self.base.data()
-    }
-
-    fn data_mut(&mut self) -> &mut Data {
-        self.base.data_mut()
-    }
-
-    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        self.base.set_state(qpos, qvel)
-    }
+    base_state_accessors!();
 }

@@ -174,6 +174,25 @@ macro_rules! env_core_accessors {
 }
 pub(crate) use env_core_accessors;
 
+/// The [`Env`](super::Env) methods a wrapper env (a command task, notch actions) hands to the env
+/// it wraps (its `base` field): the simulation state is the base's.
+macro_rules! base_state_accessors {
+    () => {
+        fn data(&self) -> &$crate::mujoco::Data {
+            self.base.data()
+        }
+
+        fn data_mut(&mut self) -> &mut $crate::mujoco::Data {
+            self.base.data_mut()
+        }
+
+        fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), $crate::envs::EnvError> {
+            self.base.set_state(qpos, qvel)
+        }
+    };
+}
+pub(crate) use base_state_accessors;
+
 /// The state every MuJoCo environment keeps, and the parts of reset/step they all share.
 pub(crate) struct EnvCore {
     pub(crate) sim: Simulation,

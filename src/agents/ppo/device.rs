@@ -2,17 +2,16 @@
 //! sampling stays on the host (the same draws from the same RNG as the fused path); per minibatch
 //! the host sends one buffer and reads back one (the diagnostics), and the global gradient-norm
 //! clip is computed on the device, so no value travels to the host in between.
-use candle_core::{DType, Device, Result, Tensor, Var, D};
+use candle_core::{DType, Device, Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 
-use super::{ppo_glue, ppo_on_policy_glue};
+use super::{gaussian_log_prob_and_entropy, ppo_glue, ppo_on_policy_glue};
 use crate::agents::common::device::adam::DeviceAdam;
 use crate::agents::common::device::layers::{clamp, constant, DeviceStack};
 use crate::agents::common::device::read_scalars;
 use crate::agents::config::{Algo, PpoConfig, TrainConfig};
 use crate::agents::ppo::{
     named_networks, normalized_advantages, sample_actions, Activation, ObsStats, PolicyStep, PpoBatch, PpoLosses,
-    HALF_LOG_2PI,
 };
 use crate::agents::{Agent, OnPolicyAgent, PpoAgent};
 use crate::numeric::optim::Optimizer;
@@ -143,10 +142,7 @@ impl OnPolicyAgent for GenericPpo {
         let (old_log_probs, advantages, returns, old_values) = (take(1)?, take(1)?, take(1)?, take(1)?);
 
         let mean = self.actor.forward(&obs)?;
-        let log_std = self.log_std.as_tensor().broadcast_as(mean.shape())?;
-        let z = ((&actions - &mean)? / log_std.exp()?)?;
-        let new_log_probs = ((z.sqr()?.affine(-0.5, -HALF_LOG_2PI as f64))? - &log_std)?.sum(D::Minus1)?;
-        let entropy = log_std.affine(1.0, 0.5 + HALF_LOG_2PI as f64)?.sum(D::Minus1)?.mean_all()?;
+        let (new_log_probs, entropy) = gaussian_log_prob_and_entropy(&mean, &self.log_std, &actions)?;
         let log_ratio = (&new_log_probs - &old_log_probs)?;
         let ratio = log_ratio.exp()?;
         let clipped = clamp(&ratio, 1.0 - s.clip_coef as f32, 1.0 + s.clip_coef as f32)?;

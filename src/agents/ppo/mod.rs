@@ -406,10 +406,7 @@ impl OnPolicyAgent for PpoAgent {
         let advantages = column(&advantages)?;
 
         let mean = self.actor.forward(&obs)?;
-        let log_std = self.log_std.as_tensor().broadcast_as(mean.shape())?;
-        let z = ((&actions - &mean)? / log_std.exp()?)?;
-        let new_log_probs = ((z.sqr()?.affine(-0.5, -HALF_LOG_2PI as f64))? - &log_std)?.sum(D::Minus1)?;
-        let entropy = log_std.affine(1.0, 0.5 + HALF_LOG_2PI as f64)?.sum(D::Minus1)?.mean_all()?;
+        let (new_log_probs, entropy) = gaussian_log_prob_and_entropy(&mean, &self.log_std, &actions)?;
         let log_ratio = (&new_log_probs - &old_log_probs)?;
         let ratio = log_ratio.exp()?;
         let clipped = ratio.clamp(1.0 - s.clip_coef as f32, 1.0 + s.clip_coef as f32)?;
@@ -470,6 +467,21 @@ impl OnPolicyAgent for PpoAgent {
 
 /// ln(2 pi) / 2.
 pub(crate) const HALF_LOG_2PI: f32 = 0.918_938_5;
+
+/// log pi(a|s) of each row under the diagonal Gaussian (`mean`, exp(`log_std`)), and the
+/// policy's entropy averaged over the batch, as CleanRL's `get_action_and_value` computes them;
+/// both versions of PPO's update build their loss on it.
+pub(crate) fn gaussian_log_prob_and_entropy(
+    mean: &Tensor,
+    log_std: &Var,
+    actions: &Tensor,
+) -> Result<(Tensor, Tensor)> {
+    let log_std = log_std.as_tensor().broadcast_as(mean.shape())?;
+    let z = ((actions - mean)? / log_std.exp()?)?;
+    let new_log_probs = ((z.sqr()?.affine(-0.5, -HALF_LOG_2PI as f64))? - &log_std)?.sum(D::Minus1)?;
+    let entropy = log_std.affine(1.0, 0.5 + HALF_LOG_2PI as f64)?.sum(D::Minus1)?.mean_all()?;
+    Ok((new_log_probs, entropy))
+}
 
 /// The [`Agent`] methods both versions of PPO share (this file's fused one and `device.rs`'s),
 /// written once: both keep their networks, optimisers and counters under the same field names, so

@@ -38,6 +38,7 @@ pub use process::{CommandProcess, Schedule};
 
 use super::options::{join_wrapped, split_wrapped};
 use super::registry::Registered;
+use super::simulation::base_state_accessors;
 use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
@@ -384,17 +385,7 @@ impl<B: CommandBase> Env for CommandEnv<B> {
         })
     }
 
-    fn data(&self) -> &Data {
-        self.base.data()
-    }
-
-    fn data_mut(&mut self) -> &mut Data {
-        self.base.data_mut()
-    }
-
-    fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
-        self.base.set_state(qpos, qvel)
-    }
+    base_state_accessors!();
 
     /// The command in force now: (forward speed m/s, yaw rate rad/s).
     fn command(&self) -> Option<[f64; 2]> {
