@@ -13,9 +13,13 @@ import tomllib
 from pathlib import Path
 
 
-def train_table(run):
+def config(run):
     with open(run / "config.toml", "rb") as f:
-        return tomllib.load(f)["train"]
+        return tomllib.load(f)
+
+
+def train_table(run):
+    return config(run)["train"]
 
 
 def change(run, base):
@@ -50,7 +54,7 @@ def main():
         eps, trunc, alpha, steps = training(run)
         wall = (run / "wall_s.txt").read_text().strip() if (run / "wall_s.txt").is_file() else ""
         rows.append({
-            "probe": run.name, "change": change(run, base), "steps": steps, "return": ret, "return_low": lo,
+            "probe": run.name, "seed": config(run)["seed"], "change": change(run, base), "steps": steps, "return": ret, "return_low": lo,
             "return_high": hi, "falls": falls, "episodes": n, "final_alpha": alpha, "truncated": trunc,
             "training_episodes": eps, "wall_s": wall,
         })

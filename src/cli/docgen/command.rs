@@ -74,7 +74,7 @@ pub(crate) fn probes(root: &Path, csv: &str) -> Result<String> {
     let rows = read(&root.join(csv))?;
     let mut out = format!(
         "From {csv} (`benches/minitaur_probes.sh`, then `benches/minitaur_probe_summary.py`; the folder's NOTES.md \
-         names the machine and commit). SAC on `minitaur`, seed 0, one change each from the preset; held-out: 50 \
+         names the machine and commit). SAC on `minitaur`, one change each from the preset (seed 0; the warm-up probe also seeds 1 and 2); held-out: 50 \
          episodes, protocol seed 0, 95% bootstrap intervals.\n\n"
     );
     out.push_str(
@@ -84,8 +84,9 @@ pub(crate) fn probes(root: &Path, csv: &str) -> Result<String> {
     for r in rows {
         let _ = writeln!(
             out,
-            "| {} | `{}` | {} | {:.3} [{:.3}, {:.3}] | {}/{} | {:.2e} | {}/{} | {:.0} |",
+            "| {} | {} | `{}` | {} | {:.3} [{:.3}, {:.3}] | {}/{} | {:.2e} | {}/{} | {:.0} |",
             r.text("probe"),
+            r.text("seed"),
             r.text("change"),
             r.text("steps"),
             r.num("return"),
