@@ -22,6 +22,7 @@ ENV_IDS = {
     "hopper": "locobench/Hopper-v5",
     "minitaur-command": "locobench/MinitaurCommand-v0",
     "ant-command": "locobench/AntCommand-v0",
+    "walker2d-notch": "locobench/Walker2dNotch-v0",
 }
 
 _RENDER_MODES = ["rgb_array", "rgb_array_list"]
