@@ -160,7 +160,9 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
     let mut doc = Document::new("locobench report");
     // The summary goes here, once the sections below have computed what it says.
     let summary_at = doc.blocks.len();
-    let mut summaries: Vec<((bool, usize, String), Vec<document::Block>)> = Vec::new();
+    // (not a command task, no controller, fewer runs first, env): the order of the summaries.
+    type Order = (bool, bool, usize, String);
+    let mut summaries: Vec<(Order, Vec<document::Block>)> = Vec::new();
     sections::protocol(&mut doc, opts);
 
     // Every clip file this report shows, relative to `out`: the others in its videos folder go.
@@ -172,7 +174,10 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
         rows: BTreeMap::new(),
         controllers: BTreeMap::new(),
     };
-    for (env, env_groups) in &envs {
+    // Command tasks first: the same command for every contender is the fairest comparison.
+    let mut ordered: Vec<_> = envs.iter().collect();
+    ordered.sort_by_key(|(env, _)| (!env.ends_with("-command"), env.to_string()));
+    for (env, env_groups) in ordered {
         doc.heading(1, env.as_str());
         tracking::section(&mut doc, out, env, env_groups, opts)?;
         report.groups.extend(sections::learning_curves(&mut doc, out, env, env_groups)?);
@@ -199,13 +204,13 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
         filmed.extend(clips.iter().flat_map(videos::Clip::files));
         let runs_here: usize = env_groups.iter().map(|(_, rs)| rs.len()).sum();
         summaries.push((
-            (section.is_none(), usize::MAX - runs_here, env.clone()),
+            (!env.ends_with("-command"), section.is_none(), usize::MAX - runs_here, env.clone()),
             sections::summary(env, &rows, section, &clips),
         ));
         sections::training_returns(&mut doc, out, env, env_groups)?;
         report.rows.insert(env.clone(), rows);
     }
-    // Envs with a controller first, then by runs.
+    // Command tasks first, then envs with a controller, then by runs.
     summaries.sort_by(|a, b| a.0.cmp(&b.0));
     let mut first = vec![document::Block::Heading { level: 1, text: "Summary".into() }];
     first.push(document::Block::Paragraph(format!(

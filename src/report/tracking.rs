@@ -65,8 +65,11 @@ pub(crate) fn section(
             speeds.iter().map(|&speed| TrackingPoint { speed, yaw_rate: 0.0, episodes: Vec::new() }).collect();
         let mut budgets = Vec::new();
         for run in runs.iter() {
-            // The newest policy the run kept (a run still training has metrics beyond it).
-            let newest = crate::train::budget_policy_steps(&run.dir).into_iter().filter(|s| *s <= reached(run)).max();
+            // The newest policy the run kept at a whole 100k (a run's last step is seldom round), or
+            // its newest; a run still training has metrics beyond it.
+            let held: Vec<u64> =
+                crate::train::budget_policy_steps(&run.dir).into_iter().filter(|s| *s <= reached(run)).collect();
+            let newest = held.iter().copied().filter(|s| s % 100_000 == 0).max().or_else(|| held.iter().copied().max());
             let Some(budget) = newest.or_else(|| shipped_step(&run.dir)) else { continue };
             let Ok(source) = policy_at(run, budget) else { continue };
             let (cfg, agent) = source.load(&run.dir, budget)?;
