@@ -208,3 +208,28 @@ mod notch {
         }
     }
 }
+
+#[test]
+fn commands_outside_a_policy_s_training_ranges_are_named_with_the_range() {
+    use locobench::envs::command::{command_ranges, commands_given, outside_training_range};
+    let cfg = |options: &[(&str, &str)]| {
+        let pairs: Vec<(String, String)> = options.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
+        EnvConfig::new("minitaur-command").with_overrides(&pairs).unwrap()
+    };
+    let trained = cfg(&[("speed_range", "[0.0, 1.5]"), ("yaw_rate_range", "[-0.3, 0.3]")]);
+    assert_eq!(command_ranges(&trained).unwrap(), Some(([0.0, 1.5], [-0.3, 0.3])));
+    assert_eq!(command_ranges(&EnvConfig::new("minitaur")).unwrap(), None);
+    // A schedule gives its knots; without one, the corners of the ranges.
+    let scheduled = cfg(&[("schedule", "\"0:1.0:0 3:2.0:0.5\"")]);
+    assert_eq!(commands_given(&scheduled).unwrap(), vec![[1.0, 0.0], [2.0, 0.5]]);
+    assert_eq!(commands_given(&trained).unwrap().len(), 4);
+    let lines = outside_training_range(&trained, &commands_given(&scheduled).unwrap(), "p").unwrap();
+    assert_eq!(
+        lines,
+        vec![
+            "command speed 2 m/s lies outside p's training speed_range [0, 1.5]".to_string(),
+            "command yaw rate 0.5 rad/s lies outside p's training yaw_rate_range [-0.3, 0.3]".to_string(),
+        ]
+    );
+    assert!(outside_training_range(&trained, &[[1.5, -0.3]], "p").unwrap().is_empty(), "the ends are inside");
+}

@@ -18,7 +18,8 @@ SHIPPED = sorted(p for p in (ROOT / "models" / "policies").iterdir() if (p / "po
 
 def test_every_policy_that_ships_is_tested_here():
     names = {p.name for p in SHIPPED}
-    assert {"minitaur-ppo", "minitaur-ppo-robust", "minitaur-ppo-robust-com", "minitaur-sac", "minitaur-td3"} <= names
+    assert {"minitaur-ppo", "minitaur-ppo-robust", "minitaur-ppo-robust-com", "minitaur-sac", "minitaur-td3",
+            "minitaur-command-ppo"} <= names
 
 
 @pytest.mark.parametrize("shipped", SHIPPED, ids=lambda p: p.name)
@@ -46,6 +47,22 @@ def test_options_and_reward_over_a_policys_world_agree_with_eval_option_and_rewa
                              check=True, capture_output=True, text=True).stdout.splitlines()
     assert result["text"].splitlines() == printed[1:]
     assert result["reward_terms"]["energy"] == 0.0
+
+
+def test_a_command_policy_on_a_fixed_command_agrees_with_eval(binary):
+    """A command-task policy given one command through `options`, as `eval --option schedule=...`
+    gives it: the same episodes, the same digits, and the same warning for a command outside the
+    policy's training range."""
+    policy = ROOT / "models" / "policies" / "minitaur-command-ppo"
+    schedule = "0:1.0:0 4:1.5:0.3"
+    result = locobench.evaluate(locobench.load_policy(policy), episodes=2, seed=3, options={"schedule": schedule})
+    done = subprocess.run([str(binary), "eval", "--policy", str(policy), "--episodes", "2", "--seed", "3",
+                           "--option", f"schedule={schedule}"], check=True, capture_output=True, text=True)
+    assert result["text"].splitlines() == done.stdout.splitlines()[1:]
+    assert "tracking_speed" in result["reward_terms"]
+    outside = subprocess.run([str(binary), "eval", "--policy", str(policy), "--episodes", "1",
+                              "--option", "schedule=0:3.0:0"], check=True, capture_output=True, text=True)
+    assert "outside" in outside.stderr and "speed_range [0, 2.5]" in outside.stderr
 
 
 def test_a_robust_policys_env_is_nominal_unless_asked():

@@ -1,7 +1,8 @@
 use std::path::PathBuf;
 
 use anyhow::{Context, Result};
-use locobench::controller::baseline::{baseline_controller_for, baseline_env, parse_gait};
+use locobench::controller::baseline::{baseline_controller_for, baseline_env, baseline_env_like, parse_gait};
+use locobench::controller::command::Command;
 use locobench::envs::make;
 use locobench::policy::{AgentPolicy, Policy};
 use locobench::record::{spawn_viewer, Recording, RolloutRecorder};
@@ -202,7 +203,22 @@ fn side_by_side(args: &RecordArgs, cfg: &locobench::envs::EnvConfig, policy: &mu
     let speed = first.speed;
     let mut panels = vec![first];
     for spec in &args.side_by_side {
-        let (panel, label) = if spec == "controller" {
+        let (panel, label) = if spec == "controller" && locobench::envs::command::is_command_task(&cfg.name) {
+            // On a command task the controller follows the task's command, as the policy does.
+            let env = baseline_env_like(cfg)?;
+            let mut controller = baseline_controller_for(&cfg.name, Command::straight(0.0, 0.0), None)?;
+            let label = "controller".to_string();
+            let panel = film_episode(
+                &env,
+                controller.as_mut(),
+                &settings,
+                args.fps,
+                seed,
+                caption(label.clone()).as_deref(),
+                None,
+            )?;
+            (panel, label)
+        } else if spec == "controller" {
             let command = speed.clamp(0.0, CONTROLLER_TOP_SPEED);
             let base = baseline_env(&cfg.name).with_context(|| {
                 format!("--side-by-side controller: {} has no controller (minitaur, ant)", cfg.name)

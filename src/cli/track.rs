@@ -51,7 +51,7 @@ pub fn run(args: TrackArgs) -> Result<()> {
     let (points, who) = match &args.policy {
         Some(path) => {
             let (run, agent) = resolve_policy(path, args.budget)?.load()?;
-            if !run.env.name.ends_with("-command") {
+            if !locobench::envs::command::is_command_task(&run.env.name) {
                 bail!(
                     "{} was trained on {}, not on a command task: it has no command to follow",
                     path.display(),
@@ -112,19 +112,11 @@ fn interval(i: Interval) -> String {
     format!("{:.3} [{:.3}, {:.3}]", i.estimate, i.low, i.high)
 }
 
-/// In `eval`'s spirit: a command outside the range a policy was trained on is a warning naming it.
+/// As `eval` does: a command outside the range a policy was trained on is a warning naming it.
 fn warn_outside_training_range(env: &EnvConfig, speeds: &[f64], yaw_rates: &[f64], policy: &str) -> Result<()> {
-    let resolved = env.resolved_options()?;
-    let range = |key: &str| -> Option<[f64; 2]> {
-        let a = resolved.get(key)?.as_array()?;
-        Some([a.first()?.as_float()?, a.get(1)?.as_float()?])
-    };
-    for (key, values, unit) in [("speed_range", speeds, "m/s"), ("yaw_rate_range", yaw_rates, "rad/s")] {
-        if let Some([lo, hi]) = range(key) {
-            for v in values.iter().filter(|v| **v < lo - 1e-9 || **v > hi + 1e-9) {
-                eprintln!("warning: command {v} {unit} lies outside {policy}'s training {key} [{lo}, {hi}]");
-            }
-        }
+    let asked: Vec<[f64; 2]> = speeds.iter().flat_map(|&v| yaw_rates.iter().map(move |&w| [v, w])).collect();
+    for line in locobench::envs::command::outside_training_range(env, &asked, policy)? {
+        eprintln!("warning: {line}");
     }
     Ok(())
 }

@@ -23,7 +23,7 @@ pub fn baseline_env(env: &str) -> Result<EnvConfig> {
 
 /// The env a trained policy ran in, switched to what the baseline needs (Minitaur's torque
 /// action mode), keeping its reward, episode length and randomisation.
-pub(crate) fn baseline_env_like(cfg: &EnvConfig) -> Result<EnvConfig> {
+pub fn baseline_env_like(cfg: &EnvConfig) -> Result<EnvConfig> {
     let mut out = cfg.clone();
     for (k, v) in baseline_env(&cfg.name)?.options {
         out.options.insert(k, v);

@@ -117,6 +117,14 @@ impl Env for Pushed<'_> {
     fn set_state(&mut self, qpos: &[f64], qvel: &[f64]) -> Result<(), EnvError> {
         self.inner.set_state(qpos, qvel)
     }
+
+    fn command(&self) -> Option<[f64; 2]> {
+        self.inner.command()
+    }
+
+    fn set_command(&mut self, speed: f64, yaw_rate: f64) -> Result<(), EnvError> {
+        self.inner.set_command(speed, yaw_rate)
+    }
 }
 
 #[cfg(test)]

@@ -107,7 +107,7 @@ pub fn point_env(env: &EnvConfig, speed: f64, yaw_rate: f64) -> EnvConfig {
 /// protocol's held-out episodes.
 pub fn tracking_episodes(env: &EnvConfig, policy: &mut dyn Policy, protocol: Protocol) -> Result<Vec<TrackingEpisode>> {
     ensure!(
-        env.name.ends_with("-command"),
+        crate::envs::command::is_command_task(&env.name),
         "the tracking grid needs a command task (minitaur-command, ant-command), not {}",
         env.name
     );

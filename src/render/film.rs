@@ -2,7 +2,9 @@
 //! file or into frames kept in memory, optionally with a caption (the panel's label, the step,
 //! the return so far and the mean forward speed so far) and with pushes marked: while a force
 //! pushes the floating base, and for a second after, a red arrow points at the base along the
-//! push and the caption gives its size as a velocity change.
+//! push and the caption gives its size as a velocity change. On a velocity-command task the
+//! caption also gives the command and the achieved forward speed and yaw rate (averaged over the
+//! last half second, so that a stride's swing does not hide the mean).
 //!
 //! [`Observer`]: crate::rollout::Observer
 use std::path::PathBuf;
@@ -18,6 +20,9 @@ use crate::rollout::{Observer, StepView};
 
 /// Seconds a push stays marked after it starts: long enough to be seen at video speed.
 const PUSH_MARK_TIME: f64 = 1.0;
+
+/// Seconds the caption's achieved speed and yaw rate are averaged over.
+const ACHIEVED_WINDOW: f64 = 0.5;
 
 enum Sink {
     Frames(Vec<Frame>),
@@ -47,6 +52,9 @@ pub struct Film {
     episode_return: f64,
     x0: f64,
     push: Option<PushSeen>,
+    /// On a command task: the command in force and the recent (forward speed, yaw rate).
+    command: Option<[f64; 2]>,
+    recent: std::collections::VecDeque<[f64; 2]>,
 }
 
 /// Steps per frame so that frames come at most `fps` times per simulated second.
@@ -92,6 +100,8 @@ impl Film {
             episode_return: 0.0,
             x0: 0.0,
             push: None,
+            command: None,
+            recent: std::collections::VecDeque::new(),
         }
     }
 
@@ -163,6 +173,14 @@ impl Film {
         if let Some(label) = &self.label {
             let speed = if self.steps == 0 { 0.0 } else { (Self::base_x(data) - self.x0) / t };
             let mut text = format!("{label}\nstep {}  return {:.2}  {speed:.2} m/s", self.steps, self.episode_return);
+            if let Some(c) = self.command {
+                let n = self.recent.len().max(1) as f64;
+                let (v, w) = self.recent.iter().fold((0.0, 0.0), |(v, w), r| (v + r[0] / n, w + r[1] / n));
+                text.push_str(&format!(
+                    "\ncommand  {:.2} m/s  {:+.2} rad/s\nachieved {v:.2} m/s  {w:+.2} rad/s",
+                    c[0], c[1]
+                ));
+            }
             if let Some(p) = push {
                 text.push_str(&format!("\npush {:.2} m/s", p.impulse / self.mass));
             }
@@ -202,6 +220,8 @@ impl Observer for Film {
         self.episode_return = 0.0;
         self.push = None;
         self.x0 = Self::base_x(env.data());
+        self.command = env.command();
+        self.recent.clear();
         self.shoot(env.data())
     }
 
@@ -209,6 +229,14 @@ impl Observer for Film {
         self.steps = view.t + 1;
         self.episode_return += view.step.reward;
         self.watch_push(view.env.data());
+        if let Some(c) = view.env.command() {
+            self.command = Some(c);
+            let m = |name: &str| view.step.info.metric(name).unwrap_or(f64::NAN);
+            self.recent.push_back([m("forward_velocity"), m("yaw_rate")]);
+            if self.recent.len() as f64 * self.dt > ACHIEVED_WINDOW {
+                self.recent.pop_front();
+            }
+        }
         if self.steps.is_multiple_of(self.every) {
             self.shoot(view.env.data())?;
         }

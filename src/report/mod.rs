@@ -176,17 +176,18 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
     };
     // Command tasks first: the same command for every contender is the fairest comparison.
     let mut ordered: Vec<_> = envs.iter().collect();
-    ordered.sort_by_key(|(env, _)| (!env.ends_with("-command"), env.to_string()));
+    ordered.sort_by_key(|(env, _)| (!crate::envs::command::is_command_task(env), env.to_string()));
     for (env, env_groups) in ordered {
         doc.heading(1, env.as_str());
-        tracking::section(&mut doc, out, env, env_groups, opts)?;
+        let tracked = tracking::section(&mut doc, out, env, env_groups, opts)?;
+        filmed.extend(tracked.clips.iter().flat_map(videos::Clip::files));
         report.groups.extend(sections::learning_curves(&mut doc, out, env, env_groups)?);
         let here: Vec<_> = externals.iter().filter(|x| x.meta.env == *env).cloned().collect();
         let rows = sections::held_out(&mut doc, env_groups, opts, &here)?;
         sections::published(&mut doc, env, &rows, env_groups);
         // On a command task the controller follows the task's commands, not a speed: the tracking
         // section above compares it.
-        if crate::controller::baseline::baseline_env(env).is_ok() && !env.ends_with("-command") {
+        if crate::controller::baseline::baseline_env(env).is_ok() && !crate::envs::command::is_command_task(env) {
             if let Some(c) = sections::controller(&mut doc, out, env, env_groups, &rows, opts)? {
                 report.controllers.insert(env.clone(), c);
             }
@@ -204,8 +205,8 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
         filmed.extend(clips.iter().flat_map(videos::Clip::files));
         let runs_here: usize = env_groups.iter().map(|(_, rs)| rs.len()).sum();
         summaries.push((
-            (!env.ends_with("-command"), section.is_none(), usize::MAX - runs_here, env.clone()),
-            sections::summary(env, &rows, section, &clips),
+            (!crate::envs::command::is_command_task(env), section.is_none(), usize::MAX - runs_here, env.clone()),
+            tracked.summary.into_iter().chain(sections::summary(env, &rows, section, &clips)).collect(),
         ));
         sections::training_returns(&mut doc, out, env, env_groups)?;
         report.rows.insert(env.clone(), rows);

@@ -2,21 +2,25 @@
 //! group's policies hold the same commands on the same held-out episodes
 //! (`evaluation::tracking`), and the report shows commanded against achieved speed with bands and
 //! the grid table. Every grid point's episodes go through the evaluation cache, keyed by the
-//! env's resolved options, so the command settings are part of the key.
+//! env's resolved options, so the command settings are part of the key. With videos on, the
+//! policy that tracks best and the controller follow one schedule side by side (walk, speed up,
+//! turn, stop), the command and the achieved speed in each panel's caption.
 use std::path::Path;
 
 use anyhow::Result;
 
 use super::budgets::{policy_at, reached, shipped_step};
-use super::document::Document;
+use super::document::{Block, Document};
 use super::format::interval;
 use super::plots::{bands_svg, Band};
 use super::runs::{Group, Run};
+use super::videos::{Clip, ClipPlan};
 use super::ReportOptions;
 use crate::controller::baseline::{baseline_controller_for, baseline_env_like};
 use crate::controller::command::Command;
 use crate::envs::EnvConfig;
 use crate::evaluation::cache::Key;
+use crate::evaluation::robustness::suite::PolicySource;
 use crate::evaluation::tracking::{point_env, tracking_episodes, TrackingEpisode, TrackingPoint};
 use crate::io::write_bytes_atomic;
 use crate::policy::AgentPolicy;
@@ -24,24 +28,46 @@ use crate::policy::AgentPolicy;
 /// The commanded speeds of the report's grid (m/s), those within a run's `speed_range`.
 pub const GRID_SPEEDS: [f64; 6] = [0.25, 0.5, 1.0, 1.5, 2.0, 2.5];
 
-/// One contender's grid.
+/// One contender's grid, and for a learned one the policy its clip plays (its first seed's).
 struct Contender {
     label: String,
     points: Vec<TrackingPoint>,
+    clip_policy: Option<PolicySource>,
 }
 
-/// The tracking section of a command task; nothing when the env is not one.
+impl Contender {
+    /// The mean of its grid points' mean RMS speed errors.
+    fn mean_speed_rms(&self) -> f64 {
+        let xs: Vec<f64> = self.points.iter().map(|p| p.speed_rms().estimate).collect();
+        xs.iter().sum::<f64>() / xs.len().max(1) as f64
+    }
+}
+
+/// The filmed schedule, as (fraction of the episode, forward speed m/s, yaw rate rad/s) knots:
+/// walk, speed up, turn, stop.
+const FILMED_SCHEDULE: [(f64, f64, f64); 4] = [(0.0, 0.5, 0.0), (0.3, 1.0, 0.0), (0.6, 1.0, 0.3), (0.8, 0.0, 0.0)];
+
+/// What the tracking section gives the rest of the report: its clips, and the blocks the
+/// summary opens the env with.
+#[derive(Default)]
+pub(crate) struct Tracking {
+    pub clips: Vec<Clip>,
+    pub summary: Vec<Block>,
+}
+
+/// The tracking section of a command task, and its clip when videos are on; nothing when the env
+/// is not one.
 pub(crate) fn section(
     doc: &mut Document,
     out: &Path,
     env: &str,
     groups: &[(&Group, &Vec<&Run>)],
     opts: &ReportOptions,
-) -> Result<()> {
-    if !env.ends_with("-command") {
-        return Ok(());
+) -> Result<Tracking> {
+    if !crate::envs::command::is_command_task(env) {
+        return Ok(Tracking::default());
     }
-    let Some(first) = groups.iter().flat_map(|(_, rs)| rs.iter()).next() else { return Ok(()) };
+    let Some(first) = groups.iter().flat_map(|(_, rs)| rs.iter()).next() else { return Ok(Tracking::default()) };
     let base_env = first.config.env.for_evaluation();
     let speeds = grid_speeds(&base_env)?;
     let protocol = opts.protocol;
@@ -58,12 +84,13 @@ pub(crate) fn section(
             })?;
             points.push(TrackingPoint { speed, yaw_rate: 0.0, episodes });
         }
-        contenders.push(Contender { label: "controller".into(), points });
+        contenders.push(Contender { label: "controller".into(), points, clip_policy: None });
     }
     for (group, runs) in groups {
         let mut points: Vec<TrackingPoint> =
             speeds.iter().map(|&speed| TrackingPoint { speed, yaw_rate: 0.0, episodes: Vec::new() }).collect();
         let mut budgets = Vec::new();
+        let mut clip_policy = None;
         for run in runs.iter() {
             // The newest policy the run kept at a whole 100k (a run's last step is seldom round), or
             // its newest; a run still training has metrics beyond it.
@@ -86,16 +113,17 @@ pub(crate) fn section(
                 p.episodes.extend(episodes);
             }
             budgets.push(budget);
+            clip_policy.get_or_insert(PolicySource { reference: run.dir.clone(), budget: Some(budget) });
         }
         if budgets.is_empty() {
             continue;
         }
         let seeds = if budgets.len() == 1 { "1 seed".to_string() } else { format!("{} seeds", budgets.len()) };
         let label = format!("{} at {} ({seeds})", group.label(), super::format::budget(budgets[0]));
-        contenders.push(Contender { label, points });
+        contenders.push(Contender { label, points, clip_policy });
     }
     if contenders.is_empty() {
-        return Ok(());
+        return Ok(Tracking::default());
     }
     doc.heading(2, "Same command: speed tracking");
     doc.lines(vec![format!(
@@ -150,17 +178,102 @@ pub(crate) fn section(
         }
     }
     doc.table(&["contender", "command m/s", "speed RMS m/s", "achieved m/s", "falls", "cost of transport"], rows);
-    Ok(())
+    let clips =
+        if opts.videos { schedule_clip(doc, out, env, &base_env, &contenders, groups, opts)? } else { Vec::new() };
+    let mut summary = summary(env, &speeds, &contenders, protocol.episodes);
+    summary.extend(clips.iter().map(Block::clip));
+    Ok(Tracking { clips, summary })
+}
+
+/// The summary's opening for a command task: per command, each contender's RMS speed error and
+/// falls.
+fn summary(env: &str, speeds: &[f64], contenders: &[Contender], episodes: usize) -> Vec<Block> {
+    let mut header = vec!["command m/s".to_string()];
+    header.extend(contenders.iter().map(|c| c.label.clone()));
+    let rows = speeds
+        .iter()
+        .enumerate()
+        .map(|(k, speed)| {
+            let mut row = vec![format!("{speed:.2}")];
+            row.extend(contenders.iter().map(|c| {
+                let p = &c.points[k];
+                format!("{:.3} m/s, falls {}/{}", p.speed_rms().estimate, p.falls(), p.episodes.len())
+            }));
+            row
+        })
+        .collect();
+    vec![
+        Block::Paragraph(format!(
+            "{env}, the same straight commands for every contender ({episodes} held-out episodes per command and seed): \
+             the mean RMS speed error after the first second, and the falls. The tracking section below gives the \
+             intervals and the cost of transport; the line after this table, the return on the task's own random \
+             commands."
+        )),
+        Block::Table { header, rows },
+    ]
+}
+
+/// Films the learned contender with the lowest mean RMS speed error beside the controller on
+/// [`FILMED_SCHEDULE`].
+fn schedule_clip(
+    doc: &mut Document,
+    out: &Path,
+    env: &str,
+    base_env: &EnvConfig,
+    contenders: &[Contender],
+    groups: &[(&Group, &Vec<&Run>)],
+    opts: &ReportOptions,
+) -> Result<Vec<Clip>> {
+    let best = contenders
+        .iter()
+        .filter(|c| c.clip_policy.is_some())
+        .min_by(|a, b| a.mean_speed_rms().total_cmp(&b.mean_speed_rms()));
+    let Some(best) = best else { return Ok(Vec::new()) };
+    let spec = crate::envs::make(base_env)?.spec().clone();
+    let seconds = spec.max_episode_steps as f64 * spec.dt;
+    let schedule = filmed_schedule(seconds);
+    let mut cfg = base_env.clone();
+    cfg.options.insert("schedule".into(), toml::Value::String(schedule.clone()));
+    let source = best.clip_policy.clone().expect("filtered above");
+    let caption = format!(
+        "{}, left, and the controller, right, following the same schedule (`{schedule}`: time s, forward speed m/s, \
+         yaw rate rad/s) on the first held-out episode; the captions give the command and the speed and yaw rate \
+         achieved over the last half second",
+        best.label
+    );
+    let plan = ClipPlan::command_schedule(format!("{env}_schedule"), caption, source, best.label.clone(), cfg);
+    let clips = super::videos::film(&[plan], groups, out, &opts.protocol, opts.threads, &opts.cache)?;
+    for clip in &clips {
+        doc.video(clip);
+    }
+    Ok(clips)
+}
+
+/// [`FILMED_SCHEDULE`] over an episode of `seconds`, as the `schedule` option spells it.
+fn filmed_schedule(seconds: f64) -> String {
+    FILMED_SCHEDULE
+        .iter()
+        .map(|(at, v, w)| format!("{}:{v}:{w}", (at * seconds * 100.0).round() / 100.0))
+        .collect::<Vec<_>>()
+        .join(" ")
 }
 
 /// [`GRID_SPEEDS`] within the env's `speed_range`.
 fn grid_speeds(env: &EnvConfig) -> Result<Vec<f64>> {
-    let resolved = env.resolved_options()?;
-    let high = resolved
-        .get("speed_range")
-        .and_then(|r| r.as_array())
-        .and_then(|a| a.get(1))
-        .and_then(|v| v.as_float())
-        .unwrap_or(f64::INFINITY);
+    let high = crate::envs::command::command_ranges(env)?.map_or(f64::INFINITY, |(speeds, _)| speeds[1]);
     Ok(GRID_SPEEDS.iter().copied().filter(|s| *s <= high + 1e-9).collect())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_filmed_schedule_spans_the_episode_and_parses() {
+        let s = filmed_schedule(10.0);
+        assert_eq!(s, "0:0.5:0 3:1:0 6:1:0.3 8:0:0");
+        let parsed = crate::envs::command::Schedule::parse(&s).unwrap().unwrap();
+        assert_eq!(parsed.at(7.0), [1.0, 0.3]);
+        assert_eq!(filmed_schedule(50.0), "0:0.5:0 15:1:0 30:1:0.3 40:0:0");
+    }
 }

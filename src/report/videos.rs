@@ -72,6 +72,22 @@ pub struct ClipPlan {
 }
 
 impl ClipPlan {
+    /// A clip of a command task's schedule (`cfg` holds it): `policy`, left, beside the
+    /// controller following the same commands, right, on the first held-out episode.
+    pub fn command_schedule(
+        stem: String,
+        caption: String,
+        policy: crate::evaluation::robustness::suite::PolicySource,
+        label: String,
+        cfg: EnvConfig,
+    ) -> ClipPlan {
+        let mut panels = vec![Actor::Policy { source: policy, label }];
+        if crate::controller::baseline::baseline_env_like(&cfg).is_ok() {
+            panels.push(Actor::Controller { speed: 0.0 });
+        }
+        ClipPlan { stem, caption, panels, push: None, env: cfg, episode_seed: None, panel: PANEL, until_decided: false }
+    }
+
     /// A clip of a robustness suite's contenders side by side, left to right, on one episode of
     /// `env` (an axis's level) with `push`: each policy row by its first seed, each controller at
     /// its commanded speed.
@@ -410,7 +426,12 @@ fn film_panel(
             // report's controller rows are.
             let env = crate::controller::baseline::baseline_env_like(env)?;
             let mut controller = baseline_controller(&env.name, *speed, None)?;
-            let label = format!("controller {speed:.2} m/s");
+            // On a command task it follows the task's command, whatever the speed.
+            let label = if crate::envs::command::is_command_task(&env.name) {
+                "controller".to_string()
+            } else {
+                format!("controller {speed:.2} m/s")
+            };
             film_episode(&env, controller.as_mut(), &settings, fps, episode_seed, Some(&label), push)
         }
     }

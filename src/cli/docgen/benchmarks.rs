@@ -330,8 +330,43 @@ pub(crate) fn ppo_vs_sb3(results: &Path) -> Result<String> {
 /// threshold, how many runs reached it and how long they took.
 pub(crate) fn time_to_walk(results: &Path) -> Result<String> {
     let path = newest(results, "time-to-walk.csv")?;
-    let rows = read(&path)?;
-    let mut out = quoting(&path)? + "\n\n| algorithm | threshold | runs that reached it | training minutes, median (range) | env steps, median (range) | held-out return when reached, per run | falls when reached, per run |\n|---|---|---|---|---|---|---|\n";
+    let returns = |r: &Row| {
+        format!(
+            "{} [{}, {}]",
+            fixed(r.num("heldout_return"), 2),
+            fixed(r.num("heldout_low"), 2),
+            fixed(r.num("heldout_high"), 2)
+        )
+    };
+    let falls = |r: &Row| format!("{}/{}", r.text("falls"), r.text("episodes"));
+    threshold_table(
+        &path,
+        &[("held-out return when reached, per run", &returns), ("falls when reached, per run", &falls)],
+    )
+}
+
+/// The newest `time-to-track.csv` (`cargo bench --bench time_to_walk -- --env minitaur-command`):
+/// per algorithm and threshold, how many runs reached it, how long they took, and how their
+/// tracking compared with the controller's when they did.
+pub(crate) fn time_to_track(results: &Path) -> Result<String> {
+    let path = newest(results, "time-to-track.csv")?;
+    let falls = |r: &Row| format!("{}/{}", r.text("falls"), r.text("episodes"));
+    let ratio = |r: &Row| fixed(r.num("worst_rms_ratio"), 2);
+    threshold_table(
+        &path,
+        &[("falls when reached, per run", &falls), ("largest RMS speed error / the controller's, per run", &ratio)],
+    )
+}
+
+/// A threshold benchmark's table: per (algorithm, threshold), the runs that reached it, their
+/// minutes and steps, and `per_run` columns of the runs that did; then the runs that did not.
+fn threshold_table(path: &Path, per_run: &[(&str, &dyn Fn(&Row) -> String)]) -> Result<String> {
+    let rows = read(path)?;
+    let mut out = quoting(path)? + "\n\n| algorithm | threshold | runs that reached it | training minutes, median (range) | env steps, median (range) |";
+    for (name, _) in per_run {
+        let _ = write!(out, " {name} |");
+    }
+    out += &format!("\n|---|---|---|---|---|{}\n", "---|".repeat(per_run.len()));
     let mut keys: Vec<(String, String)> = Vec::new();
     for r in &rows {
         let key = (r.text("algo").to_string(), r.text("threshold").to_string());
@@ -348,31 +383,23 @@ pub(crate) fn time_to_walk(results: &Path) -> Result<String> {
         format!("{} ({} – {})", f(quantile(&v, 0.5)), f(v[0]), f(v[v.len() - 1]))
     };
     for (algo, threshold) in keys {
-        let runs: Vec<&super::csv_rows::Row> =
+        let runs: Vec<&Row> =
             rows.iter().filter(|r| r.text("algo") == algo && r.text("threshold") == threshold).collect();
-        let hits: Vec<&&super::csv_rows::Row> = runs.iter().filter(|r| r.text("reached") == "true").collect();
-        let per_run = |f: &dyn Fn(&super::csv_rows::Row) -> String| -> String {
-            if hits.is_empty() {
-                "–".into()
-            } else {
-                hits.iter().map(|r| f(r)).collect::<Vec<_>>().join(", ")
-            }
-        };
-        let _ = writeln!(
+        let hits: Vec<&&Row> = runs.iter().filter(|r| r.text("reached") == "true").collect();
+        let _ = write!(
             out,
-            "| {algo} | {threshold} | {}/{} | {} | {} | {} | {} |",
+            "| {algo} | {threshold} | {}/{} | {} | {} |",
             hits.len(),
             runs.len(),
             spread(hits.iter().map(|r| r.num("training_s")).collect(), 60.0, ""),
             spread(hits.iter().map(|r| r.num("step")).collect(), 1000.0, "k"),
-            per_run(&|r| format!(
-                "{} [{}, {}]",
-                fixed(r.num("heldout_return"), 2),
-                fixed(r.num("heldout_low"), 2),
-                fixed(r.num("heldout_high"), 2)
-            )),
-            per_run(&|r| format!("{}/{}", r.text("falls"), r.text("episodes"))),
         );
+        for (_, f) in per_run {
+            let cell =
+                if hits.is_empty() { "–".into() } else { hits.iter().map(|r| f(r)).collect::<Vec<_>>().join(", ") };
+            let _ = write!(out, " {cell} |");
+        }
+        out.push('\n');
     }
     let unreached: Vec<String> = rows
         .iter()

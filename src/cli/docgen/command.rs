@@ -78,9 +78,9 @@ pub(crate) fn probes(root: &Path, csv: &str) -> Result<String> {
          episodes, protocol seed 0, 95% bootstrap intervals.\n\n"
     );
     out.push_str(
-        "| probe | change | steps | held-out return | falls | final temperature | truncated episode ends | wall s |\n",
+        "| probe | seed | change | steps | held-out return | falls | final temperature | truncated episode ends | wall s |\n",
     );
-    out.push_str("|---|---|---|---|---|---|---|---|\n");
+    out.push_str("|---|---|---|---|---|---|---|---|---|\n");
     for r in rows {
         let _ = writeln!(
             out,

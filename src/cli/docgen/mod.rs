@@ -62,6 +62,11 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
         },
         Section {
             file: "docs/benchmarks.md",
+            name: "time-to-track",
+            text: benchmarks::time_to_track(&root.join(BENCH_RESULTS_DIR))?,
+        },
+        Section {
+            file: "docs/benchmarks.md",
             name: "vector-env",
             text: benchmarks::vector_env(&root.join(BENCH_RESULTS_DIR))?,
         },

@@ -36,6 +36,68 @@ use serde::{Deserialize, Serialize};
 
 pub use process::{CommandProcess, Schedule};
 
+/// Whether `env` names a command task (`minitaur-command`, `ant-command`).
+pub fn is_command_task(env: &str) -> bool {
+    env.ends_with("-command")
+}
+
+/// The ranges a command task draws from: (`speed_range`, `yaw_rate_range`); None for another env.
+pub fn command_ranges(env: &super::EnvConfig) -> Result<Option<([f64; 2], [f64; 2])>, EnvError> {
+    if !is_command_task(&env.name) {
+        return Ok(None);
+    }
+    let resolved = env.resolved_options()?;
+    let range = |key: &str| -> Result<[f64; 2], EnvError> {
+        let bad = || EnvError::InvalidOption { env: env.name.clone(), message: format!("{key} must be [low, high]") };
+        let a = resolved.get(key).and_then(|v| v.as_array()).ok_or_else(bad)?;
+        let number = |v: Option<&toml::Value>| v.and_then(|v| v.as_float().or(v.as_integer().map(|i| i as f64)));
+        Ok([number(a.first()).ok_or_else(bad)?, number(a.get(1)).ok_or_else(bad)?])
+    };
+    Ok(Some((range("speed_range")?, range("yaw_rate_range")?)))
+}
+
+/// The commands an env will give: its schedule's, or the corners of its ranges; none for an env
+/// that is not a command task.
+pub fn commands_given(env: &super::EnvConfig) -> Result<Vec<[f64; 2]>, EnvError> {
+    let Some((speeds, yaw_rates)) = command_ranges(env)? else { return Ok(Vec::new()) };
+    let resolved = env.resolved_options()?;
+    let text = resolved.get("schedule").and_then(|s| s.as_str()).unwrap_or_default();
+    let schedule = Schedule::parse(text)
+        .map_err(|m| EnvError::InvalidOption { env: env.name.clone(), message: format!("schedule: {m}") })?;
+    Ok(match schedule {
+        Some(s) => s.commands(),
+        None => speeds.iter().flat_map(|&v| yaw_rates.iter().map(move |&w| [v, w])).collect(),
+    })
+}
+
+/// One line per command in `commands` that lies outside the ranges `trained` (a policy's
+/// training env) drew from, naming `policy` and its range: what `eval` and `track` warn with.
+pub fn outside_training_range(
+    trained: &super::EnvConfig,
+    commands: &[[f64; 2]],
+    policy: &str,
+) -> Result<Vec<String>, EnvError> {
+    let Some((speeds, yaw_rates)) = command_ranges(trained)? else { return Ok(Vec::new()) };
+    let outside = |x: f64, [lo, hi]: [f64; 2]| x < lo - 1e-9 || x > hi + 1e-9;
+    let mut lines = Vec::new();
+    for &[v, w] in commands {
+        if outside(v, speeds) {
+            lines.push(format!(
+                "command speed {v} m/s lies outside {policy}'s training speed_range [{}, {}]",
+                speeds[0], speeds[1]
+            ));
+        }
+        if outside(w, yaw_rates) {
+            lines.push(format!(
+                "command yaw rate {w} rad/s lies outside {policy}'s training yaw_rate_range [{}, {}]",
+                yaw_rates[0], yaw_rates[1]
+            ));
+        }
+    }
+    lines.dedup();
+    Ok(lines)
+}
+
 use super::options::{join_wrapped, split_wrapped};
 use super::registry::Registered;
 use super::simulation::base_state_accessors;

@@ -49,6 +49,11 @@ impl Schedule {
         [k.1, k.2]
     }
 
+    /// The commands the schedule holds, in order.
+    pub fn commands(&self) -> Vec<[f64; 2]> {
+        self.knots.iter().map(|k| [k.1, k.2]).collect()
+    }
+
     /// The knots' times.
     pub fn times(&self) -> Vec<f64> {
         self.knots.iter().map(|k| k.0).collect()

@@ -48,9 +48,27 @@ fn controller(speed: f64, why: &str) -> Contender {
     Contender::Controller { label: format!("controller {speed:.3} m/s ({why})"), speed }
 }
 
+/// On a command task the controller reads the command from the observation, as every policy
+/// does, so one controller contender stands for every choice: there is no speed to pick.
+fn command_task_plan(agents: Vec<Contender>, choices: &[ControllerChoice]) -> Plan {
+    let mut contenders = agents;
+    let mut notes = Vec::new();
+    if !choices.is_empty() {
+        contenders.push(Contender::Controller { label: COMMAND_CONTROLLER.into(), speed: 0.0 });
+        notes.push("a command task: the controller follows the task's command, as every policy does".into());
+    }
+    Plan { contenders, known: Vec::new(), notes }
+}
+
+/// The controller's label on a command task.
+pub const COMMAND_CONTROLLER: &str = "controller (follows the command)";
+
 /// Plans the suite for `agents` and the controller `choices`; a policy's nominal cell found in
 /// `reuse` is not played again.
 pub fn plan(suite: &Suite, agents: Vec<Contender>, choices: &[ControllerChoice], reuse: &[Cell]) -> Result<Plan> {
+    if crate::envs::command::is_command_task(&suite.env.name) {
+        return Ok(command_task_plan(agents, choices));
+    }
     let mut notes = Vec::new();
     let mut known = Vec::new();
     let mut controllers: Vec<Contender> = Vec::new();
