@@ -22,10 +22,17 @@ def train_table(run):
     return config(run)["train"]
 
 
+def env_options(run):
+    return config(run)["env"].get("options", {})
+
+
 def change(run, base):
-    ours, theirs = train_table(run), train_table(base)
-    keys = sorted(k for k in ours if k not in ("total_steps",) and ours[k] != theirs.get(k))
-    return ",".join(f"{k}={ours[k]}".replace(" ", "") for k in keys) or "none (the preset)"
+    """The hyperparameters, then the env options, that differ from the base run's."""
+    parts = []
+    for ours, theirs in ((train_table(run), train_table(base)), (env_options(run), env_options(base))):
+        keys = sorted(k for k in ours if k not in ("total_steps",) and ours[k] != theirs.get(k))
+        parts += [f"{k}={ours[k]}".replace(" ", "") for k in keys]
+    return ",".join(parts) or "none (the preset)"
 
 
 def held_out(run):
@@ -40,7 +47,8 @@ def held_out(run):
 def training(run):
     rows = list(csv.DictReader(open(run / "metrics.csv")))
     episodes = [r for r in rows if r["kind"] == "episode"]
-    truncated = sum(1 for r in episodes if int(r["episode_length"]) >= 1000)
+    limit = int(env_options(run).get("max_episode_steps", 1000))
+    truncated = sum(1 for r in episodes if int(r["episode_length"]) >= limit)
     alphas = [float(r["alpha"]) for r in rows if r.get("alpha")]
     return len(episodes), truncated, (alphas[-1] if alphas else float("nan")), int(rows[-1]["step"])
 

@@ -77,9 +77,10 @@ for d in $r/minitaur/sb3-ppo-seed*-1m/external $r/half-cheetah/sb3-ppo*-seed*-1m
   [ -d "$d" ] && external+=(--external "$d")
 done
 # The newest committed robustness suite of each env (cargo bench --bench robustness) becomes that
-# env's robustness section: Minitaur's in the dated directory, Ant's in its ant/ folder.
+# env's robustness section: Minitaur's in the dated directory, Ant's and minitaur-command's (at
+# one command for every contender) in their folders.
 robustness=()
-for f in robustness.csv ant/robustness.csv; do
+for f in robustness.csv ant/robustness.csv minitaur-command/robustness.csv; do
   suite=$(ls -d $r/20??-??-??-*/$f 2>/dev/null | sort | tail -1)
   [ -n "$suite" ] && robustness+=(--robustness "$(dirname "$suite")")
 done

@@ -97,10 +97,17 @@ pub fn run_to_dir(
     Ok((cells, meta))
 }
 
+/// What the metadata says of the controller on a command task.
+const FOLLOWS_THE_COMMAND: &str = "the controller following the task's command";
+
 /// A contender as the metadata lists it: `LABEL: the controller commanded SPEED m/s`, or
 /// `LABEL: REFERENCE[ at budget B], ...` (one per seed).
 pub fn describe(c: &Contender) -> String {
     match c {
+        // On a command task it takes no speed: it follows the task's command.
+        Contender::Controller { label, .. } if label == super::plan::COMMAND_CONTROLLER => {
+            format!("{label}: {FOLLOWS_THE_COMMAND}")
+        }
         Contender::Controller { label, speed } => format!("{label}: the controller commanded {speed} m/s"),
         Contender::Agent { label, seeds } => format!(
             "{label}: {}",
@@ -122,6 +129,9 @@ pub fn parse_description(line: &str) -> Result<Contender> {
     let Some((label, what)) = line.split_once(": ") else {
         anyhow::bail!("'{line}' is not a suite contender (LABEL: WHAT)");
     };
+    if what == FOLLOWS_THE_COMMAND {
+        return Ok(Contender::Controller { label: label.to_string(), speed: 0.0 });
+    }
     if let Some(speed) = what.strip_prefix("the controller commanded ").and_then(|r| r.strip_suffix(" m/s")) {
         let speed = speed.parse().with_context(|| format!("'{line}': '{speed}' is not a speed"))?;
         return Ok(Contender::Controller { label: label.to_string(), speed });
@@ -252,6 +262,7 @@ mod tests {
                 label: "ppo 1M".into(),
                 seeds: vec![PolicySource { reference: "models/policies/minitaur-ppo".into(), budget: None }],
             },
+            Contender::Controller { label: super::super::plan::COMMAND_CONTROLLER.into(), speed: 0.0 },
             Contender::Agent {
                 label: "crossq".into(),
                 seeds: (0..3)
