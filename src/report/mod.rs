@@ -193,7 +193,10 @@ pub fn write_report(paths: &[PathBuf], out: &Path, opts: &ReportOptions) -> Resu
             }
         }
         for suite in suites.iter().filter(|s| s.meta.env.name == *env) {
-            let clips = robustness::section(&mut doc, out, suite, opts.videos.then_some(opts.threads), &opts.cache)?;
+            // A command task's suite is not filmed: its same-command section films the schedule,
+            // and the report stays small enough to clone.
+            let film = opts.videos && !crate::envs::command::is_command_task(env);
+            let clips = robustness::section(&mut doc, out, suite, film.then_some(opts.threads), &opts.cache)?;
             filmed.extend(clips.iter().flat_map(videos::Clip::files));
         }
         let section = report.controllers.get(env);
