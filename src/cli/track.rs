@@ -105,11 +105,12 @@ pub fn run(args: TrackArgs) -> Result<()> {
     Ok(())
 }
 
+/// A measure with its interval, as `eval` prints them; `-` where no episode gave one.
 fn interval(i: Interval) -> String {
     if i.estimate.is_nan() {
         return "-".into();
     }
-    format!("{:.3} [{:.3}, {:.3}]", i.estimate, i.low, i.high)
+    locobench::evaluation::stats::interval(i, |v| format!("{v:.3}"))
 }
 
 /// As `eval` does: a command outside the range a policy was trained on is a warning naming it.

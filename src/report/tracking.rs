@@ -119,7 +119,15 @@ pub(crate) fn section(
             continue;
         }
         let seeds = if budgets.len() == 1 { "1 seed".to_string() } else { format!("{} seeds", budgets.len()) };
-        let label = format!("{} at {} ({seeds})", group.label(), super::format::budget(budgets[0]));
+        // Each seed plays its newest whole-100k policy; seeds that stopped at different budgets
+        // are named by the range.
+        let (low, high) = (budgets.iter().min().copied().unwrap_or(0), budgets.iter().max().copied().unwrap_or(0));
+        let at = if low == high {
+            super::format::budget(low)
+        } else {
+            format!("{}-{}", super::format::budget(low), super::format::budget(high))
+        };
+        let label = format!("{} at {at} ({seeds})", group.label());
         contenders.push(Contender { label, points, clip_policy });
     }
     if contenders.is_empty() {
