@@ -754,9 +754,10 @@ pub(crate) fn gaits(
     use super::videos::ControllerSpeed;
     let speed = |i: usize| {
         let s = section?;
-        let matched = s.matched.iter().find(|m| m.row == i).and_then(|m| m.controller.as_ref().ok());
-        match matched {
+        let compared = s.matched.iter().find(|m| m.row == i);
+        match compared.and_then(|m| m.controller.as_ref().ok()) {
             Some(c) => Some(ControllerSpeed::Matched(c.commanded)),
+            None if compared.is_none() => s.best.as_ref().map(|b| ControllerSpeed::Unmatched(b.commanded)),
             None => s.best.as_ref().map(|b| ControllerSpeed::Best(b.commanded)),
         }
     };

@@ -196,6 +196,9 @@ pub enum ControllerSpeed {
     Matched(f64),
     /// The controller's best speed; the row is faster or slower than the controller goes.
     Best(f64),
+    /// The controller's best speed; the row trained under other env options than the
+    /// controller's env, so it was not matched at its own speed.
+    Unmatched(f64),
 }
 
 /// The clips of one env: per algorithm's best row, the policy (beside the controller when
@@ -238,6 +241,13 @@ pub fn plan(
                     "{who}, left, beside the controller at its best speed ({speed:.2} m/s commanded; it does not reach the \
                      policy's {:.2} m/s), right; the first held-out episode",
                     row.speed()
+                ),
+            ),
+            Some(ControllerSpeed::Unmatched(speed)) => (
+                vec![learned, Actor::Controller { speed }],
+                format!(
+                    "{who}, left, beside the controller at its best speed ({speed:.2} m/s commanded; the policy trained \
+                     under other env options, so it is not matched at its own speed), right; the first held-out episode"
                 ),
             ),
             None => (vec![learned], format!("{who}; the first held-out episode")),
