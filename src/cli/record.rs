@@ -203,33 +203,23 @@ fn side_by_side(args: &RecordArgs, cfg: &locobench::envs::EnvConfig, policy: &mu
     let speed = first.speed;
     let mut panels = vec![first];
     for spec in &args.side_by_side {
-        let (panel, label) = if spec == "controller" && locobench::envs::command::is_command_task(&cfg.name) {
-            // On a command task the controller follows the task's command, as the policy does.
-            let env = baseline_env_like(cfg)?;
-            let mut controller = baseline_controller_for(&cfg.name, Command::straight(0.0, 0.0), None)?;
-            let label = "controller".to_string();
+        let (panel, label) = if spec == "controller" {
+            let (env, command, label) = if locobench::envs::command::is_command_task(&cfg.name) {
+                // On a command task the controller follows the task's command, as the policy does.
+                (baseline_env_like(cfg)?, Command::straight(0.0, 0.0), "controller".to_string())
+            } else {
+                let speed = speed.clamp(0.0, CONTROLLER_TOP_SPEED);
+                let base = baseline_env(&cfg.name).with_context(|| {
+                    format!("--side-by-side controller: {} has no controller (minitaur, ant)", cfg.name)
+                })?;
+                // The same --option and --reward settings as the policy's panel.
+                let base = args.env_options.apply(base)?;
+                let command = args.command.commands(&[speed])?.into_iter().next().unwrap();
+                (base, command, format!("controller at {speed:.2} m/s"))
+            };
+            let mut controller = baseline_controller_for(&cfg.name, command, None)?;
             let panel = film_episode(
                 &env,
-                controller.as_mut(),
-                &settings,
-                args.fps,
-                seed,
-                caption(label.clone()).as_deref(),
-                None,
-            )?;
-            (panel, label)
-        } else if spec == "controller" {
-            let command = speed.clamp(0.0, CONTROLLER_TOP_SPEED);
-            let base = baseline_env(&cfg.name).with_context(|| {
-                format!("--side-by-side controller: {} has no controller (minitaur, ant)", cfg.name)
-            })?;
-            // The same --option and --reward settings as the policy's panel.
-            let base = args.env_options.apply(base)?;
-            let commands = args.command.commands(&[command])?;
-            let mut controller = baseline_controller_for(&cfg.name, commands.into_iter().next().unwrap(), None)?;
-            let label = format!("controller at {command:.2} m/s");
-            let panel = film_episode(
-                &base,
                 controller.as_mut(),
                 &settings,
                 args.fps,
