@@ -21,6 +21,7 @@
 //!   command the mean RMS speed error is at most twice the controller's;
 //! - `tracks-like-controller`: no falls, and at every command a mean RMS speed error no larger
 //!   than the controller's.
+//!
 //! These checks play far more episodes, so they come at most every `--check-every` steps
 //! (default 250k there), after an in-training evaluation of at least [`TRACKING_GATE`].
 //!

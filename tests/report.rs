@@ -125,6 +125,11 @@ fn sweep_then_report_evaluates_every_run_at_its_budget_beside_the_controller() {
     assert!(at("## minitaur") < at("## Appendix: the runs"));
     let summary = &md[at("## Summary")..at("## Protocol")];
     assert!(summary.contains("minitaur: Best learned: ") && summary.contains("The controller"), "{summary}");
+    // Each algorithm's own best row is listed under the winner, one line per algorithm.
+    let per_algo = &summary[summary.find("each algorithm at its best row").expect("per-algorithm list")..];
+    for algo in ["sac", "td3"] {
+        assert_eq!(per_algo.matches(&format!("\n- {algo}-drift")).count(), 1, "{algo}: {per_algo}");
+    }
     // --videos: per algorithm its best row's clip beside the controller, and the pair pushed;
     // the page plays MP4s with posters, the Markdown shows GIFs.
     for algo in ["sac", "td3"] {

@@ -5,6 +5,7 @@ import hashlib
 import os
 import platform
 import sys
+import warnings
 
 import numpy as np
 
@@ -181,6 +182,8 @@ def evaluate(policy, env=None, *, episodes=50, seed=0, deterministic=True, optio
             core = _core_env(env, options, reward)
         if core.name != policy.env_name:
             raise ValueError(f"the policy was trained on {policy.env_name}, not {core.name}")
+        for line in policy._core.command_warnings(core):
+            warnings.warn(line, stacklevel=2)
     else:
         if env is None:
             raise ValueError("env is needed for a policy that is not a locobench policy")

@@ -358,6 +358,9 @@ struct PyTrainedPolicy {
     high: Vec<f64>,
     obs_dim: usize,
     training: (u64, u64, usize),
+    /// The env it was trained on, and the path it was loaded from: what command warnings name.
+    trained_env: EnvConfig,
+    path: PathBuf,
 }
 
 #[pymethods]
@@ -383,7 +386,18 @@ impl PyTrainedPolicy {
             high: spec.action_space.high.clone(),
             obs_dim: spec.observation_space.dim(),
             training: (run.seed, run.train.total_steps, run.train.eval_episodes),
+            trained_env: run.env.clone(),
+            path,
         })
+    }
+
+    /// One line per command `env` will give (its schedule's, or its ranges' corners) outside the
+    /// ranges this policy was trained on, naming the policy and its range: `locobench eval`'s
+    /// warnings. Empty for an env that is not a command task.
+    fn command_warnings(&self, env: &PyEnv) -> PyResult<Vec<String>> {
+        use locobench::envs::command::{commands_given, outside_training_range};
+        let commands = commands_given(&env.config).map_err(value_error)?;
+        outside_training_range(&self.trained_env, &commands, &self.path.display().to_string()).map_err(value_error)
     }
 
     /// (seed, steps, evaluation episodes) of the run that trained it: what the protocol's

@@ -3,6 +3,7 @@
 and envs that do not fit."""
 import pathlib
 import subprocess
+import warnings
 
 import numpy as np
 import pytest
@@ -63,6 +64,12 @@ def test_a_command_policy_on_a_fixed_command_agrees_with_eval(binary):
     outside = subprocess.run([str(binary), "eval", "--policy", str(policy), "--episodes", "1",
                               "--option", "schedule=0:3.0:0"], check=True, capture_output=True, text=True)
     assert "outside" in outside.stderr and "speed_range [0, 2.5]" in outside.stderr
+    # evaluate warns with eval's words, and stays quiet inside the range
+    with pytest.warns(UserWarning, match=r"command speed 3 m/s lies outside .*speed_range \[0, 2.5\]"):
+        locobench.evaluate(locobench.load_policy(policy), episodes=1, options={"schedule": "0:3.0:0"})
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        locobench.evaluate(locobench.load_policy(policy), episodes=1, options={"schedule": schedule})
 
 
 def test_a_robust_policys_env_is_nominal_unless_asked():

@@ -8,8 +8,8 @@
 //! - falls, with a Wilson interval;
 //! - cost of transport, the motors' mechanical work over (total mass x g x path length);
 //! - the time to settle: when the forward speed, averaged over half a second, enters and stays
-//!   within [`SETTLE_BAND`] of the command (of a standing start, so the time a command change
-//!   takes).
+//!   within [`SETTLE_BAND`] of the command, for at least [`SETTLE_HOLD`] seconds before the
+//!   episode ends (of a standing start, so the time a command change takes).
 use anyhow::{ensure, Result};
 
 use super::protocol::Protocol;
@@ -26,6 +26,10 @@ pub const SETTLE_BAND: (f64, f64) = (0.1, 0.1);
 
 /// Seconds the speed is averaged over for the settling time.
 const SMOOTHING: f64 = 0.5;
+
+/// Seconds the smoothed speed must stay in the band before the episode ends to count as settled:
+/// a speed that enters the band in the last moments of an episode has not shown that it stays.
+pub const SETTLE_HOLD: f64 = 2.0;
 
 /// One episode at one command.
 #[derive(Debug, Clone, PartialEq)]
@@ -195,7 +199,8 @@ fn track_episode(
 }
 
 /// The first time (s) after which the forward speed, averaged over [`SMOOTHING`] seconds, stays
-/// within the band around `target` to the end of the episode.
+/// within the band around `target` to the end of the episode, for at least [`SETTLE_HOLD`]
+/// seconds; None if it never does.
 pub fn settle_time(speeds: &[f64], target: f64, dt: f64) -> Option<f64> {
     let window = ((SMOOTHING / dt).round() as usize).max(1);
     if speeds.len() < window {
@@ -203,12 +208,10 @@ pub fn settle_time(speeds: &[f64], target: f64, dt: f64) -> Option<f64> {
     }
     let band = SETTLE_BAND.0.max(SETTLE_BAND.1 * target.abs());
     let smoothed: Vec<f64> = speeds.windows(window).map(mean).collect();
-    // The last index outside the band; the speed has settled from the sample after it.
-    match smoothed.iter().rposition(|v| (v - target).abs() > band) {
-        None => Some((window - 1) as f64 * dt),
-        Some(i) if i + 1 < smoothed.len() => Some((i + window) as f64 * dt),
-        Some(_) => None,
-    }
+    // The first smoothed sample of the final stretch inside the band.
+    let first_in = smoothed.iter().rposition(|v| (v - target).abs() > band).map_or(0, |i| i + 1);
+    let held = (smoothed.len() - first_in) as f64 * dt;
+    (held >= SETTLE_HOLD - 1e-9).then(|| (first_in + window - 1) as f64 * dt)
 }
 
 #[cfg(test)]
@@ -228,6 +231,12 @@ mod tests {
         late.extend(vec![0.0; 10]);
         assert_eq!(settle_time(&late, 1.0, dt), None);
         // in the band from the start
-        assert!((settle_time(&[1.0; 20], 1.0, dt).unwrap() - 0.4).abs() < 1e-9);
+        assert!((settle_time(&[1.0; 30], 1.0, dt).unwrap() - 0.4).abs() < 1e-9);
+        // entering the band shortly before the end: not held for SETTLE_HOLD, so not settled
+        let mut short = vec![0.0; 10];
+        short.extend(vec![1.0; 23]);
+        assert_eq!(settle_time(&short, 1.0, dt), None);
+        short.push(1.0);
+        assert!((settle_time(&short, 1.0, dt).unwrap() - 1.4).abs() < 1e-9);
     }
 }

@@ -864,12 +864,16 @@ pub(crate) fn summary(
         }
         None => {
             text.push_str(&format!("Best learned: {}.", describe(row)));
-            if let Some(&second) = ranked.get(1) {
-                text.push_str(&format!(" Next: {}.", describe(&rows[second])));
-            }
         }
     }
     let mut blocks = vec![Block::Paragraph(text)];
+    if ranked.len() > 1 {
+        // Every algorithm's own best row, so a reader sees where each stands, not only the winner.
+        blocks.push(Block::Paragraph(format!(
+            "{env}, each algorithm at its best row (the highest lower 95% bound of its held-out return):"
+        )));
+        blocks.push(Block::Lines(ranked.iter().map(|&i| describe(&rows[i])).collect()));
+    }
     blocks.extend(winner_clip.map(Block::clip));
     blocks
 }

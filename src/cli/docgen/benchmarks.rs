@@ -358,9 +358,13 @@ pub(crate) fn time_to_track(results: &Path) -> Result<String> {
     )
 }
 
+/// A named column of a threshold table, computed from one run's row.
+type RunColumn<'a> = (&'a str, &'a dyn Fn(&Row) -> String);
+
 /// A threshold benchmark's table: per (algorithm, threshold), the runs that reached it, their
 /// minutes and steps, and `per_run` columns of the runs that did; then the runs that did not.
-fn threshold_table(path: &Path, per_run: &[(&str, &dyn Fn(&Row) -> String)]) -> Result<String> {
+
+fn threshold_table(path: &Path, per_run: &[RunColumn]) -> Result<String> {
     let rows = read(path)?;
     let mut out = quoting(path)? + "\n\n| algorithm | threshold | runs that reached it | training minutes, median (range) | env steps, median (range) |";
     for (name, _) in per_run {

@@ -41,8 +41,11 @@ pub fn is_command_task(env: &str) -> bool {
     env.ends_with("-command")
 }
 
-/// The ranges a command task draws from: (`speed_range`, `yaw_rate_range`); None for another env.
-pub fn command_ranges(env: &super::EnvConfig) -> Result<Option<([f64; 2], [f64; 2])>, EnvError> {
+/// A command task's (`speed_range`, `yaw_rate_range`), each [low, high].
+pub type CommandRanges = ([f64; 2], [f64; 2]);
+
+/// The ranges a command task draws from; None for another env.
+pub fn command_ranges(env: &super::EnvConfig) -> Result<Option<CommandRanges>, EnvError> {
     if !is_command_task(&env.name) {
         return Ok(None);
     }
