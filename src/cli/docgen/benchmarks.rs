@@ -363,7 +363,6 @@ type RunColumn<'a> = (&'a str, &'a dyn Fn(&Row) -> String);
 
 /// A threshold benchmark's table: per (algorithm, threshold), the runs that reached it, their
 /// minutes and steps, and `per_run` columns of the runs that did; then the runs that did not.
-
 fn threshold_table(path: &Path, per_run: &[RunColumn]) -> Result<String> {
     let rows = read(path)?;
     let mut out = quoting(path)? + "\n\n| algorithm | threshold | runs that reached it | training minutes, median (range) | env steps, median (range) |";
