@@ -39,6 +39,8 @@ runs=(
   # PPO with CleanRL's settings, 1M steps, with their policies; PPO and the branching DQN on Minitaur
   $r/{half-cheetah,walker2d}/ppo-seed{0,1,2}-1m $r/hopper/ppo-seed{0,1,2,3,4,5,6,7,8,9}-1m
   $r/minitaur/ppo-8envs-seed{0,1,2}-2m $r/minitaur/dqn-seed0-300k $r/inverted-pendulum/dqn-seed0
+  # The branching DQN on Walker2d with S003's notch actions (walker2d-notch), 1M steps
+  $r/walker2d/dqn-notch-seed{0,1,2}
   # PPO with rl-baselines3-zoo's tuned HalfCheetah settings (docs/training.md), 1M steps
   $r/half-cheetah/ppo-zoo-seed{0,1,2}-1m
   # PPO trained for robustness (random shoves, rough ground, latency, sensor noise, slopes),
