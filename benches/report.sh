@@ -57,9 +57,12 @@ runs=(
   # with 256-wide critics, policies at 100k and 300k
   $r/minitaur/sac-energy0-*500k
   # SAC on Minitaur with the 100k probes' changes combined (normalised observations, rewards x100,
-  # a 1k warm-up, 50 Hz control), seeds 0-2 with policies at 100k, 300k and 500k; TD3 with the
-  # same changes, seed 0, 100k and 300k
+  # a 1k warm-up, 50 Hz control), seeds 0-2 with policies at 100k, 300k and 500k (seed 1 also
+  # 1M); TD3 with the same changes, seed 0, 100k and 300k
   $r/minitaur/sac-combined-seed{0,1,2} $r/minitaur/td3-combined-seed0
+  # Freeman's env (PyBullet's Minitaur at 100 Hz, no energy cost) with the agent-side changes
+  # (normalised observations, rewards x100, a 1k warm-up), seed 0, 500k
+  $r/minitaur/sac-freeman-norm-seed0
   $r/{half-cheetah,ant,humanoid}/crossq-256-seed{0,1,2}
   # PPO on the velocity-command task (minitaur-command), with its policies: the report's
   # same-command section puts them beside the controller on the same commands

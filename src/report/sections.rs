@@ -868,11 +868,26 @@ pub(crate) fn summary(
     }
     let mut blocks = vec![Block::Paragraph(text)];
     if ranked.len() > 1 {
-        // Every algorithm's own best row, so a reader sees where each stands, not only the winner.
+        // Every algorithm's own best row, so a reader sees where each stands, not only the winner;
+        // where a controller is compared, a row trained under other env options or rewards says
+        // that its return is not on the controller's scale.
+        let apart = |i: usize| section.is_some_and(|s| !s.matched.iter().any(|m| m.row == i));
         blocks.push(Block::Paragraph(format!(
             "{env}, each algorithm at its best row (the highest lower 95% bound of its held-out return):"
         )));
-        blocks.push(Block::Lines(ranked.iter().map(|&i| describe(&rows[i])).collect()));
+        blocks.push(Block::Lines(
+            ranked
+                .iter()
+                .map(|&i| {
+                    let line = describe(&rows[i]);
+                    if apart(i) {
+                        line + " (trained under other env options or rewards than the controller's: not compared with it)"
+                    } else {
+                        line
+                    }
+                })
+                .collect(),
+        ));
     }
     blocks.extend(winner_clip.map(Block::clip));
     blocks
