@@ -405,6 +405,52 @@ fn reward_scale_must_be_positive_and_defaults_to_one() {
 }
 
 #[test]
+fn termination_penalty_must_be_finite_and_not_negative() {
+    assert_eq!(small_config("").termination_penalty, 0.0, "off unless asked for");
+    for bad in ["-1", "nan", "inf"] {
+        let o = split_pairs(&format!("termination_penalty={bad}")).unwrap();
+        let err = build_config("minitaur", Algo::Sac, &o).and_then(|c| c.validate()).unwrap_err();
+        assert!(err.to_string().contains("termination_penalty"), "{bad}: {err}");
+    }
+    let o = split_pairs("termination_penalty=5").unwrap();
+    let cfg = build_config("minitaur", Algo::Sac, &o).unwrap();
+    assert!(cfg.validate().is_ok());
+    assert_eq!(cfg.termination_penalty, 5.0);
+
+    // The inverted pendulum ends every early episode by termination: the penalty reaches the
+    // learner (other weights), an explicit 0 is the default bit for bit, and the reported
+    // returns stay the environment's (the first episodes, before learning, are the same).
+    let dir = tempfile::tempdir().unwrap();
+    let run = |name: &str, extra: &str| {
+        let out = dir.path().join(name);
+        let s = train::train(
+            EnvConfig::new("inverted-pendulum"),
+            small_config(extra),
+            4,
+            &out,
+            None,
+            false,
+            &RunControl::default(),
+        )
+        .unwrap();
+        (tensors(&s.checkpoint), std::fs::read_to_string(out.join("metrics.csv")).unwrap())
+    };
+    let (plain, plain_rows) = run("plain", "");
+    let (zero, _) = run("zero", "termination_penalty=0");
+    let (penalised, penalised_rows) = run("penalised", "termination_penalty=5");
+    assert_eq!(plain, zero);
+    assert_ne!(plain, penalised);
+    let first_returns = |rows: &str| -> Vec<String> {
+        rows.lines()
+            .filter(|l| l.starts_with("episode,"))
+            .take(5)
+            .map(|l| l.split(',').nth(2).unwrap().to_string())
+            .collect()
+    };
+    assert_eq!(first_returns(&plain_rows), first_returns(&penalised_rows));
+}
+
+#[test]
 fn observation_normalisation_is_fitted_on_the_warm_up_and_travels_with_the_actor() {
     let dir = tempfile::tempdir().unwrap();
     let env = EnvConfig::new("half-cheetah").with_overrides(&[("max_episode_steps".into(), "100".into())]).unwrap();

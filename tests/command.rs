@@ -211,7 +211,7 @@ mod notch {
 
 #[test]
 fn commands_outside_a_policy_s_training_ranges_are_named_with_the_range() {
-    use locobench::envs::command::{command_ranges, commands_given, outside_training_range};
+    use locobench::envs::command::{command_ranges, command_warnings, commands_given, outside_training_range};
     let cfg = |options: &[(&str, &str)]| {
         let pairs: Vec<(String, String)> = options.iter().map(|(k, v)| (k.to_string(), v.to_string())).collect();
         EnvConfig::new("minitaur-command").with_overrides(&pairs).unwrap()
@@ -232,4 +232,7 @@ fn commands_outside_a_policy_s_training_ranges_are_named_with_the_range() {
         ]
     );
     assert!(outside_training_range(&trained, &[[1.5, -0.3]], "p").unwrap().is_empty(), "the ends are inside");
+    assert_eq!(command_warnings(&trained, &scheduled, "p").unwrap(), lines, "what eval and Python warn with");
+    assert!(command_warnings(&trained, &trained, "p").unwrap().is_empty());
+    assert!(command_warnings(&EnvConfig::new("minitaur"), &scheduled, "p").unwrap().is_empty(), "not a command task");
 }

@@ -395,9 +395,8 @@ impl PyTrainedPolicy {
     /// ranges this policy was trained on, naming the policy and its range: `locobench eval`'s
     /// warnings. Empty for an env that is not a command task.
     fn command_warnings(&self, env: &PyEnv) -> PyResult<Vec<String>> {
-        use locobench::envs::command::{commands_given, outside_training_range};
-        let commands = commands_given(&env.config).map_err(value_error)?;
-        outside_training_range(&self.trained_env, &commands, &self.path.display().to_string()).map_err(value_error)
+        locobench::envs::command::command_warnings(&self.trained_env, &env.config, &self.path.display().to_string())
+            .map_err(value_error)
     }
 
     /// (seed, steps, evaluation episodes) of the run that trained it: what the protocol's

@@ -98,6 +98,12 @@ pub struct TrainConfig {
     /// 1 unless a preset says otherwise (Haarnoja et al. 2018a tune a reward scale per task; it
     /// sets how large rewards are against the critic's approximation error).
     pub reward_scale: f64,
+    /// Subtracted from the reward the learner stores on a transition that ends its episode by
+    /// termination (a fall; not a time limit), before `reward_scale`. Returns and evaluations stay
+    /// the environment's. legged_gym's `termination` reward term is the same penalty
+    /// (`leggedrobotics/legged_gym`, `legged_gym/envs/base/legged_robot.py`, `_reward_termination`).
+    /// 0 unless asked for.
+    pub termination_penalty: f64,
     /// Feed the networks observations standardised by the warm-up transitions' mean and std,
     /// frozen from then on (`agents::normalize`). Off unless a preset says otherwise.
     pub normalize_observations: bool,
@@ -256,6 +262,7 @@ impl TrainConfig {
             hidden: vec![400, 300],
             gamma: 0.99,
             reward_scale: 1.0,
+            termination_penalty: 0.0,
             normalize_observations: false,
             weight_init: WeightInit::Uniform,
             tau: 0.005,
@@ -294,6 +301,11 @@ impl TrainConfig {
         positive("actor_lr", self.actor_lr)?;
         positive("critic_lr", self.critic_lr)?;
         positive("reward_scale", self.reward_scale)?;
+        anyhow::ensure!(
+            self.termination_penalty.is_finite() && self.termination_penalty >= 0.0,
+            "termination_penalty must be a finite number >= 0, got {}",
+            self.termination_penalty
+        );
         anyhow::ensure!(
             self.algo.is_on_policy()
                 || !self.normalize_observations

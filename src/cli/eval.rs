@@ -45,9 +45,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
     anyhow::ensure!(args.episodes > 0, "--episodes must be at least 1");
     let (run, agent) = resolve_policy(&args.policy, args.budget)?.load_on(args.device)?;
     let env_cfg = args.env_options.apply(run.env.for_evaluation())?;
-    let given = locobench::envs::command::commands_given(&env_cfg)?;
-    for line in locobench::envs::command::outside_training_range(&run.env, &given, &args.policy.display().to_string())?
-    {
+    for line in locobench::envs::command::command_warnings(&run.env, &env_cfg, &args.policy.display().to_string())? {
         eprintln!("warning: {line}");
     }
     let mut env = make(&env_cfg)?;

@@ -16,7 +16,7 @@ use super::fault::{self, Point};
 use super::metrics::MetricsRow;
 use super::policy_ref::PolicyRef;
 use super::run_config::RunConfig;
-use super::scaffold::{self, check_bounded_actions, finish_run, save_budget_policy, Scaffold};
+use super::scaffold::{self, check_bounded_actions, finish_run, learner_reward, save_budget_policy, Scaffold};
 use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
 use crate::agents::{make_learner_on, Batch, Losses, OffPolicyAgent, ReplayBuffer, TrainConfig};
 use crate::device::ComputeDevice;
@@ -158,7 +158,7 @@ impl Trainer {
                 need_reset = true;
             } else {
                 let next32: Vec<f32> = s.observation.iter().map(|&v| v as f32).collect();
-                let learner_reward = (s.reward * cfg.reward_scale) as f32;
+                let learner_reward = (learner_reward(s.reward, s.terminated, &cfg) * cfg.reward_scale) as f32;
                 self.buffer.add(&obs32, &action, learner_reward, &next32, s.terminated, s.truncated);
                 ep_return += s.reward;
                 ep_len += 1;

@@ -235,7 +235,8 @@ impl OnPolicyTrainer {
             }
             let mut raw_rewards = Vec::with_capacity(n);
             for i in 0..n {
-                let reward = s.rewards[i] * reward_scale;
+                let fell = s.terminated[i] && !s.infos[i].unstable;
+                let reward = scaffold::learner_reward(s.rewards[i], fell, self.cfg()) * reward_scale;
                 self.returns[i] = self.returns[i] * gamma * if s.terminated[i] { 0.0 } else { 1.0 } + reward;
                 raw_rewards.push(reward);
             }

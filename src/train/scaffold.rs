@@ -20,7 +20,7 @@ use super::run_config::RunConfig;
 use super::run_lock::RunLock;
 use super::stop::{stop_signals, StopSignals};
 use super::tensorboard::EventWriter;
-use crate::agents::Agent;
+use crate::agents::{Agent, TrainConfig};
 use crate::envs::EnvConfig;
 use crate::io::write_bytes_atomic;
 use crate::record::Recording;
@@ -268,6 +268,17 @@ pub(super) fn crossed(before: u64, now: u64, every: u64) -> bool {
     before / every != now / every
 }
 
+/// The reward a learner stores for one transition, before `reward_scale`: the environment's, less
+/// `termination_penalty` when the transition ends its episode by termination (time limits are not
+/// terminations).
+pub(super) fn learner_reward(reward: f64, terminated: bool, cfg: &TrainConfig) -> f64 {
+    if terminated {
+        reward - cfg.termination_penalty
+    } else {
+        reward
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -291,5 +302,14 @@ mod tests {
         let err = super::check_bounded_actions("toy", &space, Algo::Dqn).unwrap_err().to_string();
         assert!(err.contains("toy's action dimension 1 is unbounded") && err.contains("levels"), "{err}");
         assert!(super::check_bounded_actions("toy", &BoxSpace::uniform(3, -0.4, 0.4), Algo::Td3).is_ok());
+    }
+
+    #[test]
+    fn the_termination_penalty_falls_on_terminations_only() {
+        let mut cfg = TrainConfig::defaults(Algo::Sac);
+        assert_eq!(learner_reward(0.25, true, &cfg), 0.25, "0 by default");
+        cfg.termination_penalty = 5.0;
+        assert_eq!(learner_reward(0.25, true, &cfg), 0.25 - 5.0);
+        assert_eq!(learner_reward(0.25, false, &cfg), 0.25, "a step that goes on, or a time limit");
     }
 }

@@ -101,6 +101,18 @@ pub fn outside_training_range(
     Ok(lines)
 }
 
+/// The warnings for playing a policy trained on `trained` in `evaluated`: one line per command
+/// `evaluated` will give ([`commands_given`]) outside the training ranges
+/// ([`outside_training_range`]). What `eval` prints and Python's `TrainedPolicy.command_warnings`
+/// returns.
+pub fn command_warnings(
+    trained: &super::EnvConfig,
+    evaluated: &super::EnvConfig,
+    policy: &str,
+) -> Result<Vec<String>, EnvError> {
+    outside_training_range(trained, &commands_given(evaluated)?, policy)
+}
+
 use super::options::{join_wrapped, split_wrapped};
 use super::registry::Registered;
 use super::simulation::base_state_accessors;
