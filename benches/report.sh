@@ -61,8 +61,8 @@ runs=(
   # 1M); TD3 with the same changes, seed 0, 100k and 300k
   $r/minitaur/sac-combined-seed{0,1,2} $r/minitaur/td3-combined-seed0
   # Freeman's env (PyBullet's Minitaur at 100 Hz, no energy cost) with the agent-side changes
-  # (normalised observations, rewards x100, a 1k warm-up), seed 0, 500k
-  $r/minitaur/sac-freeman-norm-seed0
+  # (normalised observations, rewards x100, a 1k warm-up), seeds 0-2, 500k
+  $r/minitaur/sac-freeman-norm-seed{0,1,2}
   $r/{half-cheetah,ant,humanoid}/crossq-256-seed{0,1,2}
   # PPO on the velocity-command task (minitaur-command), with its policies: the report's
   # same-command section puts them beside the controller on the same commands
