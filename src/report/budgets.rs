@@ -81,9 +81,13 @@ pub(crate) fn policy_at(run: &Run, budget: u64) -> Result<PolicySource, String> 
     })
 }
 
+/// A budget off the standard list that is reported wherever a run kept its actor there: 500k,
+/// where Freeman's Minitaur result and the off-policy goals sit.
+const KEPT_BUDGET: u64 = 500_000;
+
 /// The budgets a set of runs is reported at: each standard budget some run reached; the full
 /// budget of each run trained to one off the standard list (e.g. 500k, where a published result
-/// sits) and kept its actor there; and the last step of each run that reached no standard budget
+/// sits) and kept its actor there, and 500k wherever a run kept its actor there; and the last step of each run that reached no standard budget
 /// (short runs), so that every run appears in some row. An imported policy has one row, at the
 /// step its `source.toml` states (or [`UNKNOWN_BUDGET`]).
 pub fn budgets(runs: &[&Run]) -> Vec<u64> {
@@ -102,6 +106,10 @@ pub fn budgets(runs: &[&Run]) -> Vec<u64> {
         let full = r.config.train.total_steps;
         if last >= full && budget_policy_path(&r.dir, full).is_file() {
             out.push(full);
+        }
+        // A run trained to 500k and then carried on keeps its 500k actor: still reported there.
+        if last >= KEPT_BUDGET && budget_policy_path(&r.dir, KEPT_BUDGET).is_file() {
+            out.push(KEPT_BUDGET);
         }
     }
     out.sort_unstable();
@@ -137,5 +145,23 @@ mod tests {
         // A run stopped before its full budget gets no row there.
         run.metrics = vec![crate::train::metrics::MetricsRow { kind: "episode", step: 400_000, ..Default::default() }];
         assert_eq!(budgets(&[&run]), vec![100_000, 300_000]);
+    }
+
+    #[test]
+    fn a_run_carried_on_past_500k_keeps_its_500k_row() {
+        let tmp = tempfile::tempdir().unwrap();
+        let dir = tmp.path().to_path_buf();
+        let mut run = crate::report::runs::tests::run("minitaur", crate::agents::Algo::Sac, "total_steps=1000000", &[]);
+        run.dir = dir.clone();
+        run.metrics =
+            vec![crate::train::metrics::MetricsRow { kind: "episode", step: 1_000_000, ..Default::default() }];
+        for step in [100_000, 300_000, 1_000_000] {
+            let file = budget_policy_path(&dir, step);
+            std::fs::create_dir_all(file.parent().unwrap()).unwrap();
+            std::fs::write(&file, b"").unwrap();
+        }
+        assert_eq!(budgets(&[&run]), vec![100_000, 300_000, 1_000_000]);
+        std::fs::write(budget_policy_path(&dir, 500_000), b"").unwrap();
+        assert_eq!(budgets(&[&run]), vec![100_000, 300_000, 500_000, 1_000_000]);
     }
 }
