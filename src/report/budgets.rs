@@ -81,14 +81,15 @@ pub(crate) fn policy_at(run: &Run, budget: u64) -> Result<PolicySource, String> 
     })
 }
 
-/// A budget off the standard list that is reported wherever a run kept its actor there: 500k,
-/// where Freeman's Minitaur result and the off-policy goals sit.
+/// A budget off the standard list that is reported wherever a run kept its actor there, also
+/// when the run was carried on past it: 500k, where Freeman's Minitaur result and the off-policy
+/// goals sit.
 const KEPT_BUDGET: u64 = 500_000;
 
 /// The budgets a set of runs is reported at: each standard budget some run reached; the full
-/// budget of each run trained to one off the standard list (e.g. 500k, where a published result
-/// sits) and kept its actor there, and 500k wherever a run kept its actor there; and the last step of each run that reached no standard budget
-/// (short runs), so that every run appears in some row. An imported policy has one row, at the
+/// budget of each run, and [`KEPT_BUDGET`], where the run reached it and kept its actor there;
+/// and the last step of each run that reached no standard budget (short runs), so that every run
+/// appears in some row. An imported policy has one row, at the
 /// step its `source.toml` states (or [`UNKNOWN_BUDGET`]).
 pub fn budgets(runs: &[&Run]) -> Vec<u64> {
     // A policy imported from elsewhere is reported at the step its source states, and only there.
@@ -103,13 +104,10 @@ pub fn budgets(runs: &[&Run]) -> Vec<u64> {
         if last < POLICY_BUDGETS[0] && last > 0 {
             out.push(last);
         }
-        let full = r.config.train.total_steps;
-        if last >= full && budget_policy_path(&r.dir, full).is_file() {
-            out.push(full);
-        }
-        // A run trained to 500k and then carried on keeps its 500k actor: still reported there.
-        if last >= KEPT_BUDGET && budget_policy_path(&r.dir, KEPT_BUDGET).is_file() {
-            out.push(KEPT_BUDGET);
+        for kept in [r.config.train.total_steps, KEPT_BUDGET] {
+            if last >= kept && budget_policy_path(&r.dir, kept).is_file() {
+                out.push(kept);
+            }
         }
     }
     out.sort_unstable();
@@ -129,13 +127,20 @@ mod tests {
         assert_eq!(shipped_step(&root), None);
     }
 
+    /// A SAC run trained to `total` steps in `dir`, whose metrics reach `reached`.
+    fn run_in(dir: &Path, total: u64, reached: u64) -> Run {
+        let mut run =
+            crate::report::runs::tests::run("minitaur", crate::agents::Algo::Sac, &format!("total_steps={total}"), &[]);
+        run.dir = dir.to_path_buf();
+        run.metrics = vec![crate::train::metrics::MetricsRow { kind: "episode", step: reached, ..Default::default() }];
+        run
+    }
+
     #[test]
     fn a_full_budget_off_the_standard_list_gets_a_row_when_its_policy_was_kept() {
         let tmp = tempfile::tempdir().unwrap();
         let dir = tmp.path().to_path_buf();
-        let mut run = crate::report::runs::tests::run("minitaur", crate::agents::Algo::Sac, "total_steps=500000", &[]);
-        run.dir = dir.clone();
-        run.metrics = vec![crate::train::metrics::MetricsRow { kind: "episode", step: 500_000, ..Default::default() }];
+        let mut run = run_in(&dir, 500_000, 500_000);
         // Reached 500k but kept no actor there: only the standard budgets it passed.
         assert_eq!(budgets(&[&run]), vec![100_000, 300_000]);
         let file = budget_policy_path(&dir, 500_000);
@@ -151,10 +156,7 @@ mod tests {
     fn a_run_carried_on_past_500k_keeps_its_500k_row() {
         let tmp = tempfile::tempdir().unwrap();
         let dir = tmp.path().to_path_buf();
-        let mut run = crate::report::runs::tests::run("minitaur", crate::agents::Algo::Sac, "total_steps=1000000", &[]);
-        run.dir = dir.clone();
-        run.metrics =
-            vec![crate::train::metrics::MetricsRow { kind: "episode", step: 1_000_000, ..Default::default() }];
+        let run = run_in(&dir, 1_000_000, 1_000_000);
         for step in [100_000, 300_000, 1_000_000] {
             let file = budget_policy_path(&dir, step);
             std::fs::create_dir_all(file.parent().unwrap()).unwrap();
