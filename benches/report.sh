@@ -67,6 +67,9 @@ runs=(
   # PPO on the velocity-command task (minitaur-command), with its policies: the report's
   # same-command section puts them beside the controller on the same commands
   $r/minitaur-command/ppo-seed{0,1,2}-6m
+  # The same 6M actors fine-tuned 2M steps for closer tracking (narrower kernels, yaw rate weighted
+  # 1.0) with a battery drawn down to 6 V
+  $r/minitaur-command/ppo-6m-ft-track-seed{0,1,2}
 )
 existing=()
 for d in "${runs[@]}"; do

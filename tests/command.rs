@@ -26,6 +26,7 @@ fn the_observation_is_the_base_s_then_velocities_then_the_command() {
             e.data(),
             e.data().model().body_id(if base == "ant" { "torso" } else { "base" }).unwrap(),
             0,
+            e.forward_angle(),
         );
         assert_eq!(&obs[base_dim..base_dim + 3], &m.velocity);
         assert_eq!(&obs[base_dim + 3..base_dim + 6], &m.angular_velocity);
@@ -40,7 +41,7 @@ fn reward_terms_match_a_hand_computation_and_sum_to_the_reward() {
     let action = vec![0.3; 8];
     let step = e.step(&action).unwrap();
     let body = e.data().model().body_id("base").unwrap();
-    let m = BaseMotion::of(e.data(), body, 0);
+    let m = BaseMotion::of(e.data(), body, 0, 0.0);
     let term = |n: &str| step.info.term(n).unwrap();
     let speed_error = (m.velocity[0] - 0.5).powi(2) + m.velocity[1].powi(2);
     assert!((term("tracking_speed") - dt * (-speed_error / 0.25).exp()).abs() < 1e-12);
@@ -111,6 +112,10 @@ fn bad_command_options_are_errors_naming_the_option() {
     assert!(err(&[("standing_probability", "1.5")]).contains("standing_probability"));
     assert!(err(&[("tracking_speed_weight", "-1")]).contains("tracking_speed_weight"));
     assert!(err(&[("no_such_term_weight", "1")]).contains("no_such_term_weight"));
+    assert!(err(&[("forward_angle", "200")]).contains("forward_angle"));
+    assert!(err(&[("forward_angle", "nan")]).contains("forward_angle"));
+    assert!(err(&[("feet_air_time_target", "-0.1")]).contains("feet_air_time_target"));
+    assert!(err(&[("feet_air_time_weight", "-1")]).contains("feet_air_time_weight"));
 }
 
 #[test]
@@ -127,32 +132,136 @@ fn the_controller_follows_the_stream_it_is_given() {
     }
 }
 
+/// On `ant-command` the rowing controller rows along the task's forward (45° from the torso's x
+/// axis) and takes each new command in stride: speeding up, turning both ways and stopping, the
+/// mean speed and yaw rate over the settled part of each 10 s stretch follow the command, with
+/// no fall.
 #[test]
-fn the_ant_controller_follows_a_changing_command_by_rebuilding_for_each() {
+fn the_ant_controller_follows_a_changing_command_in_stride() {
     let cfg = baseline_env("ant-command")
         .unwrap()
-        .with_overrides(&[("schedule".into(), "\"0:0.5:0 20:0:0\"".into())])
+        .with_overrides(&[("schedule".into(), "\"0:0.5:0 10:1.0:0 20:0.5:0.3 30:0.3:-0.3 40:0:0\"".into())])
         .unwrap();
     let mut env = make(&cfg).unwrap();
     let mut controller = baseline_controller_for("ant-command", Command::straight(0.0, 0.0), None).unwrap();
     assert_eq!(controller.name(), "raibert-row@command");
-    let (mut obs, _) = env.reset(Some(1)).unwrap();
-    controller.begin_episode(0);
-    let (mut walked, mut stood) = (Vec::new(), Vec::new());
-    for t in 0..800 {
-        let step = env.step(&controller.act(env.as_ref(), &obs).unwrap()).unwrap();
-        assert!(!step.done(), "fell or ended at step {t}");
-        let v = step.info.metric("forward_velocity").unwrap();
-        if (100..400).contains(&t) {
-            walked.push(v);
-        } else if t >= 600 {
-            stood.push(v);
+    for seed in [1, 2] {
+        let (mut obs, _) = env.reset(Some(seed)).unwrap();
+        controller.begin_episode(0);
+        let mut sums = [[0.0; 3]; 5];
+        for t in 0..1000 {
+            let step = env.step(&controller.act(env.as_ref(), &obs).unwrap()).unwrap();
+            assert!(!step.terminated, "seed {seed}: fell at step {t}");
+            // the last 7 s of each 10 s stretch: the first 3 s change pace
+            if t % 200 >= 60 {
+                let m = |k: &str| step.info.metric(k).unwrap();
+                let s = &mut sums[t / 200];
+                s[0] += m("forward_velocity");
+                s[1] += m("yaw_rate");
+                s[2] += 1.0;
+            }
+            obs = step.observation;
         }
-        obs = step.observation;
+        for (k, (speed, yaw_rate)) in
+            [(0.5, 0.0), (1.0, 0.0), (0.5, 0.3), (0.3, -0.3), (0.0, 0.0)].into_iter().enumerate()
+        {
+            let [v, w, n] = sums[k];
+            let (v, w) = (v / n, w / n);
+            assert!((v - speed).abs() < 0.1 * speed.max(0.5), "seed {seed}, {speed} m/s commanded: {v:.3}");
+            assert!((w - yaw_rate).abs() < 0.05, "seed {seed}, {yaw_rate} rad/s commanded: {w:.3}");
+        }
     }
-    let mean = |v: &[f64]| v.iter().sum::<f64>() / v.len() as f64;
-    assert!(mean(&walked) > 0.2, "walking at 0.5 m/s commanded: {}", mean(&walked));
-    assert!(mean(&stood).abs() < mean(&walked) / 2.0, "stopping: {} after {}", mean(&stood), mean(&walked));
+}
+
+/// The task's forward axis is `forward_angle` degrees from the body's x axis: a torso moving
+/// along its own 45° diagonal moves straight forward on `ant-command` (the default) and half
+/// forward, half to the right, at 0°.
+#[test]
+fn forward_is_the_forward_angle_from_the_body_s_x_axis() {
+    for (angle, forward, left) in [("45", 1.0, 0.0), ("0", 0.5f64.sqrt(), 0.5f64.sqrt()), ("-45", 0.0, 1.0)] {
+        let mut e = env("ant-command", &[("forward_angle", angle), ("schedule", "\"0:0.5:0\"")]);
+        e.reset(Some(0)).unwrap();
+        let mut q = e.data().qpos().to_vec();
+        let mut v = vec![0.0; e.data().qvel().len()];
+        q[3..7].copy_from_slice(&[1.0, 0.0, 0.0, 0.0]);
+        let d = 0.5f64.sqrt();
+        v[0] = d;
+        v[1] = d;
+        e.set_state(&q, &v).unwrap();
+        let body = e.data().model().body_id("torso").unwrap();
+        let angle: f64 = angle.parse().unwrap();
+        let m = BaseMotion::of(e.data(), body, 0, angle.to_radians());
+        assert!(
+            (m.velocity[0] - forward).abs() < 1e-9 && (m.velocity[1] - left).abs() < 1e-9,
+            "{angle}: {:?}",
+            m.velocity
+        );
+        assert!((e.forward_angle() - angle.to_radians()).abs() < 1e-15);
+    }
+    assert_eq!(env("minitaur-command", &[]).forward_angle(), 0.0);
+}
+
+/// `feet_air_time` against a count kept here from MuJoCo's contacts: on the step a foot lands
+/// (pushed up by more than 1 N, at this step or the last) it pays its air time less the 0.5 s
+/// target, times the weight per second; nothing while the command is to stand.
+#[test]
+fn feet_air_time_pays_each_landing_its_air_time_less_the_target() {
+    for (schedule, moving) in [("\"0:0.5:0\"", true), ("\"0:0:0.3\"", false)] {
+        let options = [("schedule", schedule), ("only_positive_rewards", "false"), ("feet_air_time_weight", "1.0")];
+        let mut e = env("ant-command", &options);
+        e.reset(Some(4)).unwrap();
+        let dt = e.spec().dt;
+        let feet: Vec<usize> = ["left_ankle_geom", "right_ankle_geom", "third_ankle_geom", "fourth_ankle_geom"]
+            .iter()
+            .map(|n| e.data().model().geom_id(n).unwrap())
+            .collect();
+        let (mut air, mut last) = ([0.0f64; 4], [false; 4]);
+        let (mut landings, mut paid) = (0, 0.0);
+        for t in 0..300 {
+            // hips swing back and forth, ankles lift and drop: feet leave and strike the ground
+            let phase = t as f64 * dt * 2.0 * std::f64::consts::PI / 0.8;
+            let a: Vec<f64> = (0..8).map(|j| if j % 2 == 0 { phase.sin() } else { (phase + j as f64).cos() }).collect();
+            let step = e.step(&a).unwrap();
+            let mut expected = 0.0;
+            let contacts = e.data().contacts();
+            for k in 0..4 {
+                let now = contacts.iter().any(|c| (c.geom1 == feet[k] || c.geom2 == feet[k]) && c.force[0] > 1.0);
+                let filtered = now || last[k];
+                last[k] = now;
+                let first = air[k] > 0.0 && filtered;
+                air[k] += dt;
+                if first {
+                    expected += air[k] - 0.5;
+                    landings += 1;
+                }
+                if filtered {
+                    air[k] = 0.0;
+                }
+            }
+            let term = step.info.term("feet_air_time").unwrap();
+            let want = if moving { expected } else { 0.0 };
+            assert!((term - want).abs() < 1e-12, "step {t}: {term} against {want}");
+            paid += term.abs();
+            if step.terminated {
+                break;
+            }
+        }
+        assert!(landings >= 5, "the feet landed {landings} times");
+        assert_eq!(paid > 0.0, moving, "{schedule}");
+    }
+    // off by default
+    for name in ["minitaur-command", "ant-command"] {
+        let mut m = env(name, &[("schedule", "\"0:1.0:0\"")]);
+        m.reset(Some(0)).unwrap();
+        let dim = m.spec().action_space.dim();
+        for _ in 0..50 {
+            let step = m.step(&vec![0.0; dim]).unwrap();
+            assert_eq!(step.info.term("feet_air_time").unwrap(), 0.0, "{name}");
+            if step.done() {
+                break;
+            }
+        }
+    }
 }
 
 mod notch {

@@ -192,4 +192,17 @@ fn the_protocol_evaluates_a_policy_trained_under_perturbations_in_the_nominal_wo
     assert!(!eval.options.contains_key("random_push_max") && !eval.options.contains_key("terrain_step_height"));
     assert_eq!(eval.options.get("drift_weight"), trained.options.get("drift_weight"), "the reward stays the run's");
     assert_eq!(EnvConfig::new("ant").for_evaluation(), EnvConfig::new("ant"));
+    // a command task's base perturbations too, its command settings kept
+    let trained = EnvConfig::new("minitaur-command")
+        .with_overrides(&[
+            ("random_push_max".into(), "1.0".into()),
+            ("random_battery_min".into(), "6.0".into()),
+            ("tracking_sigma".into(), "0.05".into()),
+        ])
+        .unwrap();
+    let eval = trained.for_evaluation();
+    assert!(!eval.options.contains_key("random_push_max") && !eval.options.contains_key("random_battery_min"));
+    assert_eq!(eval.options.get("tracking_sigma"), trained.options.get("tracking_sigma"));
+    let ant = EnvConfig::new("ant-command").with_overrides(&[("payload_mass".into(), "2.0".into())]).unwrap();
+    assert_eq!(ant.for_evaluation(), EnvConfig::new("ant-command"));
 }

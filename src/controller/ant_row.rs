@@ -16,7 +16,7 @@
 use anyhow::{bail, Result};
 use std::f64::consts::{FRAC_PI_4, PI};
 
-use super::command::{wrap_angle, Command};
+use super::command::{wrap_angle, Command, SpeedProfile};
 use super::gait::{GaitKind, GaitScheduler, LEGS};
 use super::measure::base_pose;
 use crate::envs::Env;
@@ -106,6 +106,10 @@ pub struct AntRowParams {
     /// surge (peaks of 1.4 m/s against 1.0 at 0.5 m/s commanded) and swing the yaw. The fast
     /// posture integrates from the first cycle: it needs the wound-up stroke to reach 1.0 m/s.
     pub warmup_cycles: u32,
+    /// Follow the command a velocity-command task (`ant-command`) gives, changing speed and turn
+    /// rate in stride, and row along the task's forward direction from where the robot lands,
+    /// instead of along world x.
+    pub on_command_task: bool,
 }
 
 /// Commands whose peak speed is at most this (m/s) row in the steady posture, faster ones in
@@ -175,6 +179,7 @@ impl AntRowParams {
             land_kp: 10.0,
             land_kd: 30.0,
             warmup_cycles: 0,
+            on_command_task: false,
         }
     }
 }
@@ -246,6 +251,8 @@ pub struct AntRowController {
     /// The last tick's yaw error and lean of the yaw goal (rad), for telemetry.
     last_yaw_error: f64,
     last_lean: f64,
+    /// On a command task: the command being followed (None before the episode's first step).
+    following: Option<[f64; 2]>,
 }
 
 impl AntRowController {
@@ -282,7 +289,40 @@ impl AntRowController {
             last_phase: [(true, 0.0); LEGS],
             last_yaw_error: 0.0,
             last_lean: 0.0,
+            following: None,
         })
+    }
+
+    /// On a command task: takes up `command` (speed, yaw rate) where the robot is. The episode's
+    /// first command is ramped up to from standing like a set-point's; a later one takes over in
+    /// stride: no landing, no turn into the pose, the gait's phase kept and its cycle retimed for
+    /// the new speed. A change of posture (steady and fast) restarts the speed integral and its
+    /// warm-up cycles; the cycle in progress is never integrated, since it straddles the change.
+    fn follow(&mut self, command: [f64; 2], position: [f64; 2]) -> Result<()> {
+        if self.following == Some(command) {
+            return Ok(());
+        }
+        let first = self.following.is_none();
+        let ramp = if first { super::baseline::RAMP_TIME } else { 0.0 };
+        let next = Command { speed: SpeedProfile::ramp(command[0], ramp), yaw_rate: command[1] };
+        let replacement =
+            AntRowController::new(AntRowParams { on_command_task: true, ..AntRowParams::for_command(next) })?;
+        if first {
+            *self = AntRowController { joints: self.joints.take(), ..replacement };
+        } else {
+            let steady = |p: &AntRowParams| p.command.speed.peak_speed() <= STEADY_SPEED_LIMIT;
+            if steady(&self.params) != steady(&replacement.params) {
+                self.stroke_integral = 0.0;
+                self.cycles_rowed = 0;
+            }
+            self.row_gait.retime(replacement.row_gait.stance_duration, replacement.row_gait.duty_factor);
+            self.params = replacement.params;
+            self.period = replacement.period;
+            self.cycle_start = None;
+            self.origin = position;
+        }
+        self.following = Some(command);
+        Ok(())
     }
 
     fn joints(env: &dyn Env) -> Result<Vec<Joints>> {
@@ -320,10 +360,14 @@ impl AntRowController {
         let d = env.data();
         let (q, v) = (d.qpos(), d.qvel());
         let yaw = base_pose(env).1;
+        if self.params.on_command_task {
+            let command = env.command().ok_or_else(|| anyhow::anyhow!("{} gives no command", env.spec().name))?;
+            self.follow(command, [q[0], q[1]])?;
+        }
         if self.time == 0.0 {
             // Travel along world x, where Ant's reward counts progress, whatever yaw the reset
-            // noise left the body at (up to about ±11°).
-            self.travel_heading = 0.0;
+            // noise left the body at (up to about ±11°); on a command task, along its forward.
+            self.travel_heading = if self.params.on_command_task { wrap_angle(yaw + env.forward_angle()) } else { 0.0 };
             self.origin = [q[0], q[1]];
         }
         let p = self.params.clone();
@@ -473,7 +517,11 @@ fn sign(speed: f64) -> f64 {
 
 impl Policy for AntRowController {
     fn name(&self) -> String {
-        self.params.command.controller_name("row")
+        if self.params.on_command_task {
+            "raibert-row@command".into()
+        } else {
+            self.params.command.controller_name("row")
+        }
     }
     fn begin_episode(&mut self, _episode: usize) {
         self.turn_gait.reset();
@@ -487,6 +535,7 @@ impl Policy for AntRowController {
         self.turn_time = 0.0;
         self.stats = RowStats::default();
         self.cycles_rowed = 0;
+        self.following = None;
     }
     fn act(&mut self, env: &dyn Env, _observation: &[f64]) -> Result<Vec<f64>> {
         self.controls(env)

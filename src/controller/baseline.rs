@@ -54,6 +54,9 @@ pub fn baseline_controller_for(env: &str, command: Command, gait: Option<GaitKin
                 ..defaults
             })?)
         }
+        "ant-command" if gait.unwrap_or(GaitKind::Row) == GaitKind::Row => {
+            Box::new(AntRowController::new(AntRowParams { on_command_task: true, ..AntRowParams::default() })?)
+        }
         "ant-command" => {
             let name = format!("raibert-{}@command", if gait == Some(GaitKind::Trot) { "trot" } else { "row" });
             Box::new(super::follow::CommandFollower::new(name, |c, g| baseline_controller_for("ant", c, g), gait))

@@ -69,6 +69,14 @@ impl GaitScheduler {
         self.time += dt;
     }
 
+    /// A new stance duration and duty factor, each leg kept at the same point of its cycle.
+    pub(crate) fn retime(&mut self, stance_duration: f64, duty_factor: f64) {
+        let phase = self.time / self.period();
+        self.stance_duration = stance_duration;
+        self.duty_factor = duty_factor;
+        self.time = phase * self.period();
+    }
+
     pub fn reset(&mut self) {
         self.time = 0.0;
     }

@@ -165,6 +165,11 @@ pub trait Env: Send {
     fn command(&self) -> Option<[f64; 2]> {
         None
     }
+    /// On a velocity-command task: the direction it calls forward, in radians counter-clockwise
+    /// from the commanded body's x axis (its `forward_angle` option). 0 on every other env.
+    fn forward_angle(&self) -> f64 {
+        0.0
+    }
     /// On a velocity-command task: holds this command from the next step until the next reset
     /// (a joystick). Every other env refuses.
     fn set_command(&mut self, speed: f64, yaw_rate: f64) -> Result<(), EnvError> {

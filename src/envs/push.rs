@@ -125,6 +125,10 @@ impl Env for Pushed<'_> {
     fn set_command(&mut self, speed: f64, yaw_rate: f64) -> Result<(), EnvError> {
         self.inner.set_command(speed, yaw_rate)
     }
+
+    fn forward_angle(&self) -> f64 {
+        self.inner.forward_angle()
+    }
 }
 
 #[cfg(test)]

@@ -179,7 +179,8 @@ impl EnvConfig {
     /// world every other policy meets; `--option` puts a perturbation back.
     pub fn for_evaluation(&self) -> EnvConfig {
         let mut out = self.clone();
-        let perturbations: &[&str] = match self.name.as_str() {
+        // A command task takes its base env's perturbations.
+        let perturbations: &[&str] = match self.name.trim_end_matches("-command") {
             "minitaur" => &super::minitaur::perturb::OPTIONS,
             "ant" => &super::world::OPTIONS,
             _ => &[],

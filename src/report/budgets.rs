@@ -81,9 +81,8 @@ pub(crate) fn policy_at(run: &Run, budget: u64) -> Result<PolicySource, String> 
     })
 }
 
-/// A budget off the standard list that is reported wherever a run kept its actor there, also
-/// when the run was carried on past it: 500k, where Freeman's Minitaur result and the off-policy
-/// goals sit.
+/// A standard budget that runs trained before it joined the list passed without keeping an
+/// actor there: it is reported only where a run kept one (500k).
 const KEPT_BUDGET: u64 = 500_000;
 
 /// The budgets a set of runs is reported at: each standard budget some run reached; the full
@@ -95,7 +94,7 @@ pub fn budgets(runs: &[&Run]) -> Vec<u64> {
     // A policy imported from elsewhere is reported at the step its source states, and only there.
     let (imported, runs): (Vec<&Run>, Vec<&Run>) = runs.iter().copied().partition(|r| r.imported.is_some());
     let mut out: Vec<u64> = imported.iter().map(|r| shipped_step(&r.dir).unwrap_or(UNKNOWN_BUDGET)).collect();
-    out.extend(POLICY_BUDGETS.iter().copied().filter(|&b| runs.iter().any(|r| reached(r) >= b)));
+    out.extend(POLICY_BUDGETS.iter().copied().filter(|&b| b != KEPT_BUDGET && runs.iter().any(|r| reached(r) >= b)));
     for r in runs {
         if exported_without_step(r) {
             out.push(UNKNOWN_BUDGET);

@@ -27,8 +27,12 @@ use crate::policy::AgentPolicy;
 
 /// The commanded speeds of the report's grid (m/s), those within a run's `speed_range`.
 pub const GRID_SPEEDS: [f64; 6] = [0.25, 0.5, 1.0, 1.5, 2.0, 2.5];
+/// The commanded yaw rates of the report's grid (rad/s), those within a run's `yaw_rate_range`:
+/// straight, and turning either way at the rate the controller follows.
+pub const GRID_YAW_RATES: [f64; 3] = [0.0, -0.3, 0.3];
 
-/// One contender's grid, and for a learned one the policy its clip plays (its first seed's).
+/// One contender's grid (every speed straight, then every speed at each turn rate), and for a
+/// learned one the policy its clip plays (its first seed's).
 struct Contender {
     label: String,
     points: Vec<TrackingPoint>,
@@ -36,9 +40,14 @@ struct Contender {
 }
 
 impl Contender {
-    /// The mean of its grid points' mean RMS speed errors.
+    /// Its straight-ahead points, in the order of the speeds.
+    fn straight(&self) -> Vec<&TrackingPoint> {
+        self.points.iter().filter(|p| p.yaw_rate == 0.0).collect()
+    }
+
+    /// The mean of its straight grid points' mean RMS speed errors.
     fn mean_speed_rms(&self) -> f64 {
-        let xs: Vec<f64> = self.points.iter().map(|p| p.speed_rms().estimate).collect();
+        let xs: Vec<f64> = self.straight().iter().map(|p| p.speed_rms().estimate).collect();
         xs.iter().sum::<f64>() / xs.len().max(1) as f64
     }
 }
@@ -70,25 +79,27 @@ pub(crate) fn section(
     let Some(first) = groups.iter().flat_map(|(_, rs)| rs.iter()).next() else { return Ok(Tracking::default()) };
     let base_env = first.config.env.for_evaluation();
     let speeds = grid_speeds(&base_env)?;
+    let commands: Vec<(f64, f64)> =
+        grid_yaw_rates(&base_env)?.into_iter().flat_map(|w| speeds.iter().map(move |&v| (v, w))).collect();
     let protocol = opts.protocol;
     let mut contenders = Vec::new();
     // The controller, where the task has one, on the same episodes.
     if let Ok(cfg) = baseline_env_like(&base_env) {
         let mut points = Vec::new();
-        for &speed in &speeds {
-            let at = point_env(&cfg, speed, 0.0);
+        for &(speed, yaw_rate) in &commands {
+            let at = point_env(&cfg, speed, yaw_rate);
             let key = opts.cache.timed(|| Key::tracking(&at, &protocol, "controller command"))?;
             let episodes = opts.cache.tracking(&key, || {
                 let mut c = baseline_controller_for(&cfg.name, Command::straight(0.0, 0.0), None)?;
                 tracking_episodes(&at, c.as_mut(), protocol)
             })?;
-            points.push(TrackingPoint { speed, yaw_rate: 0.0, episodes });
+            points.push(TrackingPoint { speed, yaw_rate, episodes });
         }
         contenders.push(Contender { label: "controller".into(), points, clip_policy: None });
     }
     for (group, runs) in groups {
         let mut points: Vec<TrackingPoint> =
-            speeds.iter().map(|&speed| TrackingPoint { speed, yaw_rate: 0.0, episodes: Vec::new() }).collect();
+            commands.iter().map(|&(speed, yaw_rate)| TrackingPoint { speed, yaw_rate, episodes: Vec::new() }).collect();
         let mut budgets = Vec::new();
         let mut clip_policy = None;
         for run in runs.iter() {
@@ -104,7 +115,7 @@ pub(crate) fn section(
             let env_config = cfg.env.for_evaluation();
             let digest = source.digest(&run.dir)?;
             for p in points.iter_mut() {
-                let at = point_env(&env_config, p.speed, 0.0);
+                let at = point_env(&env_config, p.speed, p.yaw_rate);
                 let key = opts.cache.timed(|| Key::tracking(&at, &protocol, &format!("agent {digest}")))?;
                 let episodes: Vec<TrackingEpisode> = opts.cache.tracking(&key, || {
                     let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.algo().to_string() };
@@ -135,18 +146,19 @@ pub(crate) fn section(
     }
     doc.heading(2, "Same command: speed tracking");
     doc.lines(vec![format!(
-        "Every contender holds the same commands (straight ahead, yaw rate 0) on the same {} held-out episodes per \
-         command and seed, from a standing start: RMS errors after the first second, falls with Wilson intervals, \
-         cost of transport, 95% intervals. `locobench track` gives the same measures for any grid, turns included.",
+        "Every contender holds the same commands, straight ahead and turning either way, on the same {} held-out \
+         episodes per command and seed, from a standing start: RMS errors of speed and yaw rate after the first \
+         second, falls with Wilson intervals, cost of transport, 95% intervals. The chart shows the straight \
+         commands. `locobench track` gives the same measures for any grid.",
         protocol.episodes
     )]);
     let bands: Vec<Band> = contenders
         .iter()
         .map(|c| {
-            let achieved: Vec<_> = c.points.iter().map(|p| p.achieved_speed()).collect();
+            let achieved: Vec<_> = c.straight().iter().map(|p| p.achieved_speed()).collect();
             Band {
                 label: c.label.clone(),
-                x: c.points.iter().map(|p| p.speed).collect(),
+                x: c.straight().iter().map(|p| p.speed).collect(),
                 mean: achieved.iter().map(|i| i.estimate).collect(),
                 low: achieved.iter().map(|i| i.low).collect(),
                 high: achieved.iter().map(|i| i.high).collect(),
@@ -178,14 +190,28 @@ pub(crate) fn section(
             rows.push(vec![
                 c.label.clone(),
                 format!("{:.2}", p.speed),
+                format!("{:.1}", p.yaw_rate),
                 interval(p.speed_rms(), |v| format!("{v:.3}")),
+                interval(p.yaw_rate_rms(), |v| format!("{v:.3}")),
                 interval(p.achieved_speed(), |v| format!("{v:.2}")),
                 format!("{}/{} [{:.2}, {:.2}]", p.falls(), p.episodes.len(), f.low, f.high),
                 interval(p.cost_of_transport(), |v| format!("{v:.2}")),
             ]);
         }
     }
-    doc.table(&["contender", "command m/s", "speed RMS m/s", "achieved m/s", "falls", "cost of transport"], rows);
+    doc.table(
+        &[
+            "contender",
+            "command m/s",
+            "yaw rate rad/s",
+            "speed RMS m/s",
+            "yaw-rate RMS rad/s",
+            "achieved m/s",
+            "falls",
+            "cost of transport",
+        ],
+        rows,
+    );
     let clips =
         if opts.videos { schedule_clip(doc, out, env, &base_env, &contenders, groups, opts)? } else { Vec::new() };
     let mut summary = summary(env, &speeds, &contenders, protocol.episodes);
@@ -204,7 +230,7 @@ fn summary(env: &str, speeds: &[f64], contenders: &[Contender], episodes: usize)
         .map(|(k, speed)| {
             let mut row = vec![format!("{speed:.2}")];
             row.extend(contenders.iter().map(|c| {
-                let p = &c.points[k];
+                let p = c.straight()[k];
                 format!("{:.3} m/s, falls {}/{}", p.speed_rms().estimate, p.falls(), p.episodes.len())
             }));
             row
@@ -264,6 +290,12 @@ fn filmed_schedule(seconds: f64) -> String {
         .map(|(at, v, w)| format!("{}:{v}:{w}", (at * seconds * 100.0).round() / 100.0))
         .collect::<Vec<_>>()
         .join(" ")
+}
+
+/// [`GRID_YAW_RATES`] within the env's `yaw_rate_range`.
+fn grid_yaw_rates(env: &EnvConfig) -> Result<Vec<f64>> {
+    let range = crate::envs::command::command_ranges(env)?.map_or([f64::NEG_INFINITY, f64::INFINITY], |(_, w)| w);
+    Ok(GRID_YAW_RATES.iter().copied().filter(|w| (range[0] - 1e-9..=range[1] + 1e-9).contains(w)).collect())
 }
 
 /// [`GRID_SPEEDS`] within the env's `speed_range`.

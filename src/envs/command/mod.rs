@@ -24,6 +24,11 @@
 //! - `vertical_velocity`: -v_up^2 (`_reward_lin_vel_z`, 2.0), the body-height term;
 //! - `action_rate`: -|a_t - a_{t-1}|^2 over the normalised action (`_reward_action_rate`, 0.01);
 //! - `energy`: -(the motors' mechanical work this step, J) / dt, a power;
+//! - `feet_air_time`: on the step a foot touches down, the seconds it was in the air less a target
+//!   (0.5 s), summed over the feet, and only while the commanded speed is above 0.1 m/s
+//!   (`_reward_feet_air_time`, 1.0 there): what is meant to make a policy lift its feet rather
+//!   than stand or shuffle. Off by default: the Minitaur's bounding strides are shorter than the
+//!   target, and on Ant it taught PPO to hop in place (benches/results/ant-command/README.md);
 //! - `positive_clip`: what lifts a negative total to zero when `only_positive_rewards` is on
 //!   (legged_gym's default: it "avoids early termination problems", since a step that costs
 //!   more than it earns teaches the robot to fall), zero otherwise. The terms still sum to the
@@ -120,7 +125,7 @@ use super::{BoxSpace, Env, EnvError, EnvSpec, Info, Step};
 use crate::mujoco::Data;
 
 /// The reward terms of every command task, in the order `Info::reward_terms` lists them.
-pub const REWARD_TERMS: [&str; 8] = [
+pub const REWARD_TERMS: [&str; 9] = [
     "tracking_speed",
     "tracking_yaw_rate",
     "orientation",
@@ -128,8 +133,16 @@ pub const REWARD_TERMS: [&str; 8] = [
     "vertical_velocity",
     "action_rate",
     "energy",
+    "feet_air_time",
     "positive_clip",
 ];
+
+/// A foot is on the ground when its contacts push it up by more than this (N), legged_gym's
+/// `contact_forces[..., 2] > 1.`.
+const FOOT_CONTACT_FORCE: f64 = 1.0;
+/// Commands slower than this (m/s) earn no `feet_air_time`: standing is not stepping
+/// (legged_gym's `norm(commands[:, :2]) > 0.1`).
+const STEPPING_SPEED: f64 = 0.1;
 
 /// What a command task adds to its base env's observation: heading-frame linear velocity (3),
 /// body-frame angular velocity (3) and the command (2).
@@ -171,8 +184,16 @@ pub struct CommandSettings {
     pub action_rate_weight: f64,
     /// Weight of `energy` (per watt of mechanical power, per second).
     pub energy_weight: f64,
+    /// Weight of `feet_air_time` (per second).
+    pub feet_air_time_weight: f64,
+    /// Air time (s) a step must exceed to earn `feet_air_time`; shorter steps cost.
+    pub feet_air_time_target: f64,
     /// Clip each step's reward at zero from below (the `positive_clip` term).
     pub only_positive_rewards: bool,
+    /// The direction the task calls forward, in degrees counter-clockwise from the commanded
+    /// body's x axis: the heading frame of the observed velocity and of the speed tracked. 0 is
+    /// the body's x axis, as legged_gym measures in the base frame.
+    pub forward_angle: f64,
 }
 
 impl Default for CommandSettings {
@@ -196,7 +217,10 @@ impl Default for CommandSettings {
             vertical_velocity_weight: 2.0,
             action_rate_weight: 0.01,
             energy_weight: 0.001,
+            feet_air_time_weight: 0.0,
+            feet_air_time_target: 0.5,
             only_positive_rewards: true,
+            forward_angle: 0.0,
         }
     }
 }
@@ -220,6 +244,18 @@ impl CommandSettings {
         if !(0.0..=1.0).contains(&self.standing_probability) {
             return Err(fail(format!("standing_probability must lie in [0, 1], got {}", self.standing_probability)));
         }
+        if !(self.forward_angle.is_finite() && self.forward_angle.abs() <= 180.0) {
+            return Err(fail(format!(
+                "forward_angle must be a finite number of degrees in [-180, 180], got {}",
+                self.forward_angle
+            )));
+        }
+        if !(self.feet_air_time_target.is_finite() && self.feet_air_time_target >= 0.0) {
+            return Err(fail(format!(
+                "feet_air_time_target must be a finite number of seconds >= 0, got {}",
+                self.feet_air_time_target
+            )));
+        }
         if !(self.tracking_sigma.is_finite() && self.tracking_sigma > 0.0) {
             return Err(fail(format!("tracking_sigma must be a finite number > 0, got {}", self.tracking_sigma)));
         }
@@ -233,7 +269,7 @@ impl CommandSettings {
     }
 
     /// Each weighted reward term's weight, in [`REWARD_TERMS`]' order (all but `positive_clip`).
-    pub fn weights(&self) -> [(&'static str, f64); 7] {
+    pub fn weights(&self) -> [(&'static str, f64); 8] {
         [
             ("tracking_speed", self.tracking_speed_weight),
             ("tracking_yaw_rate", self.tracking_yaw_rate_weight),
@@ -242,6 +278,7 @@ impl CommandSettings {
             ("vertical_velocity", self.vertical_velocity_weight),
             ("action_rate", self.action_rate_weight),
             ("energy", self.energy_weight),
+            ("feet_air_time", self.feet_air_time_weight),
         ]
     }
 }
@@ -284,6 +321,8 @@ pub trait CommandBase: Registered<Options: Default + Clone + std::fmt::Debug + P
     const COMMAND_NAME: &'static str;
     /// The body whose velocity is commanded (Minitaur's `base`, Ant's `torso`).
     const BODY: &'static str;
+    /// The feet's geoms, whose touchdowns `feet_air_time` counts.
+    const FEET: [&'static str; 4];
     /// The command's defaults on this robot.
     fn command_defaults() -> CommandSettings {
         CommandSettings::default()
@@ -304,12 +343,13 @@ pub struct BaseMotion {
 }
 
 impl BaseMotion {
-    /// The motion of `body`, whose free joint's velocities start at `qvel[dof]`.
-    pub fn of(data: &Data, body: usize, dof: usize) -> BaseMotion {
+    /// The motion of `body`, whose free joint's velocities start at `qvel[dof]`, with the heading
+    /// frame's forward axis `forward_angle` radians counter-clockwise from the body's x axis.
+    pub fn of(data: &Data, body: usize, dof: usize, forward_angle: f64) -> BaseMotion {
         let r = &data.xmat()[9 * body..9 * body + 9];
         let v = &data.qvel()[dof..dof + 6];
         // MuJoCo's free joint: linear velocity in the world frame, angular in the body frame.
-        let yaw = r[3].atan2(r[0]);
+        let yaw = r[3].atan2(r[0]) + forward_angle;
         let (s, c) = yaw.sin_cos();
         let velocity = [c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]];
         let angular_velocity = [v[3], v[4], v[5]];
@@ -331,6 +371,52 @@ pub struct CommandEnv<B: CommandBase> {
     rng: ChaCha8Rng,
     last_action: Vec<f64>,
     last_obs: Vec<f64>,
+    feet: Feet,
+}
+
+/// The feet's geoms, and per foot the seconds since it left the ground and whether it touched
+/// it at the last step, for `feet_air_time`.
+struct Feet {
+    geoms: [usize; 4],
+    air_time: [f64; 4],
+    last_contact: [bool; 4],
+}
+
+impl Feet {
+    fn reset(&mut self) {
+        self.air_time = [0.0; 4];
+        self.last_contact = [false; 4];
+    }
+
+    /// After a step of `dt` seconds: the summed air time less `target` of the feet that touch
+    /// down now, legged_gym's `_reward_feet_air_time` (contact filtered over two steps, since a
+    /// foot bounces).
+    fn touchdowns(&mut self, data: &Data, dt: f64, target: f64) -> f64 {
+        let mut contact = [false; 4];
+        for c in data.contacts() {
+            for (k, &g) in self.geoms.iter().enumerate() {
+                // The normal force, along the contact frame's first row, is positive pushing the
+                // geoms apart; a foot is on the ground when it carries more than FOOT_CONTACT_FORCE.
+                if (c.geom1 == g || c.geom2 == g) && c.force[0] > FOOT_CONTACT_FORCE {
+                    contact[k] = true;
+                }
+            }
+        }
+        let mut reward = 0.0;
+        for (k, &now) in contact.iter().enumerate() {
+            let filtered = now || self.last_contact[k];
+            self.last_contact[k] = now;
+            let first_contact = self.air_time[k] > 0.0 && filtered;
+            self.air_time[k] += dt;
+            if first_contact {
+                reward += self.air_time[k] - target;
+            }
+            if filtered {
+                self.air_time[k] = 0.0;
+            }
+        }
+        reward
+    }
 }
 
 /// Mixes the reset seed so the command stream is not the base env's own stream.
@@ -358,6 +444,10 @@ impl<B: CommandBase> CommandEnv<B> {
         let schedule = Schedule::parse(&options.command.schedule).expect("validated");
         let process = CommandProcess::new(&options.command, schedule);
         let act_dim = spec.action_space.dim();
+        let mut geoms = [0; 4];
+        for (g, name) in geoms.iter_mut().zip(B::FEET) {
+            *g = model.geom_id(name)?;
+        }
         Ok(CommandEnv {
             base,
             settings: options.command,
@@ -368,11 +458,12 @@ impl<B: CommandBase> CommandEnv<B> {
             rng: ChaCha8Rng::seed_from_u64(STREAM),
             last_action: vec![0.0; act_dim],
             last_obs: Vec::new(),
+            feet: Feet { geoms, air_time: [0.0; 4], last_contact: [false; 4] },
         })
     }
 
     fn observe(&self, base_obs: Vec<f64>) -> Vec<f64> {
-        let m = BaseMotion::of(self.base.data(), self.body, self.dof);
+        let m = BaseMotion::of(self.base.data(), self.body, self.dof, self.settings.forward_angle.to_radians());
         let mut obs = base_obs;
         obs.extend(m.velocity);
         obs.extend(m.angular_velocity);
@@ -380,7 +471,14 @@ impl<B: CommandBase> CommandEnv<B> {
         obs
     }
 
-    fn reward_terms(&self, m: &BaseMotion, command: [f64; 2], action: &[f64], energy: f64) -> Vec<(&'static str, f64)> {
+    fn reward_terms(
+        &self,
+        m: &BaseMotion,
+        command: [f64; 2],
+        action: &[f64],
+        energy: f64,
+        air_time: f64,
+    ) -> Vec<(&'static str, f64)> {
         let s = &self.settings;
         let dt = self.spec.dt;
         let speed_error = (m.velocity[0] - command[0]).powi(2) + m.velocity[1].powi(2);
@@ -394,6 +492,7 @@ impl<B: CommandBase> CommandEnv<B> {
             -m.velocity[2].powi(2),
             -action_rate,
             -energy.abs() / dt,
+            if command[0].abs() > STEPPING_SPEED { air_time / dt } else { 0.0 },
         ];
         let mut terms: Vec<(&'static str, f64)> =
             self.settings.weights().iter().zip(raw).map(|((name, w), r)| (*name, w * r * dt)).collect();
@@ -416,6 +515,7 @@ impl<B: CommandBase> Env for CommandEnv<B> {
         }
         self.process.reset(&mut self.rng);
         self.last_action = vec![0.0; self.spec.action_space.dim()];
+        self.feet.reset();
         let [speed, yaw_rate] = self.process.current();
         info.metrics.extend([("command_speed", speed), ("command_yaw_rate", yaw_rate)]);
         self.last_obs = self.observe(obs);
@@ -432,7 +532,7 @@ impl<B: CommandBase> Env for CommandEnv<B> {
             return Ok(Step { observation, reward: 0.0, terminated: false, truncated: true, info });
         }
         let command = self.process.current();
-        let m = BaseMotion::of(self.base.data(), self.body, self.dof);
+        let m = BaseMotion::of(self.base.data(), self.body, self.dof, self.settings.forward_angle.to_radians());
         let space = &self.spec.action_space;
         let normalised: Vec<f64> = (0..space.dim())
             .map(|i| {
@@ -441,7 +541,13 @@ impl<B: CommandBase> Env for CommandEnv<B> {
             })
             .collect();
         let energy = info.metric("mechanical_energy").unwrap_or(0.0);
-        info.reward_terms = self.reward_terms(&m, command, &normalised, energy);
+        // Counted only when it is rewarded: the contact forces cost time.
+        let air_time = if self.settings.feet_air_time_weight != 0.0 {
+            self.feet.touchdowns(self.base.data(), self.spec.dt, self.settings.feet_air_time_target)
+        } else {
+            0.0
+        };
+        info.reward_terms = self.reward_terms(&m, command, &normalised, energy, air_time);
         self.last_action = normalised;
         self.process.advance(self.spec.dt, &mut self.rng);
         info.metrics.extend([
@@ -469,6 +575,10 @@ impl<B: CommandBase> Env for CommandEnv<B> {
         Some(self.process.current())
     }
 
+    fn forward_angle(&self) -> f64 {
+        self.settings.forward_angle.to_radians()
+    }
+
     /// Replaces the command from now on (a joystick): the stream's redraws and schedule stop
     /// until the next reset.
     fn set_command(&mut self, speed: f64, yaw_rate: f64) -> Result<(), EnvError> {
@@ -486,15 +596,25 @@ impl<B: CommandBase> Env for CommandEnv<B> {
 impl CommandBase for super::Minitaur {
     const COMMAND_NAME: &'static str = "minitaur-command";
     const BODY: &'static str = "base";
+    const FEET: [&'static str; 4] = ["foot_fl", "foot_bl", "foot_fr", "foot_br"];
 }
 
 impl CommandBase for super::Ant {
     const COMMAND_NAME: &'static str = "ant-command";
     const BODY: &'static str = "torso";
+    const FEET: [&'static str; 4] = ["left_ankle_geom", "right_ankle_geom", "third_ankle_geom", "fourth_ankle_geom"];
     /// Ant's motors (gear 150 on unit controls) spend far more power than the Minitaur's (random
     /// actions: about 1.9 kW against 0.16 kW), so its energy weight is a hundredth; its speeds span
-    /// the controller's range, from standing to 1.5 m/s.
+    /// the controller's range, from standing to 1.5 m/s. Its forward is 45° left of the torso's
+    /// x axis, along a leg: Gymnasium's Ant (`ant.xml`) has its four legs on the torso's
+    /// diagonals and no front, and a gait that rows along a leg's direction
+    /// (`controller::ant_row`) is faster than one that trots along the x axis.
     fn command_defaults() -> CommandSettings {
-        CommandSettings { energy_weight: 0.00001, speed_range: [0.0, 1.5], ..CommandSettings::default() }
+        CommandSettings {
+            energy_weight: 0.00001,
+            speed_range: [0.0, 1.5],
+            forward_angle: 45.0,
+            ..CommandSettings::default()
+        }
     }
 }

@@ -87,6 +87,9 @@ pub struct MinitaurOptions {
     /// Battery voltage of every motor (V); 0 keeps PyBullet's: 16 V, or U(14.8, 16.8) when the
     /// dynamics are randomised.
     pub battery_voltage: f64,
+    /// With the dynamics randomised, each episode also draws one battery voltage for every motor
+    /// from U(this, 16.8) V (for training against a flat battery); 0 leaves PyBullet's draw alone.
+    pub random_battery_min: f64,
     /// Delay from an action to the motors acting on it (s), in whole physics steps of 0.002 s:
     /// 0.004 is two sub-steps, 0.01 one control step.
     pub latency: f64,
@@ -138,6 +141,7 @@ impl Default for MinitaurOptions {
             random_com_shift_max: 0.0,
             motor_strength: 1.0,
             battery_voltage: 0.0,
+            random_battery_min: 0.0,
             latency: 0.0,
             random_latency_max: 0.0,
             noise_angle: 0.0,
@@ -372,6 +376,14 @@ impl Minitaur {
                     p.voltage = self.opts.battery_voltage;
                 }
             }
+            // One battery feeds every motor. Drawn after PyBullet's draws, so that an env without
+            // this option draws exactly what it did before.
+            if self.opts.random_battery_min > 0.0 {
+                let voltage = rng.random_range(self.opts.random_battery_min..16.8);
+                if self.opts.battery_voltage == 0.0 {
+                    self.params.iter_mut().for_each(|p| p.voltage = voltage);
+                }
+            }
         }
         self.terrain = perturb::edit_model(&mut model, &self.opts, self.base_body, rng)?;
         Simulation::from_model(Arc::new(model))
@@ -501,4 +513,42 @@ impl Env for Minitaur {
     }
 
     env_core_accessors!();
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn voltages(opts: MinitaurOptions, seeds: std::ops::Range<u64>) -> Vec<[f64; NUM_MOTORS]> {
+        let mut e = Minitaur::new(opts).unwrap();
+        seeds
+            .map(|s| {
+                e.reset(Some(s)).unwrap();
+                e.params.map(|p| p.voltage)
+            })
+            .collect()
+    }
+
+    /// `random_battery_min` draws one battery for all eight motors per episode from U(min, 16.8);
+    /// without it PyBullet's per-motor U(14.8, 16.8) draws stay as they were.
+    #[test]
+    fn a_random_battery_feeds_every_motor_one_voltage_from_its_range() {
+        let flat = voltages(MinitaurOptions { random_battery_min: 6.0, ..Default::default() }, 0..40);
+        for v in &flat {
+            assert!(v.iter().all(|&x| x == v[0]) && (6.0..16.8).contains(&v[0]), "{v:?}");
+        }
+        assert!(flat.iter().any(|v| v[0] < 10.0) && flat.iter().any(|v| v[0] > 13.0));
+        for v in voltages(MinitaurOptions::default(), 0..10) {
+            assert!(v.iter().all(|x| (14.8..16.8).contains(x)) && v.iter().any(|&x| x != v[0]), "{v:?}");
+        }
+        // a fixed battery wins over the draw
+        let fixed =
+            voltages(MinitaurOptions { random_battery_min: 6.0, battery_voltage: 9.0, ..Default::default() }, 0..3);
+        assert!(fixed.iter().all(|v| v.iter().all(|&x| x == 9.0)));
+        let bad =
+            Minitaur::new(MinitaurOptions { random_battery_min: 6.0, randomize_dynamics: false, ..Default::default() });
+        assert!(bad.err().unwrap().to_string().contains("random_battery_min"));
+        let bad = Minitaur::new(MinitaurOptions { random_battery_min: 20.0, ..Default::default() });
+        assert!(bad.err().unwrap().to_string().contains("random_battery_min"));
+    }
 }

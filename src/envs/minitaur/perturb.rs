@@ -40,7 +40,7 @@ const PUSH_DURATION: usize = 10;
 
 /// Every perturbation option: what the held-out protocol resets to nominal, so a policy trained
 /// under perturbations is evaluated in the same world as every other.
-pub const OPTIONS: [&str; 16] = [
+pub const OPTIONS: [&str; 17] = [
     "friction_scale",
     "payload_mass",
     "com_shift",
@@ -48,6 +48,7 @@ pub const OPTIONS: [&str; 16] = [
     "random_com_shift_max",
     "motor_strength",
     "battery_voltage",
+    "random_battery_min",
     "latency",
     "random_latency_max",
     "noise_angle",
@@ -81,6 +82,15 @@ pub(crate) fn validate(o: &MinitaurOptions) -> Result<(), EnvError> {
     c.within("motor_strength", o.motor_strength, 0.0, 2.0)?;
     if o.battery_voltage != 0.0 {
         c.within("battery_voltage", o.battery_voltage, 1.0, 50.0)?;
+    }
+    if o.random_battery_min != 0.0 {
+        c.within("random_battery_min", o.random_battery_min, 1.0, 16.7)?;
+        if !o.randomize_dynamics {
+            return Err(EnvError::InvalidOption {
+                env: "minitaur".into(),
+                message: "random_battery_min draws with the randomised dynamics: set randomize_dynamics = true".into(),
+            });
+        }
     }
     c.within("latency", o.latency, 0.0, 0.5)?;
     c.within("random_latency_max", o.random_latency_max, 0.0, 0.5)?;
