@@ -7,10 +7,12 @@ use crate::envs::EnvConfig;
 use crate::train::metrics::{self, MetricsRow};
 use crate::train::{read_run_config, RunConfig};
 
-/// Option keys that shape the reward: the terms' weights (what a reward sweep varies) and
-/// Minitaur's cap on the speed the distance term pays for.
+/// Option keys that shape the reward: the terms' weights (what a reward sweep varies),
+/// Minitaur's cap on the speed the distance term pays for, and a command task's kernel width and
+/// air-time target.
 pub(crate) fn is_reward_option(key: &str) -> bool {
-    key.ends_with("_weight") || key == "healthy_reward" || key == "max_rewarded_speed"
+    key.ends_with("_weight")
+        || matches!(key, "healthy_reward" | "max_rewarded_speed" | "tracking_sigma" | "feet_air_time_target")
 }
 
 /// `Run::reward_label` of a run with the env's default reward weights.
