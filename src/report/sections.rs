@@ -799,8 +799,15 @@ pub(crate) fn summary(
     let est = |r: &BudgetRow| r.mean_return(BOOTSTRAP_SEED);
     let describe = |r: &BudgetRow| {
         let (falls, n) = r.falls();
+        // A return on another reward than the env's default is not comparable with the others':
+        // say so where it is named.
+        let reward = if r.group.has_default_reward() || r.group.reward.is_empty() {
+            String::new()
+        } else {
+            format!("; its own reward, {}", r.group.reward)
+        };
         format!(
-            "{} at {} ({} seed{}): return {} at {} m/s, falls {}",
+            "{} at {} ({} seed{}{reward}): return {} at {} m/s, falls {}",
             r.group.label(),
             budget(r.budget),
             r.seeds(),
