@@ -85,8 +85,9 @@ pub(crate) fn policy_at(run: &Run, budget: u64) -> Result<PolicySource, String> 
 /// actor there: it is reported only where a run kept one (500k).
 const KEPT_BUDGET: u64 = 500_000;
 
-/// The budgets a set of runs is reported at: each standard budget some run reached; the full
-/// budget of each run, and [`KEPT_BUDGET`], where the run reached it and kept its actor there;
+/// The budgets a set of runs is reported at: each standard budget but [`KEPT_BUDGET`] that some
+/// run reached; the full budget of each run, and [`KEPT_BUDGET`], where the run reached it and
+/// kept its actor there;
 /// and the last step of each run that reached no standard budget (short runs), so that every run
 /// appears in some row. An imported policy has one row, at the
 /// step its `source.toml` states (or [`UNKNOWN_BUDGET`]).
@@ -136,7 +137,7 @@ mod tests {
     }
 
     #[test]
-    fn a_full_budget_off_the_standard_list_gets_a_row_when_its_policy_was_kept() {
+    fn a_run_trained_to_500k_gets_a_500k_row_only_when_its_policy_was_kept() {
         let tmp = tempfile::tempdir().unwrap();
         let dir = tmp.path().to_path_buf();
         let mut run = run_in(&dir, 500_000, 500_000);
