@@ -204,6 +204,18 @@ fn duplicate_seeds(evaluated: &[SeedResult]) -> Vec<u64> {
     seeds.windows(2).filter(|w| w[0] == w[1]).map(|w| w[0]).collect()
 }
 
+/// The env a held-out row plays: the run's env without its perturbations (`for_evaluation`) and,
+/// on a velocity-command task, with the task's default reward. There the reward is a training
+/// device (fine-tunes narrow its kernels or reweigh its terms) and the tracking table is the
+/// comparison, so every policy's return is measured on the one reward the controller is scored on.
+pub(crate) fn evaluation_env(env: &EnvConfig) -> EnvConfig {
+    let mut out = env.for_evaluation();
+    if crate::envs::command::is_command_task(&out.name) {
+        out.options.retain(|k, _| !super::runs::is_reward_option(k));
+    }
+    out
+}
+
 /// Evaluates `runs` (one group) at `budget`, optionally under a push; episodes `cache` holds are
 /// read from it, the others played and kept there.
 pub(crate) fn evaluate_row(
@@ -233,7 +245,7 @@ pub(crate) fn evaluate_row(
             }
         };
         protocol.check_disjoint(cfg.seed, cfg.train.total_steps, cfg.train.eval_episodes)?;
-        let env_config = cfg.env.for_evaluation();
+        let env_config = evaluation_env(&cfg.env);
         let key = cache.timed(|| -> Result<Key> {
             let policy_key = format!("agent {}", source.digest(&run.dir)?);
             Key::episodes(&env_config, protocol, &policy_key, None, push)
@@ -275,5 +287,39 @@ pub(crate) fn machine_of(run: &Run, budget: u64) -> String {
             parts.join(" then ")
         }
         _ => "not recorded".to_string(),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config(env: &str, overrides: &str) -> EnvConfig {
+        let pairs = crate::envs::parse_overrides(overrides).unwrap();
+        let mut c = EnvConfig::new(env).with_overrides(&pairs).unwrap();
+        c.options = c.resolved_options().unwrap();
+        c
+    }
+
+    #[test]
+    fn command_tasks_are_played_on_their_default_reward() {
+        let trained =
+            config("minitaur-command", "tracking_sigma=0.05,tracking_yaw_rate_weight=1.0,random_battery_min=6.0");
+        let played = evaluation_env(&trained);
+        assert_eq!(played.resolved_options().unwrap(), EnvConfig::new("minitaur-command").resolved_options().unwrap());
+        // what is not reward or perturbation stays: the Ant run trained in the torso's frame
+        let ant = evaluation_env(&config("ant-command", "forward_angle=0.0,feet_air_time_weight=1.0"));
+        let options = ant.resolved_options().unwrap();
+        assert_eq!(options.get("forward_angle").and_then(|v| v.as_float()), Some(0.0));
+        let defaults = EnvConfig::new("ant-command").resolved_options().unwrap();
+        assert_eq!(options.get("feet_air_time_weight"), defaults.get("feet_air_time_weight"));
+    }
+
+    #[test]
+    fn other_envs_keep_the_reward_they_were_trained_on() {
+        let freeman = config("minitaur", "energy_weight=0.0,random_push_max=0.5");
+        let played = evaluation_env(&freeman);
+        assert_eq!(played.options.get("energy_weight").and_then(|v| v.as_float()), Some(0.0));
+        assert!(!played.options.contains_key("random_push_max"));
     }
 }

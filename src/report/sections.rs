@@ -800,9 +800,12 @@ pub(crate) fn summary(
     let describe = |r: &BudgetRow| {
         let (falls, n) = r.falls();
         // A return on another reward than the env's default is not comparable with the others':
-        // say so where it is named.
+        // say so where it is named. A command task's rows are all played on its default reward
+        // (`heldout::evaluation_env`), so there only the training reward is named.
         let reward = if r.group.has_default_reward() || r.group.reward.is_empty() {
             String::new()
+        } else if crate::envs::command::is_command_task(env) {
+            format!("; trained on {}, return on the task's default reward", r.group.reward)
         } else {
             format!("; its own reward, {}", r.group.reward)
         };

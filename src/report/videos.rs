@@ -419,7 +419,15 @@ fn film_panel(
             let source = policy_at(run, *budget).map_err(|why| anyhow::anyhow!("{}: {why}", run_dir.display()))?;
             let (cfg, agent) = source.load(run_dir, *budget)?;
             let mut policy = AgentPolicy { agent: agent.as_ref(), label: label.clone() };
-            film_episode(&cfg.env.for_evaluation(), &mut policy, &settings, fps, episode_seed, Some(label), push)
+            film_episode(
+                &super::heldout::evaluation_env(&cfg.env),
+                &mut policy,
+                &settings,
+                fps,
+                episode_seed,
+                Some(label),
+                push,
+            )
         }
         Actor::Policy { source, label } => {
             // In the given env, as the robustness suite plays it: the policy's own training
