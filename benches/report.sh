@@ -35,7 +35,7 @@ runs=(
   $r/ant/{td3,ddpg}-seed{0,1}-300k $r/ant/sac-seed{0,1,2,3,4}-300k
   # HalfCheetah and Humanoid: curves only
   $r/half-cheetah/{td3,sac,ddpg}-seed{0,1}-300k
-  $r/humanoid/{td3,sac}-seed{0,1}-300k $r/humanoid/td3-seed2-300k $r/humanoid/td3-cleanrl-seed{0,1,2}-300k
+  $r/humanoid/td3-seed{0,1}-300k $r/humanoid/sac-seed1-300k $r/humanoid/td3-seed2-300k $r/humanoid/td3-cleanrl-seed{0,1,2}-300k
   # PPO with CleanRL's settings, 1M steps, with their policies; PPO and the branching DQN on Minitaur
   $r/{half-cheetah,walker2d}/ppo-seed{0,1,2}-1m $r/hopper/ppo-seed{0,1,2,3,4,5,6,7,8,9}-1m
   $r/minitaur/ppo-8envs-seed{0,1,2}-2m $r/minitaur/dqn-seed0-300k $r/inverted-pendulum/dqn-seed0
@@ -64,6 +64,10 @@ runs=(
   # (normalised observations, rewards x100, a 1k warm-up), seeds 0-2, 500k
   $r/minitaur/sac-freeman-norm-seed{0,1,2}
   $r/{half-cheetah,ant,humanoid}/crossq-256-seed{0,1,2}
+  # Humanoid toward 1M with policies at each budget it has reached: SAC's preset, seed 0 (it
+  # replaces the earlier curves-only sac-seed0-300k, the same seed and settings on older code), and
+  # CrossQ with 512-wide critics, seed 0
+  $r/humanoid/sac-seed0-1m $r/humanoid/crossq-512-seed0
   # PPO on the velocity-command task (minitaur-command), with its policies: the report's
   # same-command section puts them beside the controller on the same commands
   $r/minitaur-command/ppo-seed{0,1,2}-6m
