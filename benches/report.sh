@@ -53,8 +53,7 @@ runs=(
   $r/minitaur/ppo-robust-com25-seed{0,1,2}-2m
   $r/minitaur/ppo-robust-com25-ft-seed{0,1,2}-500k
   $r/minitaur/ppo-robust-com25-cap1.6-ft-seed{0,1,2}-{500k,1m}
-  # SAC on Minitaur with Freeman's reward (no energy cost; drift weights 0, 0.5 and 1), 500k; CrossQ
-  # with 256-wide critics, policies at 100k and 300k
+  # SAC on Minitaur with Freeman's reward (no energy cost; drift weights 0, 0.5 and 1), 500k
   $r/minitaur/sac-energy0-*500k
   # SAC on Minitaur with the 100k probes' changes combined (normalised observations, rewards x100,
   # a 1k warm-up, 50 Hz control), seeds 0-2 with policies at 100k, 300k and 500k (seed 1 also
@@ -63,7 +62,10 @@ runs=(
   # Freeman's env (PyBullet's Minitaur at 100 Hz, no energy cost) with the agent-side changes
   # (normalised observations, rewards x100, a 1k warm-up), seeds 0-2, 500k
   $r/minitaur/sac-freeman-norm-seed{0,1,2}
+  # CrossQ with 256-wide critics, policies at 100k and 300k; on Minitaur with SAC's four combined
+  # changes, seeds 0-2 with policies at 100k, 300k and 500k
   $r/{half-cheetah,ant,humanoid}/crossq-256-seed{0,1,2}
+  $r/minitaur/crossq-combined-seed{0,1,2}
   # Humanoid toward 1M with policies at each budget it has reached: SAC's preset, seed 0 (it
   # replaces the earlier curves-only sac-seed0-300k, the same seed and settings on older code), and
   # CrossQ with 512-wide critics, seed 0

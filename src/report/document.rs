@@ -2,6 +2,10 @@
 //! cannot say different things.
 use std::fmt::Write as _;
 
+/// The largest SVG chart the HTML page embeds; a larger one (a chart with many dense curves) is
+/// shown from its file beside the page, so the page stays light.
+pub(crate) const INLINE_SVG_MAX_BYTES: usize = 40_000;
+
 #[derive(Debug, Clone, PartialEq)]
 pub enum Block {
     Heading {
@@ -73,6 +77,8 @@ impl Document {
         self.blocks.push(Block::Paragraph(text.into()));
     }
 
+    /// An SVG chart the page embeds, or, when it is larger than [`INLINE_SVG_MAX_BYTES`], shows
+    /// from its file like [`Document::image`].
     pub fn figure(&mut self, file: impl Into<String>, svg: String, caption: impl Into<String>) {
         self.blocks.push(Block::Figure { file: file.into(), svg, caption: caption.into(), inline: true });
     }
@@ -153,10 +159,10 @@ impl Document {
                 Block::Paragraph(text) => {
                     let _ = writeln!(body, "<p>{}</p>", escape(text));
                 }
-                Block::Figure { svg, caption, inline: true, .. } => {
+                Block::Figure { svg, caption, inline: true, .. } if svg.len() <= INLINE_SVG_MAX_BYTES => {
                     let _ = writeln!(body, "<figure>{svg}<figcaption>{}</figcaption></figure>", escape(caption));
                 }
-                Block::Image { file, caption } => {
+                Block::Image { file, caption } | Block::Figure { file, caption, inline: true, .. } => {
                     let _ = writeln!(
                         body,
                         "<figure><img src=\"{}\" alt=\"{}\"><figcaption>{}</figcaption></figure>",
@@ -244,5 +250,21 @@ mod tests {
         assert!(md.contains("## minitaur") && html.contains("<h2>minitaur</h2>"));
         assert_eq!(md.matches("| td3 |").count(), 1);
         assert_eq!(html.matches("<tr>").count(), 3);
+    }
+
+    /// A chart up to the limit is embedded; a larger one is shown from its file, with its caption.
+    #[test]
+    fn a_large_chart_is_shown_from_its_file_not_embedded() {
+        let small = format!("<svg>{}</svg>", "x".repeat(INLINE_SVG_MAX_BYTES - 11));
+        let large = format!("<svg>{}</svg>", "y".repeat(INLINE_SVG_MAX_BYTES));
+        let mut d = Document::new("report");
+        d.figure("small.svg", small.clone(), "small chart");
+        d.figure("large.svg", large.clone(), "large chart");
+        let (md, html) = (d.to_markdown(), d.to_html());
+        assert_eq!(small.len(), INLINE_SVG_MAX_BYTES);
+        assert!(html.contains(&small) && !html.contains("src=\"small.svg\""));
+        assert!(!html.contains(&large));
+        assert!(html.contains("<img src=\"large.svg\" alt=\"large chart\"><figcaption>large chart</figcaption>"));
+        assert!(md.contains("![small chart](small.svg)") && md.contains("![large chart](large.svg)"));
     }
 }

@@ -268,7 +268,7 @@ pub fn held_out(
         doc.lines(notes);
     }
     // What no learning scores under the same protocol.
-    let env_config = rows.iter().find_map(|r| r.env_config.clone()).unwrap_or_else(|| EnvConfig::new(&groups[0].0.env));
+    let env_config = reference_env(&groups[0].0.env, &rows)?;
     let key = crate::evaluation::cache::Key::episodes(&env_config, &opts.protocol, "random 0", None, None)?;
     let random = opts.cache.episodes(&key, || {
         let mut env = make(&env_config)?;
@@ -400,6 +400,25 @@ pub fn published(doc: &mut Document, env: &str, rows: &[BudgetRow], groups: &[(&
     }
 }
 
+/// The env the controller and the random policy play, with its options resolved: the env's
+/// defaults where any learned row was trained on them, else the first row's options and reward.
+/// Rows trained under other options are then not compared with the controller. Taking the first
+/// row alone would let a group's name, which orders the rows, decide that env (and its control
+/// rate).
+fn reference_env(env: &str, rows: &[BudgetRow]) -> Result<EnvConfig> {
+    let default = EnvConfig::new(env);
+    let default_options = default.resolved_options()?;
+    let on_defaults = |r: &BudgetRow| {
+        r.env_config.as_ref().is_some_and(|c| c.resolved_options().ok().as_ref() == Some(&default_options))
+    };
+    let chosen = if rows.iter().any(on_defaults) {
+        default
+    } else {
+        rows.iter().find_map(|r| r.env_config.clone()).unwrap_or(default)
+    };
+    Ok(EnvConfig { options: chosen.resolved_options()?, ..chosen })
+}
+
 /// The controller's grid, the learned rows against it, and pushes.
 pub fn controller(
     doc: &mut Document,
@@ -409,10 +428,7 @@ pub fn controller(
     rows: &[BudgetRow],
     opts: &ReportOptions,
 ) -> Result<Option<ControllerSection>> {
-    // The controller runs under the learned policies' env options and reward; rows trained under
-    // other options than the first are compared with a controller under theirs only if they are the same.
-    let env_config = rows.iter().find_map(|r| r.env_config.clone()).unwrap_or_else(|| crate::envs::EnvConfig::new(env));
-    let env_config = crate::envs::EnvConfig { options: env_config.resolved_options()?, ..env_config };
+    let env_config = reference_env(env, rows)?;
     let same_env = |r: &BudgetRow| {
         r.env_config.as_ref().is_none_or(|c| c.resolved_options().ok().as_ref() == Some(&env_config.options))
     };
@@ -901,4 +917,40 @@ pub(crate) fn summary(
     }
     blocks.extend(winner_clip.map(Block::clip));
     blocks
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn row(algo: &str, overrides: &str) -> BudgetRow {
+        let group = Group {
+            env: "minitaur".into(),
+            algo: algo.into(),
+            reward: String::new(),
+            settings: String::new(),
+            variant: String::new(),
+        };
+        let mut row = BudgetRow::empty(group, 100_000);
+        let pairs = crate::envs::parse_overrides(overrides).unwrap();
+        row.env_config = Some(EnvConfig::new("minitaur").with_overrides(&pairs).unwrap().for_evaluation());
+        row
+    }
+
+    #[test]
+    fn the_controller_plays_the_default_env_when_any_row_trained_on_it() {
+        let defaults = EnvConfig::new("minitaur").resolved_options().unwrap();
+        // A 50 Hz group whose name sorts first does not move the controller to 50 Hz.
+        let rows = [row("crossq", "action_repeat=10,max_episode_steps=500"), row("ppo", "")];
+        let chosen = reference_env("minitaur", &rows).unwrap();
+        assert_eq!(chosen.name, "minitaur");
+        assert_eq!(chosen.options, defaults);
+        // With no row on the defaults, the first row's options (resolved) are the controller's.
+        let rows = [row("sac", "action_repeat=10,max_episode_steps=500"), row("td3", "energy_weight=0")];
+        let chosen = reference_env("minitaur", &rows).unwrap();
+        assert_eq!(chosen.options, rows[0].env_config.as_ref().unwrap().resolved_options().unwrap());
+        assert_ne!(chosen.options, defaults);
+        // No row with an env: the defaults.
+        assert_eq!(reference_env("minitaur", &[]).unwrap().options, defaults);
+    }
 }
