@@ -400,23 +400,24 @@ pub fn published(doc: &mut Document, env: &str, rows: &[BudgetRow], groups: &[(&
     }
 }
 
+/// Whether `row` was trained under `options` (resolved); None when the row has no env (no policy
+/// was evaluated).
+fn trained_under(row: &BudgetRow, options: &toml::Table) -> Option<bool> {
+    row.env_config.as_ref().map(|c| c.resolved_options().ok().as_ref() == Some(options))
+}
+
 /// The env the controller and the random policy play, with its options resolved: the env's
 /// defaults where any learned row was trained on them, else the first row's options and reward.
 /// Rows trained under other options are then not compared with the controller. Taking the first
 /// row alone would let a group's name, which orders the rows, decide that env (and its control
 /// rate).
 fn reference_env(env: &str, rows: &[BudgetRow]) -> Result<EnvConfig> {
-    let default = EnvConfig::new(env);
-    let default_options = default.resolved_options()?;
-    let on_defaults = |r: &BudgetRow| {
-        r.env_config.as_ref().is_some_and(|c| c.resolved_options().ok().as_ref() == Some(&default_options))
-    };
-    let chosen = if rows.iter().any(on_defaults) {
-        default
-    } else {
-        rows.iter().find_map(|r| r.env_config.clone()).unwrap_or(default)
-    };
-    Ok(EnvConfig { options: chosen.resolved_options()?, ..chosen })
+    let defaults = EnvConfig::new(env).resolved_options()?;
+    if rows.iter().any(|r| trained_under(r, &defaults) == Some(true)) {
+        return Ok(EnvConfig { name: env.to_string(), options: defaults });
+    }
+    let first = rows.iter().find_map(|r| r.env_config.clone()).unwrap_or_else(|| EnvConfig::new(env));
+    Ok(EnvConfig { options: first.resolved_options()?, ..first })
 }
 
 /// The controller's grid, the learned rows against it, and pushes.
@@ -429,9 +430,7 @@ pub fn controller(
     opts: &ReportOptions,
 ) -> Result<Option<ControllerSection>> {
     let env_config = reference_env(env, rows)?;
-    let same_env = |r: &BudgetRow| {
-        r.env_config.as_ref().is_none_or(|c| c.resolved_options().ok().as_ref() == Some(&env_config.options))
-    };
+    let same_env = |r: &BudgetRow| trained_under(r, &env_config.options).unwrap_or(true);
     let comparable: Vec<&BudgetRow> = rows.iter().filter(|r| same_env(r)).collect();
     let mut section =
         controller_section(&env_config, rows, same_env, &opts.protocol, BOOTSTRAP_SEED, opts.threads, &opts.cache)?;
