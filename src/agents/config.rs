@@ -373,12 +373,14 @@ mod tests {
             let section = table[algo.name()].as_table().unwrap();
             // Every serialised key is declared (target_entropy is absent while None).
             assert!(section.keys().all(|k| section_keys(algo).contains(&k.as_str())), "{algo:?}");
-            // target_entropy (SAC, CrossQ) and target_kl (PPO) are absent while None, and PPO's
-            // activation and log_std_init while at their defaults (tanh, 0).
+            // target_entropy (SAC, CrossQ) and target_kl (PPO) are absent while None, PPO's
+            // activation and log_std_init while at their defaults (tanh, 0), and
+            // critic_layer_norm (SAC, TD3, DDPG) while off.
             let optional = match algo {
-                Algo::Sac | Algo::Crossq => 1,
+                Algo::Sac => 2,
+                Algo::Crossq | Algo::Td3 | Algo::Ddpg => 1,
                 Algo::Ppo => 3,
-                _ => 0,
+                Algo::Dqn => 0,
             };
             assert_eq!(section.len() + optional, section_keys(algo).len());
             for other in ["td3", "ddpg", "sac", "ppo", "dqn", "crossq"].into_iter().filter(|o| *o != algo.name()) {
@@ -403,5 +405,24 @@ mod tests {
         t.insert("algo".into(), "sac".into());
         t.insert("target_entropy".into(), (-3.0).into());
         assert_eq!(TrainConfig::from_table(&t, OtherAlgorithmKeys::Refuse).unwrap().sac().target_entropy, Some(-3.0));
+        // layer-normalised critics: an option of SAC, TD3 and DDPG, refused for the others
+        for (algo, takes) in [("sac", true), ("td3", true), ("ddpg", true), ("crossq", false), ("ppo", false)] {
+            let mut t = toml::Table::new();
+            t.insert("algo".into(), algo.into());
+            t.insert("critic_layer_norm".into(), true.into());
+            match TrainConfig::from_table(&t, OtherAlgorithmKeys::Refuse) {
+                Ok(c) => {
+                    assert!(takes, "{algo}");
+                    let on = if algo == "sac" { c.sac().critic_layer_norm } else { c.dpg().critic_layer_norm };
+                    assert!(on, "{algo}");
+                    assert!(toml::to_string(&c).unwrap().contains("critic_layer_norm = true"));
+                }
+                Err(e) => {
+                    let e = e.to_string();
+                    assert!(!takes && e.contains("'critic_layer_norm'") && e.contains("sac"), "{algo}: {e}");
+                }
+            }
+        }
+        assert!(!toml::to_string(&TrainConfig::sac_defaults()).unwrap().contains("critic_layer_norm"));
     }
 }

@@ -17,6 +17,7 @@ pub mod dense;
 pub mod glibc_math;
 pub(crate) mod inplace;
 pub mod kernel_path;
+pub mod layer_norm;
 pub mod matmul;
 pub mod optim;
 pub mod second_core;

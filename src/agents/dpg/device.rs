@@ -44,6 +44,10 @@ impl GenericDeterministic {
         rng: &mut ChaCha8Rng,
         device: &Device,
     ) -> anyhow::Result<Self> {
+        anyhow::ensure!(
+            !cfg.dpg().critic_layer_norm,
+            "critic_layer_norm has no device-generic path: train it with --device cpu"
+        );
         let params = DeterministicAgent::new(cfg, obs_dim, act_dim, rng)?.parameters();
         let stack = |prefix: &str| DeviceStack::from_named(&params, prefix, device);
         let (actor, critics) = (stack("actor")?, stack("critics")?);

@@ -61,7 +61,11 @@ impl DeterministicAgent {
         let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), Output::Tanh, cfg.weight_init, rng)?;
         let dpg = cfg.dpg();
         let n_critics = if dpg.twin_critics { 2 } else { 1 };
-        let critics = Critics::new(n_critics, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), cfg.weight_init, rng)?;
+        let mut critics =
+            Critics::new(n_critics, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), cfg.weight_init, rng)?;
+        if dpg.critic_layer_norm {
+            critics = critics.with_layer_norm()?;
+        }
         let actor_target = actor.deep_copy()?;
         let critic_targets = critics.deep_copy()?;
         let actor_opt = Adam::new(actor.params(), cfg.actor_lr);
@@ -228,6 +232,9 @@ pub struct DpgConfig {
     pub policy_delay: u32,
     /// Two critics and the smaller of their targets (TD3), or one (DDPG).
     pub twin_critics: bool,
+    /// Layer-normalise the critics' hidden layers (`agents::common::critics`). Off unless asked for.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub critic_layer_norm: bool,
 }
 
 impl DpgConfig {
@@ -242,6 +249,7 @@ impl DpgConfig {
         "noise_clip",
         "policy_delay",
         "twin_critics",
+        "critic_layer_norm",
     ];
 
     /// Checks this section's settings.
@@ -270,6 +278,7 @@ impl TrainConfig {
                 noise_clip: 0.5,
                 policy_delay: 2,
                 twin_critics: true,
+                critic_layer_norm: false,
             }),
             ..TrainConfig::shared_defaults(Algo::Td3)
         }

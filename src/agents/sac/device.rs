@@ -44,6 +44,10 @@ impl GenericSac {
             s.sac_version == SacVersion::V2,
             "SAC v1 has no device-generic path: train it with --device cpu"
         );
+        anyhow::ensure!(
+            !s.critic_layer_norm,
+            "critic_layer_norm has no device-generic path: train it with --device cpu"
+        );
         let params = SacAgent::new(cfg, obs_dim, act_dim, rng)?.parameters();
         let actor = DeviceStack::from_named(&params, "actor", device)?;
         let critics = DeviceStack::from_named(&params, "critics", device)?;

@@ -71,9 +71,12 @@ impl SacAgent {
             // jaxrl: mean head gain sqrt(2), log-std head gain 1 (`log_std_scale`).
             actor.scale_output_rows(act_dim..2 * act_dim, std::f64::consts::FRAC_1_SQRT_2)?;
         }
-        let critics = Critics::new(2, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), cfg.weight_init, rng)?;
-        let critic_targets = critics.deep_copy()?;
         let settings = cfg.sac();
+        let mut critics = Critics::new(2, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), cfg.weight_init, rng)?;
+        if settings.critic_layer_norm {
+            critics = critics.with_layer_norm()?;
+        }
+        let critic_targets = critics.deep_copy()?;
         let value = match settings.sac_version {
             SacVersion::V2 => None,
             SacVersion::V1 => {
@@ -254,6 +257,9 @@ pub struct SacConfig {
     pub value_lr: f64,
     /// How the log-probability is corrected for the tanh squashing.
     pub tanh_correction: TanhCorrection,
+    /// Layer-normalise the critics' hidden layers (`agents::common::critics`). Off unless asked for.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub critic_layer_norm: bool,
 }
 
 impl SacConfig {
@@ -265,6 +271,7 @@ impl SacConfig {
         "target_entropy",
         "value_lr",
         "tanh_correction",
+        "critic_layer_norm",
     ];
 
     /// Checks this section's settings.
@@ -292,6 +299,7 @@ impl TrainConfig {
                 target_entropy: None,
                 value_lr: 3e-4,
                 tanh_correction: TanhCorrection::Exact,
+                critic_layer_norm: false,
             }),
             ..TrainConfig::shared_defaults(Algo::Sac)
         }
