@@ -158,14 +158,20 @@ fn assert_same_run(whole: &Path, resumed: &Path, what: &str) {
 
 /// The unbroken run, then one killed run per crash point, each resumed and compared.
 fn crash_and_resume(algo: &str, points: &[&str]) {
+    crash_and_resume_with(algo, "", points);
+}
+
+/// [`crash_and_resume`] with `extra` settings on top of the algorithm's.
+fn crash_and_resume_with(algo: &str, extra: &str, points: &[&str]) {
     let dir = tempfile::tempdir().unwrap();
     let whole = dir.path().join("whole");
-    ok(&train(algo, &whole, None), "the unbroken run");
+    let train = |out: &Path, fault| locobench(&train_args(algo, out.to_str().unwrap(), extra), fault);
+    ok(&train(&whole, None), "the unbroken run");
     assert!(contents(&whole).keys().any(|k| k.starts_with("policies/step-1500")), "no budget policy");
     for point in points {
         let run = dir.path().join(point.replace(':', "-"));
-        let what = format!("{algo} killed at {point}");
-        killed(&train(algo, &run, Some(point)), &what);
+        let what = format!("{algo} {extra} killed at {point}");
+        killed(&train(&run, Some(point)), &what);
         let out = resume(&run);
         ok(&out, &format!("resuming {what}"));
         assert_same_run(&whole, &run, &what);
@@ -188,6 +194,12 @@ fn td3_killed_anywhere_resumes_to_the_unbroken_run() {
 #[test]
 fn sac_killed_anywhere_resumes_to_the_unbroken_run() {
     crash_and_resume("sac", &points("sac"));
+}
+
+#[test]
+fn layer_normalised_critics_killed_anywhere_resume_to_the_unbroken_run() {
+    crash_and_resume_with("td3", "critic_layer_norm=true", &["checkpoint-write:2", "step:777"]);
+    crash_and_resume_with("sac", "critic_layer_norm=true", &["after-checkpoint:1", "evaluation:3"]);
 }
 
 #[test]
