@@ -67,8 +67,8 @@ runs=(
   $r/{half-cheetah,ant,humanoid}/crossq-256-seed{0,1,2}
   $r/minitaur/crossq-combined-seed{0,1,2}
   # TD3 and SAC with those four changes and layer-normalised critics (critic_layer_norm): TD3
-  # seeds 0-2 with policies at 100k and 300k (seed 0 also 500k), SAC seed 0 to 300k
-  $r/minitaur/td3-combined-ln-seed{0,1,2} $r/minitaur/sac-combined-ln-seed0
+  # seeds 0-2 with policies at 100k, 300k and 500k; SAC and DDPG seed 0 to 300k
+  $r/minitaur/td3-combined-ln-seed{0,1,2} $r/minitaur/{sac,ddpg}-combined-ln-seed0
   # Humanoid toward 1M with policies at each budget it has reached: SAC's preset, seed 0 (it
   # replaces the earlier curves-only sac-seed0-300k, the same seed and settings on older code), and
   # CrossQ with 512-wide critics, seed 0
