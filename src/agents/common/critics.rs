@@ -11,11 +11,11 @@
 use candle_core::{DType, Device, Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
 
-use crate::agents::common::nets::{DenseStack, Mlp, Output};
+use crate::agents::common::nets::{copy_var, polyak_vars, DenseStack, Mlp, Output};
 use crate::agents::common::objectives::critic_mse;
 use crate::agents::config::WeightInit;
 use crate::numeric::dense::dense;
-use crate::numeric::inplace::{Activation, Polyak};
+use crate::numeric::inplace::Activation;
 use crate::numeric::layer_norm::layer_norm_relu;
 use crate::numeric::optim::Param;
 use crate::numeric::stack::relu_stack;
@@ -67,10 +67,11 @@ impl Critics {
 
     /// An independent copy with equal weights (for target networks).
     pub(crate) fn deep_copy(&self) -> Result<Critics> {
-        let copy = |v: &Var| Var::from_tensor(&v.as_tensor().copy()?);
         let norms = match &self.norms {
             None => None,
-            Some(norms) => Some(norms.iter().map(|(g, s)| Ok((copy(g)?, copy(s)?))).collect::<Result<Vec<_>>>()?),
+            Some(norms) => {
+                Some(norms.iter().map(|(g, s)| Ok((copy_var(g)?, copy_var(s)?))).collect::<Result<Vec<_>>>()?)
+            }
         };
         Ok(Critics { body: self.body.deep_copy()?, norms })
     }
@@ -178,11 +179,7 @@ impl Critics {
 /// target <- tau * online + (1 - tau) * target.
 pub(crate) fn polyak_update_critics(online: &Critics, target: &Critics, tau: f64) -> Result<()> {
     online.body.polyak_into(&target.body, tau)?;
-    let kernel = Polyak { tau: tau as f32 };
-    for (o, t) in online.norm_vars().iter().zip(target.norm_vars()) {
-        t.as_tensor().inplace_op2(o.as_tensor(), &kernel)?;
-    }
-    Ok(())
+    polyak_vars(&online.norm_vars(), &target.norm_vars(), tau)
 }
 
 #[cfg(test)]

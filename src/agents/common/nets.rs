@@ -37,8 +37,7 @@ impl DenseStack {
 
     /// An independent copy with equal weights (for target networks).
     pub(crate) fn deep_copy(&self) -> Result<DenseStack> {
-        let copy = |v: &Var| Var::from_tensor(&v.as_tensor().copy()?);
-        Ok(DenseStack::new(self.layers.iter().map(|(w, b)| Ok((copy(w)?, copy(b)?))).collect::<Result<_>>()?))
+        Ok(DenseStack::new(self.layers.iter().map(|(w, b)| Ok((copy_var(w)?, copy_var(b)?))).collect::<Result<_>>()?))
     }
 
     fn tensors(&self) -> Vec<(Tensor, Tensor)> {
@@ -106,12 +105,22 @@ impl DenseStack {
 
     /// target <- tau * self + (1 - tau) * target, parameter by parameter, in place.
     pub(crate) fn polyak_into(&self, target: &DenseStack, tau: f64) -> Result<()> {
-        let kernel = Polyak { tau: tau as f32 };
-        for (o, t) in self.vars().iter().zip(target.vars()) {
-            t.as_tensor().inplace_op2(o.as_tensor(), &kernel)?;
-        }
-        Ok(())
+        polyak_vars(&self.vars(), &target.vars(), tau)
     }
+}
+
+/// An independent variable with `v`'s values.
+pub(crate) fn copy_var(v: &Var) -> Result<Var> {
+    Var::from_tensor(&v.as_tensor().copy()?)
+}
+
+/// target <- tau * online + (1 - tau) * target, variable by variable, in place.
+pub(crate) fn polyak_vars(online: &[Var], target: &[Var], tau: f64) -> Result<()> {
+    let kernel = Polyak { tau: tau as f32 };
+    for (o, t) in online.iter().zip(target) {
+        t.as_tensor().inplace_op2(o.as_tensor(), &kernel)?;
+    }
+    Ok(())
 }
 
 /// Layers `sizes[0] -> sizes[1] -> ... -> sizes[n]` with ReLU between them.
