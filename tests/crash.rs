@@ -202,6 +202,12 @@ fn layer_normalised_critics_killed_anywhere_resume_to_the_unbroken_run() {
     crash_and_resume_with("sac", "critic_layer_norm=true", &["after-checkpoint:1", "evaluation:3"]);
 }
 
+/// SAC with CrossQ's optimiser settings: the delayed actor's phase comes back with the run.
+#[test]
+fn sac_with_a_delayed_actor_killed_anywhere_resumes_to_the_unbroken_run() {
+    crash_and_resume_with("sac", "policy_delay=3,adam_beta1=0.5,tau=1", &["after-checkpoint:1", "step:777"]);
+}
+
 #[test]
 fn ppo_killed_anywhere_resumes_to_the_unbroken_run() {
     crash_and_resume("ppo", &points("ppo"));

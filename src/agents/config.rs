@@ -375,9 +375,10 @@ mod tests {
             assert!(section.keys().all(|k| section_keys(algo).contains(&k.as_str())), "{algo:?}");
             // target_entropy (SAC, CrossQ) and target_kl (PPO) are absent while None, PPO's
             // activation and log_std_init while at their defaults (tanh, 0), and
-            // critic_layer_norm (SAC, TD3, DDPG) while off.
+            // critic_layer_norm (SAC, TD3, DDPG) while off, and SAC's policy_delay and adam_beta1
+            // at their defaults (1, 0.9).
             let optional = match algo {
-                Algo::Sac => 2,
+                Algo::Sac => 4,
                 Algo::Crossq | Algo::Td3 | Algo::Ddpg => 1,
                 Algo::Ppo => 3,
                 Algo::Dqn => 0,

@@ -72,6 +72,11 @@ impl Adam {
         Adam { lr, beta1: 0.9, beta2: 0.999, eps: 1e-8, step: 0, params, m, v }
     }
 
+    /// [`Adam::new`] with another `beta1` (CrossQ's 0.5, for one).
+    pub fn with_beta1<P: Into<Param>>(params: Vec<P>, lr: f64, beta1: f64) -> Adam {
+        Adam { beta1, ..Adam::new(params, lr) }
+    }
+
     /// Updates done so far.
     pub fn steps(&self) -> u64 {
         self.step

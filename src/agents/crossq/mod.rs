@@ -188,11 +188,7 @@ impl CrossqAgent {
         let critic_sizes = layer_sizes(obs_dim + act_dim, &s.critic_hidden, 1);
         let critics = [RenormMlp::new(&critic_sizes, cfg, rng)?, RenormMlp::new(&critic_sizes, cfg, rng)?];
         let log_alpha = scalar_var(s.initial_alpha.ln() as f32)?;
-        let adam = |vars: Vec<Var>, lr: f64| {
-            let mut opt = Adam::new(vars, lr);
-            opt.beta1 = s.adam_beta1;
-            opt
-        };
+        let adam = |vars: Vec<Var>, lr: f64| Adam::with_beta1(vars, lr, s.adam_beta1);
         Ok(CrossqAgent {
             obs_dim,
             act_dim,

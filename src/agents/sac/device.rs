@@ -45,8 +45,8 @@ impl GenericSac {
             "SAC v1 has no device-generic path: train it with --device cpu"
         );
         anyhow::ensure!(
-            !s.critic_layer_norm,
-            "critic_layer_norm has no device-generic path: train it with --device cpu"
+            s.device_generic(),
+            "critic_layer_norm, policy_delay and adam_beta1 have no device-generic path for SAC: train with --device cpu"
         );
         let params = SacAgent::new(cfg, obs_dim, act_dim, rng)?.parameters();
         let actor = DeviceStack::from_named(&params, "actor", device)?;

@@ -17,6 +17,10 @@
 //! has 100), and the log-density's tanh correction is the exact one (jaxrl's) unless
 //! `tanh_correction = "epsilon"` asks for SB3's and CleanRL's `log(1 - a^2 + 1e-6)`.
 //!
+//! Two of CrossQ's optimiser settings are options, off by default: `policy_delay` (the actor and
+//! temperature step on every k-th critic update, as in `araffin/sbx`, `sbx/crossq/crossq.py`) and
+//! `adam_beta1`; `tau = 1` gives CrossQ's "no target networks".
+//!
 //! To read it end to end: this file (settings, the fused CPU agent and its update), then
 //! `../common/squashed.rs` (the policy head), `../common/objectives.rs` (targets and losses),
 //! `../common/critics.rs` (the twin critics); `device.rs` is the same agent on any candle device.
@@ -60,6 +64,7 @@ pub struct SacAgent {
     actor_opt: Adam,
     critic_opt: Adam,
     alpha_opt: Option<Adam>,
+    policy_delay: u64,
     updates: u64,
 }
 
@@ -82,7 +87,7 @@ impl SacAgent {
             SacVersion::V1 => {
                 let net = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, 1), Output::Linear, cfg.weight_init, rng)?;
                 let target = net.deep_copy()?;
-                let opt = Adam::new(net.params(), settings.value_lr);
+                let opt = Adam::with_beta1(net.params(), settings.value_lr, settings.adam_beta1);
                 Some(ValueNet { net, target, opt })
             }
         };
@@ -93,9 +98,10 @@ impl SacAgent {
             act_dim,
             gamma: cfg.gamma,
             tau: cfg.tau,
-            actor_opt: Adam::new(actor.params(), cfg.actor_lr),
-            critic_opt: Adam::new(critics.params(), cfg.critic_lr),
-            alpha_opt: autotune.then(|| Adam::new(vec![log_alpha.clone()], settings.alpha_lr)),
+            actor_opt: Adam::with_beta1(actor.params(), cfg.actor_lr, settings.adam_beta1),
+            critic_opt: Adam::with_beta1(critics.params(), cfg.critic_lr, settings.adam_beta1),
+            alpha_opt: autotune
+                .then(|| Adam::with_beta1(vec![log_alpha.clone()], settings.alpha_lr, settings.adam_beta1)),
             actor,
             critics,
             critic_targets,
@@ -103,6 +109,7 @@ impl SacAgent {
             log_alpha,
             target_entropy: settings.target_entropy.unwrap_or(-(act_dim as f64)),
             tanh_correction: settings.tanh_correction,
+            policy_delay: settings.policy_delay as u64,
             updates: 0,
         })
     }
@@ -205,25 +212,28 @@ impl OffPolicyAgent for SacAgent {
         self.critic_opt.step(&critic_loss.backward()?)?;
         losses.critic = critic_loss.to_scalar::<f32>()? as f64;
 
-        // the action and its log-density side by side, and the objective as two nodes
-        // (agents::objectives: the graph's bits without its small nodes)
-        let pi = self.sample(&obs, rng)?;
-        let logp = pi.narrow(1, self.act_dim, 1)?;
-        let q = self.critics.forward_frozen(&critic_input(&obs, &pi)?)?;
-        if let Some(v) = &mut self.value {
-            let v_target = (q.min(0)? - logp.affine(alpha, 0.0)?)?.detach();
-            let value_loss = v.net.forward(&obs)?.sub(&v_target)?.sqr()?.mean_all()?;
-            v.opt.step(&value_loss.backward()?)?;
-            losses.value = Some(value_loss.to_scalar::<f32>()? as f64);
-        }
-        let actor_loss = actor_objective(&q, &pi, alpha)?;
-        self.actor_opt.step(&actor_loss.backward()?)?;
-        losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
+        // The actor and the temperature on every policy_delay-th update (every one by default).
+        if self.updates.is_multiple_of(self.policy_delay) {
+            // the action and its log-density side by side, and the objective as two nodes
+            // (agents::objectives: the graph's bits without its small nodes)
+            let pi = self.sample(&obs, rng)?;
+            let logp = pi.narrow(1, self.act_dim, 1)?;
+            let q = self.critics.forward_frozen(&critic_input(&obs, &pi)?)?;
+            if let Some(v) = &mut self.value {
+                let v_target = (q.min(0)? - logp.affine(alpha, 0.0)?)?.detach();
+                let value_loss = v.net.forward(&obs)?.sub(&v_target)?.sqr()?.mean_all()?;
+                v.opt.step(&value_loss.backward()?)?;
+                losses.value = Some(value_loss.to_scalar::<f32>()? as f64);
+            }
+            let actor_loss = actor_objective(&q, &pi, alpha)?;
+            self.actor_opt.step(&actor_loss.backward()?)?;
+            losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
 
-        if let Some(opt) = &mut self.alpha_opt {
-            let alpha_loss = temperature_loss(&self.log_alpha, &logp, self.target_entropy)?;
-            opt.step(&alpha_loss.backward()?)?;
-            losses.alpha_loss = Some(alpha_loss.to_scalar::<f32>()? as f64);
+            if let Some(opt) = &mut self.alpha_opt {
+                let alpha_loss = temperature_loss(&self.log_alpha, &logp, self.target_entropy)?;
+                opt.step(&alpha_loss.backward()?)?;
+                losses.alpha_loss = Some(alpha_loss.to_scalar::<f32>()? as f64);
+            }
         }
         losses.alpha = Some(self.alpha()?);
 
@@ -260,6 +270,13 @@ pub struct SacConfig {
     /// Layer-normalise the critics' hidden layers (`agents::common::critics`). Off unless asked for.
     #[serde(default, skip_serializing_if = "std::ops::Not::not")]
     pub critic_layer_norm: bool,
+    /// Update the actor and the temperature on every `policy_delay`-th critic update (CrossQ's
+    /// 3); 1, the default, updates them every time.
+    #[serde(default = "SacConfig::no_delay", skip_serializing_if = "SacConfig::is_no_delay")]
+    pub policy_delay: u32,
+    /// Adam's beta1 for every optimiser (CrossQ's 0.5); 0.9, the default, is Adam's own.
+    #[serde(default = "SacConfig::adam_default_beta1", skip_serializing_if = "SacConfig::is_adam_default_beta1")]
+    pub adam_beta1: f64,
 }
 
 impl SacConfig {
@@ -272,13 +289,46 @@ impl SacConfig {
         "value_lr",
         "tanh_correction",
         "critic_layer_norm",
+        "policy_delay",
+        "adam_beta1",
     ];
+
+    fn no_delay() -> u32 {
+        1
+    }
+
+    fn is_no_delay(delay: &u32) -> bool {
+        *delay == 1
+    }
+
+    fn adam_default_beta1() -> f64 {
+        0.9
+    }
+
+    fn is_adam_default_beta1(beta1: &f64) -> bool {
+        *beta1 == 0.9
+    }
+
+    /// Whether every setting that only the fused CPU agent implements is at its default.
+    pub(crate) fn device_generic(&self) -> bool {
+        !self.critic_layer_norm && self.policy_delay == 1 && self.adam_beta1 == 0.9
+    }
 
     /// Checks this section's settings.
     pub(crate) fn validate(&self) -> anyhow::Result<()> {
         positive("alpha_lr", self.alpha_lr)?;
         positive("value_lr", self.value_lr)?;
         positive("initial_alpha", self.initial_alpha)?;
+        anyhow::ensure!(self.policy_delay >= 1, "policy_delay must be at least 1, not {}", self.policy_delay);
+        anyhow::ensure!(
+            (0.0..1.0).contains(&self.adam_beta1),
+            "adam_beta1 must lie in [0, 1), not {}",
+            self.adam_beta1
+        );
+        anyhow::ensure!(
+            self.policy_delay == 1 || self.sac_version == SacVersion::V2,
+            "policy_delay applies to SAC v2 only"
+        );
         Ok(())
     }
 }
@@ -300,6 +350,8 @@ impl TrainConfig {
                 value_lr: 3e-4,
                 tanh_correction: TanhCorrection::Exact,
                 critic_layer_norm: false,
+                policy_delay: 1,
+                adam_beta1: 0.9,
             }),
             ..TrainConfig::shared_defaults(Algo::Sac)
         }
@@ -535,6 +587,72 @@ mod tests {
         let capped = sample(&tails, TanhCorrection::Epsilon);
         let squash = 2.0 * 1e-6f64.ln();
         assert!((capped[3] as f64 - (gaussian - squash)).abs() < 0.1, "{} vs {}", capped[3], gaussian - squash);
+    }
+
+    /// With `policy_delay = 3` the actor and the temperature move on updates 0, 3, 6, ... and hold
+    /// in between, while the critics move on every update; every optimiser takes `adam_beta1`.
+    #[test]
+    fn a_delayed_actor_moves_on_every_third_update_only() {
+        let mut cfg = TrainConfig::sac_defaults();
+        cfg.hidden = vec![16, 16];
+        cfg.batch_size = 8;
+        let settings = cfg.sac.as_mut().unwrap();
+        settings.policy_delay = 3;
+        settings.adam_beta1 = 0.5;
+        cfg.validate().unwrap();
+        let (obs_dim, act_dim, n) = (5, 2, 8);
+        let mut rng = ChaCha8Rng::seed_from_u64(4);
+        let mut agent = SacAgent::new(&cfg, obs_dim, act_dim, &mut rng).unwrap();
+        assert!([&agent.actor_opt, &agent.critic_opt, agent.alpha_opt.as_ref().unwrap()]
+            .iter()
+            .all(|o| o.beta1 == 0.5));
+        let mut batch = Batch::new(n, obs_dim, act_dim);
+        let mut normal = |len| (0..len).map(|_| StandardNormal.sample(&mut rng)).collect::<Vec<f32>>();
+        batch.obs = normal(n * obs_dim);
+        batch.actions = normal(n * act_dim).iter().map(|a| a.tanh()).collect();
+        batch.rewards = normal(n);
+        batch.next_obs = normal(n * obs_dim);
+        batch.terminated = vec![0.0; n];
+        let actor =
+            |a: &SacAgent| a.actor.named_vars("a").iter().flat_map(|(_, v)| flat(v.as_tensor())).collect::<Vec<_>>();
+        let critics =
+            |a: &SacAgent| a.critics.named_vars("c").iter().flat_map(|(_, v)| flat(v.as_tensor())).collect::<Vec<_>>();
+        let mut update_rng = ChaCha8Rng::seed_from_u64(5);
+        for k in 0..7u64 {
+            let (a0, c0, alpha0) = (actor(&agent), critics(&agent), agent.alpha().unwrap());
+            let losses = agent.update(&batch, &mut update_rng).unwrap();
+            let moved = actor(&agent) != a0;
+            assert_eq!(moved, k % 3 == 0, "update {k}: actor moved {moved}");
+            assert_eq!(agent.alpha().unwrap() != alpha0, k % 3 == 0, "update {k}: temperature");
+            assert_eq!(losses.actor.is_some(), k % 3 == 0, "update {k}: actor loss");
+            assert_ne!(critics(&agent), c0, "update {k}: critics");
+        }
+    }
+
+    #[test]
+    fn sac_settings_out_of_range_are_refused_by_name() {
+        for (key, value, says) in [
+            ("policy_delay", toml::Value::Integer(0), "policy_delay must be at least 1"),
+            ("adam_beta1", toml::Value::Float(1.0), "adam_beta1 must lie in [0, 1)"),
+        ] {
+            let mut t = toml::Table::new();
+            t.insert("algo".into(), "sac".into());
+            t.insert(key.into(), value);
+            let err = TrainConfig::from_table(&t, crate::agents::config::OtherAlgorithmKeys::Refuse)
+                .and_then(|c| c.validate().map(|_| c))
+                .unwrap_err();
+            assert!(format!("{err:#}").contains(says), "{key}: {err:#}");
+        }
+        let mut t = toml::Table::new();
+        t.insert("algo".into(), "sac".into());
+        t.insert("sac_version".into(), "v1".into());
+        t.insert("policy_delay".into(), 2.into());
+        let err = TrainConfig::from_table(&t, crate::agents::config::OtherAlgorithmKeys::Refuse)
+            .and_then(|c| c.validate().map(|_| c))
+            .unwrap_err();
+        assert!(format!("{err:#}").contains("policy_delay applies to SAC v2 only"), "{err:#}");
+        let defaults = toml::to_string(&TrainConfig::sac_defaults()).unwrap();
+        assert!(!defaults.contains("policy_delay") && !defaults.contains("adam_beta1"), "{defaults}");
     }
 
     #[test]
