@@ -25,10 +25,10 @@ videos=(--videos)
 r=benches/results
 runs=(
   # Minitaur: TD3 (the preset: normalised observations, rewards x 100), SAC and DDPG with the
-  # policies they saved at 100k and 300k; the shipped TD3 policy (seed 1, 1M); earlier runs kept
-  # without policies (curves only).
+  # policies they saved at 100k and 300k; the preset's seed 1 at 1M (its actor was shipped as
+  # minitaur-td3 before the layer-normalised TD3 below); earlier runs kept without policies.
   $r/minitaur/*-with-policies
-  models/policies/minitaur-td3
+  $r/minitaur/td3-norm-rs100-seed1-1m
   $r/minitaur/td3-norm-rs100-seed{0,2,3,4} $r/minitaur/sac-seed0-1m $r/minitaur/sac-seed1
   # Ant
   $r/ant/*-with-policies
@@ -67,7 +67,8 @@ runs=(
   $r/{half-cheetah,ant,humanoid}/crossq-256-seed{0,1,2}
   $r/minitaur/crossq-combined-seed{0,1,2}
   # TD3 and SAC with those four changes and layer-normalised critics (critic_layer_norm): TD3
-  # seeds 0-2 with policies at 100k, 300k and 500k; SAC and DDPG seed 0 to 300k
+  # seeds 0-2 with policies at 100k, 300k and 500k (seed 0's 300k actor is the shipped
+  # minitaur-td3); SAC and DDPG seed 0 to 300k
   $r/minitaur/td3-combined-ln-seed{0,1,2} $r/minitaur/{sac,ddpg}-combined-ln-seed0
   # Humanoid toward 1M with policies at each budget it has reached: SAC's preset, seed 0 (it
   # replaces the earlier curves-only sac-seed0-300k, the same seed and settings on older code), and

@@ -122,7 +122,7 @@ mod tests {
     #[test]
     fn shipped_policies_name_their_step() {
         let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/policies");
-        assert_eq!(shipped_step(&root.join("minitaur-td3")), Some(1_000_000));
+        assert_eq!(shipped_step(&root.join("minitaur-td3")), Some(300_000));
         assert_eq!(shipped_step(&root.join("minitaur-sac")), Some(300_000));
         assert_eq!(shipped_step(&root), None);
     }
