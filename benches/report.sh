@@ -68,8 +68,10 @@ runs=(
   $r/minitaur/crossq-combined-seed{0,1,2}
   # TD3 and SAC with those four changes and layer-normalised critics (critic_layer_norm): TD3
   # seeds 0-2 with policies at 100k, 300k and 500k (seed 0's 300k actor is the shipped
-  # minitaur-td3); SAC and DDPG seed 0 to 300k
+  # minitaur-td3); SAC and DDPG seed 0 to 300k; TD3 the same with Adam at 3e-4 (CleanRL's rate)
+  # instead of 1e-3, seeds 0-2 to 300k
   $r/minitaur/td3-combined-ln-seed{0,1,2} $r/minitaur/{sac,ddpg}-combined-ln-seed0
+  $r/minitaur/td3-combined-ln-lr3e4-seed{0,1,2}
   # Humanoid toward 1M with policies at each budget it has reached: SAC's preset, seed 0 (it
   # replaces the earlier curves-only sac-seed0-300k, the same seed and settings on older code), and
   # CrossQ with 512-wide critics, seed 0
