@@ -150,6 +150,16 @@ pub enum OtherAlgorithmKeys {
     Refuse,
 }
 
+/// Settings an algorithm took after format 2 under names that format 1 and 2 files, which list
+/// every algorithm's settings flat, used for another algorithm's (SAC's `policy_delay` was TD3's,
+/// `adam_beta1` CrossQ's): read from such a file they belong to that other algorithm.
+fn taken_after_format_2(algo: Algo) -> &'static [&'static str] {
+    match algo {
+        Algo::Sac => &["policy_delay", "adam_beta1"],
+        _ => &[],
+    }
+}
+
 impl TrainConfig {
     /// Reads a `[train]` table: keys it does not give take the algorithm's defaults (so a run
     /// written before a hyperparameter existed still loads); the algorithm's settings may sit in
@@ -178,6 +188,9 @@ impl TrainConfig {
                     }
                 }
                 (Ok(_), _) => anyhow::bail!("a {section_name} run has no [{key}] section"),
+                // An older file's flat listing: this name was another algorithm's setting then.
+                _ if matches!(others, OtherAlgorithmKeys::Ignore)
+                    && taken_after_format_2(algo).contains(&key.as_str()) => {}
                 _ if flat.contains_key(key) || own_keys.contains(&key.as_str()) => {
                     flat.insert(key.clone(), value.clone());
                 }

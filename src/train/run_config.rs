@@ -135,9 +135,15 @@ total_steps = 1000
         let flat = FORMAT_1.replace("total_steps = 1000", "total_steps = 1000\nalpha_lr = 0.001\npolicy_delay = 2");
         let run = RunConfig::parse(&format!("format = 2\n{flat}"), Path::new("c")).unwrap();
         assert_eq!(run.train.sac().alpha_lr, 0.001);
+        // TD3's policy_delay there is not the one SAC took later.
+        assert_eq!(run.train.sac().policy_delay, 1);
         // In the current format another algorithm's key is an error.
-        let err = format!("{:#}", RunConfig::parse(&format!("format = 3\n{flat}"), Path::new("c")).unwrap_err());
-        assert!(err.contains("policy_delay") && err.contains("td3"), "{err}");
+        let crossq = flat.replace("policy_delay = 2", "batch_norm_momentum = 0.9");
+        let err = format!("{:#}", RunConfig::parse(&format!("format = 3\n{crossq}"), Path::new("c")).unwrap_err());
+        assert!(err.contains("batch_norm_momentum") && err.contains("crossq"), "{err}");
+        // In the current format SAC's own policy_delay is read.
+        let run = RunConfig::parse(&format!("format = 3\n{flat}"), Path::new("c")).unwrap();
+        assert_eq!(run.train.sac().policy_delay, 2);
     }
 
     #[test]
