@@ -44,9 +44,11 @@ impl GenericSac {
             s.sac_version == SacVersion::V2,
             "SAC v1 has no device-generic path: train it with --device cpu"
         );
+        let cpu_only = s.cpu_only_settings();
         anyhow::ensure!(
-            s.device_generic(),
-            "critic_layer_norm, policy_delay and adam_beta1 have no device-generic path for SAC: train with --device cpu"
+            cpu_only.is_empty(),
+            "{} has no device-generic path for SAC: train it with --device cpu",
+            cpu_only.join(", ")
         );
         let params = SacAgent::new(cfg, obs_dim, act_dim, rng)?.parameters();
         let actor = DeviceStack::from_named(&params, "actor", device)?;

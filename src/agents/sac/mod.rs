@@ -309,9 +309,16 @@ impl SacConfig {
         *beta1 == 0.9
     }
 
-    /// Whether every setting that only the fused CPU agent implements is at its default.
-    pub(crate) fn device_generic(&self) -> bool {
-        !self.critic_layer_norm && self.policy_delay == 1 && self.adam_beta1 == 0.9
+    /// The settings away from their defaults that only the fused CPU agent implements.
+    pub(crate) fn cpu_only_settings(&self) -> Vec<&'static str> {
+        [
+            ("critic_layer_norm", self.critic_layer_norm),
+            ("policy_delay", !Self::is_no_delay(&self.policy_delay)),
+            ("adam_beta1", !Self::is_adam_default_beta1(&self.adam_beta1)),
+        ]
+        .into_iter()
+        .filter_map(|(name, set)| set.then_some(name))
+        .collect()
     }
 
     /// Checks this section's settings.
@@ -653,6 +660,10 @@ mod tests {
         assert!(format!("{err:#}").contains("policy_delay applies to SAC v2 only"), "{err:#}");
         let defaults = toml::to_string(&TrainConfig::sac_defaults()).unwrap();
         assert!(!defaults.contains("policy_delay") && !defaults.contains("adam_beta1"), "{defaults}");
+        assert!(TrainConfig::sac_defaults().sac().cpu_only_settings().is_empty());
+        let mut delayed = TrainConfig::sac_defaults();
+        delayed.sac.as_mut().unwrap().policy_delay = 3;
+        assert_eq!(delayed.sac().cpu_only_settings(), ["policy_delay"]);
     }
 
     #[test]
