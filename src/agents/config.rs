@@ -70,6 +70,25 @@ pub enum WeightInit {
     Orthogonal,
 }
 
+/// Which actor a run keeps at each reporting budget (`budget_policy` in `[train]`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum BudgetPolicy {
+    /// The actor at that step.
+    #[default]
+    Last,
+    /// Of the actors evaluated in training up to that step, the one whose evaluation had the
+    /// highest minimum episode return (ties: the higher mean): TD7's policy checkpoints
+    /// (`train::selection`). Off-policy algorithms only.
+    Best,
+}
+
+impl BudgetPolicy {
+    fn is_last(&self) -> bool {
+        *self == BudgetPolicy::Last
+    }
+}
+
 /// Every hyperparameter of a training run: the settings all algorithms share, then the run's
 /// algorithm's own section (`[train.td3]`, `[train.ddpg]` or `[train.sac]` in `config.toml`).
 /// Exactly the section of `algo` is present (`validate` checks it).
@@ -121,6 +140,9 @@ pub struct TrainConfig {
     pub eval_episodes: usize,
     /// Environment steps between checkpoints.
     pub checkpoint_every: u64,
+    /// Which actor the run keeps at each reporting budget: `last` (the default) or `best`.
+    #[serde(default, skip_serializing_if = "BudgetPolicy::is_last")]
+    pub budget_policy: BudgetPolicy,
     /// TD3's own settings (present exactly when `algo` is TD3).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub td3: Option<DpgConfig>,
@@ -160,6 +182,10 @@ fn taken_after_format_2(algo: Algo) -> &'static [&'static str] {
     }
 }
 
+/// Shared settings a config leaves out at their default, so that files written before them stay
+/// byte for byte what they were.
+const OMITTED_AT_DEFAULT: [&str; 1] = ["budget_policy"];
+
 impl TrainConfig {
     /// Reads a `[train]` table: keys it does not give take the algorithm's defaults (so a run
     /// written before a hyperparameter existed still loads); the algorithm's settings may sit in
@@ -191,7 +217,10 @@ impl TrainConfig {
                 // An older file's flat listing: this name was another algorithm's setting then.
                 _ if matches!(others, OtherAlgorithmKeys::Ignore)
                     && taken_after_format_2(algo).contains(&key.as_str()) => {}
-                _ if flat.contains_key(key) || own_keys.contains(&key.as_str()) => {
+                _ if flat.contains_key(key)
+                    || own_keys.contains(&key.as_str())
+                    || OMITTED_AT_DEFAULT.contains(&key.as_str()) =>
+                {
                     flat.insert(key.clone(), value.clone());
                 }
                 _ => {
@@ -284,6 +313,7 @@ impl TrainConfig {
             eval_every: 5000,
             eval_episodes: 10,
             checkpoint_every: 50_000,
+            budget_policy: BudgetPolicy::Last,
             td3: None,
             ddpg: None,
             sac: None,
@@ -327,6 +357,12 @@ impl TrainConfig {
              learning_starts ({}) must be at least the batch size ({})",
             self.learning_starts,
             self.batch_size
+        );
+        anyhow::ensure!(
+            !(self.algo.is_on_policy() && self.budget_policy == BudgetPolicy::Best),
+            "budget_policy = \"best\" picks among the actors of the off-policy loop's evaluations; \
+             {} keeps its last actor at each budget (budget_policy = \"last\")",
+            self.algo.name()
         );
         anyhow::ensure!((0.0..=1.0).contains(&self.gamma), "gamma must lie in [0, 1]");
         anyhow::ensure!(self.tau > 0.0 && self.tau <= 1.0, "tau must lie in (0, 1]");

@@ -49,6 +49,9 @@ pub struct TrainState {
     /// The best in-training evaluation mean so far.
     #[serde(default)]
     pub best_eval_mean: Option<f64>,
+    /// The actor `budget_policy = "best"` keeps so far (`train::selection`).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub best_policy: Option<super::selection::Snapshot>,
 }
 
 /// The step budgets results are reported at (Henderson et al. 2018 and the TD3/SAC papers report

@@ -23,6 +23,7 @@ pub mod run_dir;
 pub(crate) mod run_lock;
 mod scaffold;
 pub mod seeds;
+pub mod selection;
 pub mod stop;
 mod tensorboard;
 

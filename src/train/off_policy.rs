@@ -18,6 +18,8 @@ use super::policy_ref::PolicyRef;
 use super::run_config::RunConfig;
 use super::scaffold::{self, check_bounded_actions, finish_run, learner_reward, save_budget_policy, Scaffold};
 use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
+use super::selection::BestPolicy;
+use crate::agents::config::BudgetPolicy;
 use crate::agents::{make_learner_on, Batch, Losses, OffPolicyAgent, ReplayBuffer, TrainConfig};
 use crate::device::ComputeDevice;
 use crate::envs::{make, Env, EnvConfig};
@@ -56,6 +58,7 @@ pub(super) fn resume(
     trainer.wall_offset = state.wall_time;
     trainer.losses = state.losses;
     trainer.best_eval = state.best_eval_mean;
+    trainer.best_policy = BestPolicy::resumed(state.best_policy);
     trainer.metrics = metrics;
     scaffold::record_stretch(run_dir, state.step, control)?;
     trainer.run(control)
@@ -80,6 +83,8 @@ struct Trainer {
     losses: Option<Losses>,
     /// The best in-training evaluation mean so far.
     best_eval: Option<f64>,
+    /// The actor `budget_policy = "best"` keeps.
+    best_policy: BestPolicy,
     /// False when fine-tuning: the observation statistics come with the initial weights.
     fit_observations: bool,
 }
@@ -108,6 +113,7 @@ impl Trainer {
             metrics: Vec::new(),
             losses: None,
             best_eval: None,
+            best_policy: BestPolicy::default(),
             fit_observations: run.init_from.is_none(),
         })
     }
@@ -201,8 +207,10 @@ impl Trainer {
                 }
             }
 
-            // The actor at each reporting budget, for the report's per-budget rows.
-            if POLICY_BUDGETS.contains(&self.step) || self.step == cfg.total_steps {
+            // The actor at each reporting budget, for the report's per-budget rows. Under
+            // `budget_policy = "best"` it waits for this step's evaluation, which may be the best.
+            let at_budget = POLICY_BUDGETS.contains(&self.step) || self.step == cfg.total_steps;
+            if at_budget && cfg.budget_policy == BudgetPolicy::Last {
                 save_budget_policy(&self.run_dir, self.step, self.agent.as_ref())?;
             }
 
@@ -210,9 +218,15 @@ impl Trainer {
             if scaffold::crossed(self.step - 1, self.step, cfg.eval_every) || self.step == cfg.total_steps {
                 let e = evaluate(self.agent.as_ref(), self.eval_env.as_mut(), cfg.eval_episodes, self.seed)?;
                 self.best_eval = Some(self.best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
+                if cfg.budget_policy == BudgetPolicy::Best {
+                    self.best_policy.consider(&self.run_dir, self.step, &e, self.agent.as_ref())?;
+                }
                 let row =
                     MetricsRow::progress("eval", self.step, self.losses, sc.rate(self.step), sc.wall(self.wall_offset));
                 sc.evaluated(&self.run_dir, &mut self.metrics, row, e, control, self.agent.as_ref(), self.seed)?;
+            }
+            if at_budget && cfg.budget_policy == BudgetPolicy::Best {
+                self.best_policy.save_budget(&self.run_dir, self.step, self.agent.as_ref())?;
             }
             sc.bar.set_position(self.step);
 
@@ -226,7 +240,10 @@ impl Trainer {
         // A run finished early (target_return, an evaluation hook) keeps its actor at the step
         // it reached, as the on-policy loop does; budgets and the full budget are saved above.
         if outcome == Outcome::Finished && !POLICY_BUDGETS.contains(&self.step) && self.step != cfg.total_steps {
-            save_budget_policy(&self.run_dir, self.step, self.agent.as_ref())?;
+            match cfg.budget_policy {
+                BudgetPolicy::Last => save_budget_policy(&self.run_dir, self.step, self.agent.as_ref())?,
+                BudgetPolicy::Best => self.best_policy.save_budget(&self.run_dir, self.step, self.agent.as_ref())?,
+            }
         }
         let checkpoint = self.save(need_reset, sc.wall(self.wall_offset))?;
         let summary = sc.summary(&self.run_dir, outcome, self.step, self.best_eval, checkpoint);
@@ -244,7 +261,10 @@ impl Trainer {
             counters: Default::default(),
             losses: self.losses,
             best_eval_mean: self.best_eval,
+            best_policy: self.best_policy.best,
         };
-        checkpoint::save(&self.run_dir, self.agent.as_mut(), &self.buffer, &state, &self.metrics)
+        let saved = checkpoint::save(&self.run_dir, self.agent.as_mut(), &self.buffer, &state, &self.metrics)?;
+        self.best_policy.mark_checkpointed(&self.run_dir)?;
+        Ok(saved)
     }
 }

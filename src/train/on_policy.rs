@@ -321,6 +321,7 @@ impl OnPolicyTrainer {
             // Every row's losses come from its own rollout's update: nothing to carry.
             losses: None,
             best_eval_mean: self.best_eval,
+            best_policy: None,
         };
         let tensors = self.rollout_state()?;
         checkpoint::save_with(&self.run_dir.clone(), &mut *self.agent, &state, &self.metrics, |dir| {
