@@ -524,3 +524,63 @@ fn evaluation_on_a_fresh_thread_matches_the_runs_own() {
     .unwrap();
     assert_eq!(fresh.to_bits(), logged.to_bits());
 }
+
+fn actor_tensors(file: &Path) -> Vec<(String, Vec<f32>)> {
+    let map = candle_core::safetensors::load(file, &candle_core::Device::Cpu).unwrap();
+    let mut v: Vec<_> = map.into_iter().map(|(k, t)| (k, t.flatten_all().unwrap().to_vec1::<f32>().unwrap())).collect();
+    v.sort_by(|a, b| a.0.cmp(&b.0));
+    v
+}
+
+/// `budget_policy = "best"` leaves training alone (same weights, same evaluations) and keeps at
+/// the budget the actor of the evaluation it names: the actor a run stopped at that step holds.
+#[test]
+fn keeping_the_best_actor_changes_no_training_and_keeps_the_named_actor() {
+    let dir = tempfile::tempdir().unwrap();
+    let env = EnvConfig::new("inverted-pendulum");
+    let settings = "total_steps=3000,eval_every=250,eval_episodes=3";
+    let run = |name: &str, extra: &str| {
+        let out = dir.path().join(name);
+        let cfg = small_config(&format!("{settings}{extra}"));
+        let s = train::train(env.clone(), cfg, 5, &out, None, false, &RunControl::default()).unwrap();
+        (out, s)
+    };
+    let (last, last_summary) = run("last", "");
+    let (best, best_summary) = run("best", ",budget_policy=\"best\"");
+    assert_eq!(tensors(&last_summary.checkpoint), tensors(&best_summary.checkpoint));
+    assert_eq!(eval_rows(&last), eval_rows(&best));
+    assert!(!last.join("policies/selected.csv").exists(), "a run keeping its last actors names none");
+
+    let selected = train::selection::read_selected(&best).unwrap();
+    assert_eq!(selected.len(), 1, "{selected:?}");
+    let (budget, step, (min, mean)) = (selected[0].budget, selected[0].step, selected[0].figures.unwrap());
+    assert_eq!(budget, 3000);
+    assert!(step % 250 == 0 && step <= 3000 && min <= mean, "{selected:?}");
+    let rows = train::metrics::read(&best.join("metrics.csv")).unwrap();
+    let row = rows.iter().find(|r| r.kind == "eval" && r.step == step).expect("an evaluation at the named step");
+    assert_eq!(row.eval_mean, Some(mean));
+    let best_mean = rows.iter().filter_map(|r| r.eval_mean).fold(f64::MIN, f64::max);
+    assert!(best_mean > mean || step != 3000, "the run's own evaluations must leave some choice to test: {rows:?}");
+
+    let kept = best.join("policies/step-3000.safetensors");
+    assert_eq!(actor_tensors(&kept), actor_tensors(&best.join(format!("policies/best-step-{step}.safetensors"))));
+    let (stopped, _) = run("stopped", &format!(",total_steps={step}"));
+    assert_eq!(actor_tensors(&kept), actor_tensors(&stopped.join(format!("policies/step-{step}.safetensors"))));
+    if step != 3000 {
+        assert_ne!(actor_tensors(&kept), actor_tensors(&last.join("policies/step-3000.safetensors")));
+    }
+}
+
+#[test]
+fn budget_policy_takes_last_or_best_and_best_is_for_off_policy_learners() {
+    assert_eq!(small_config("").budget_policy, locobench::agents::config::BudgetPolicy::Last);
+    let o = split_pairs("budget_policy=\"median\"").unwrap();
+    let err = build_config("minitaur", Algo::Td3, &o).and_then(|c| c.validate()).unwrap_err();
+    assert!(err.to_string().contains("median"), "{err}");
+    let o = split_pairs("budget_policy=\"best\"").unwrap();
+    let err = build_config("minitaur", Algo::Ppo, &o).and_then(|c| c.validate()).unwrap_err();
+    assert!(err.to_string().contains("budget_policy") && err.to_string().contains("ppo"), "{err}");
+    for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg, Algo::Crossq, Algo::Dqn] {
+        assert!(build_config("minitaur", algo, &o).and_then(|c| c.validate()).is_ok(), "{algo:?}");
+    }
+}

@@ -208,6 +208,13 @@ fn sac_with_a_delayed_actor_killed_anywhere_resumes_to_the_unbroken_run() {
     crash_and_resume_with("sac", "policy_delay=3,adam_beta1=0.5,tau=1", &["after-checkpoint:1", "step:777"]);
 }
 
+/// Keeping the best evaluated actor: its files (`policies/best-step-N`, `selected.csv`) come back
+/// with the run too. The budget-policy point here kills the first best actor's write.
+#[test]
+fn td3_keeping_its_best_actor_killed_anywhere_resumes_to_the_unbroken_run() {
+    crash_and_resume_with("td3", "budget_policy=best", &points("td3"));
+}
+
 #[test]
 fn ppo_killed_anywhere_resumes_to_the_unbroken_run() {
     crash_and_resume("ppo", &points("ppo"));

@@ -2,12 +2,12 @@
 //! evaluated in training up to that budget, the one whose evaluation had the highest minimum
 //! episode return, ties going to the higher mean.
 //!
-//! This is TD7's policy checkpointing (Fujimoto et al. 2023, "For SALE: State-Action
-//! Representation Learning for Deep Reinforcement Learning", §5; repository `sfujim/TD7`,
-//! `main.py`, `maybe_train_and_checkpoint`): an off-policy actor's quality swings from one
-//! snapshot to the next, and the worst episode is what a fall shows up in. TD7 judges on training
-//! episodes; here the judge is the run's own evaluation episodes (`train::evaluate`), which are
-//! seeded apart from the report's held-out ones, so the choice never sees a held-out episode.
+//! This is TD7's policy checkpointing (Fujimoto et al. 2023, "For SALE: State-Action Representation
+//! Learning for Deep Reinforcement Learning", policy checkpoints; repository `sfujim/TD7`,
+//! `TD7.py`, `maybe_train_and_checkpoint`): an off-policy actor's quality swings from one snapshot
+//! to the next, and the worst episode is what a fall shows up in. TD7 judges on training episodes;
+//! here the judge is the run's own evaluation episodes (`train::evaluate`), which are seeded apart
+//! from the report's held-out ones, so the choice never sees a held-out episode.
 //!
 //! Files: each new best actor goes to `policies/best-step-<N>.safetensors`; at a budget it is
 //! copied to `policies/step-<budget>.safetensors`, the file every reader of budget policies
