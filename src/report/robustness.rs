@@ -247,7 +247,8 @@ pub fn provenance(s: &SuiteData) -> String {
     let m = &s.meta;
     let mut text = format!(
         "Every contender plays the same {} held-out episodes (protocol seed {}) at every level of every axis, \
-         in the env's default options plus the axis's own; a row of several trained seeds plays every episode \
+         in the env's default options plus the axis's own, each policy acting at its own run's control rate \
+         (`action_repeat`) over the same episode length; a row of several trained seeds plays every episode \
          once per seed. Survival is the share of episodes that walked to the time limit, with its 95% Wilson \
          interval; episodes where the physics blew up are counted apart, not as falls. Surviving is not walking \
          (a policy can stand still on ice): where a contender's 90% level differs from the last level at which it \

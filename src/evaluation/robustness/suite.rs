@@ -228,7 +228,8 @@ pub const NOMINAL: &str = "nominal";
 #[derive(Debug, Clone)]
 pub struct Suite {
     /// The env every contender runs in (its defaults, unless options are given): the training
-    /// options of a policy's own run are not used, so every policy meets the same world.
+    /// options of a policy's own run are not used, so every policy meets the same world. Only
+    /// its control rate comes with a policy ([`at_control_rate_of`]).
     pub env: EnvConfig,
     /// The axes.
     pub axes: Vec<Axis>,
@@ -293,6 +294,8 @@ impl Suite {
                     if run.env.name != cfg.name {
                         bail!("{label} was trained on {}, not on the suite's env {}", run.env.name, cfg.name);
                     }
+                    let cfg = at_control_rate_of(&cfg, &run.env)
+                        .with_context(|| format!("{label} from {}", source.reference.display()))?;
                     let key =
                         Key::episodes(&cfg, &self.protocol, &format!("agent {}", policy_ref.digest()?), None, push)?;
                     all.extend(self.cache.episodes(&key, || {
@@ -306,6 +309,33 @@ impl Suite {
         };
         Ok(Cell::of(&self.env.name, contender, name, level, &episodes))
     }
+}
+
+/// The suite's world `cfg` at the control rate the policy's run `run` was trained at: the run's
+/// `action_repeat`, with `max_episode_steps` scaled so that an episode lasts as long as the
+/// suite's. A policy trained at 50 Hz acts every 20 ms here too; the physics, the perturbations
+/// and the pushes (timed in seconds) are the suite's. An env without an action repeat, or a run
+/// at the suite's rate, gets `cfg` as it is.
+pub fn at_control_rate_of(cfg: &EnvConfig, run: &EnvConfig) -> Result<EnvConfig> {
+    let (suite, own) = (cfg.resolved_options()?, run.resolved_options()?);
+    let int = |t: &toml::Table, key: &str| t.get(key).and_then(toml::Value::as_integer);
+    let (Some(suite_repeat), Some(own_repeat)) = (int(&suite, "action_repeat"), int(&own, "action_repeat")) else {
+        return Ok(cfg.clone());
+    };
+    if suite_repeat == own_repeat {
+        return Ok(cfg.clone());
+    }
+    let steps = int(&suite, "max_episode_steps").context("an env with action_repeat has max_episode_steps")?;
+    let ticks = steps * suite_repeat;
+    anyhow::ensure!(
+        ticks % own_repeat == 0,
+        "the policy acts every {own_repeat} physics steps (action_repeat), which does not divide the suite's \
+         episode of {steps} x {suite_repeat} physics steps"
+    );
+    let mut out = cfg.clone();
+    out.options.insert("action_repeat".into(), toml::Value::Integer(own_repeat));
+    out.options.insert("max_episode_steps".into(), toml::Value::Integer(ticks / own_repeat));
+    Ok(out)
 }
 
 /// The CSV's header.
@@ -440,6 +470,31 @@ mod tests {
         for bad in ["models/p", "=models/p", "a,b=models/p", "x=runs/a@ten"] {
             assert!(Contender::parse_agents(&[bad.to_string()]).is_err(), "{bad}");
         }
+    }
+
+    #[test]
+    fn a_policy_plays_at_its_own_control_rate_for_the_suites_episode_length() {
+        let suite = EnvConfig::new("minitaur").with_overrides(&[("friction_scale".into(), "0.5".into())]).unwrap();
+        let run =
+            |o: &str| EnvConfig::new("minitaur").with_overrides(&crate::envs::parse_overrides(o).unwrap()).unwrap();
+        // Trained at the suite's rate (whatever else it trained with): the suite's env as it is.
+        assert_eq!(at_control_rate_of(&suite, &run("random_push_max=1.0")).unwrap(), suite);
+        // Trained at 50 Hz for 500 steps: 50 Hz here, for the suite's 10 s, in the suite's world.
+        let fifty = at_control_rate_of(&suite, &run("action_repeat=10,max_episode_steps=500")).unwrap();
+        let o = fifty.resolved_options().unwrap();
+        assert_eq!((o["action_repeat"].as_integer(), o["max_episode_steps"].as_integer()), (Some(10), Some(500)));
+        assert_eq!(o["friction_scale"].as_float(), Some(0.5));
+        // A 20 s suite gives a 50 Hz policy 1000 steps, not the 500 it trained for.
+        let mut long = suite.clone();
+        long.options.insert("max_episode_steps".into(), toml::Value::Integer(2000));
+        let o = at_control_rate_of(&long, &run("action_repeat=10,max_episode_steps=500")).unwrap();
+        assert_eq!(o.resolved_options().unwrap()["max_episode_steps"].as_integer(), Some(1000));
+        // A rate that does not divide the suite's episode is refused, naming it.
+        let e = at_control_rate_of(&long, &run("action_repeat=3")).unwrap_err().to_string();
+        assert!(e.contains("action_repeat") && e.contains("3"), "{e}");
+        // An env without an action repeat.
+        let ant = EnvConfig::new("ant");
+        assert_eq!(at_control_rate_of(&ant, &ant).unwrap(), ant);
     }
 
     #[test]
