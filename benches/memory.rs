@@ -60,6 +60,7 @@ fn child(env_name: &str, algo: Algo, capacity: usize) -> Result<()> {
         counters: Default::default(),
         losses: None,
         best_eval_mean: None,
+        best_policy: None,
     };
     checkpoint::save(dir.path(), agent.as_mut(), &buf, &state, &[])?;
     let peak = status_bytes("VmHWM:").context("no /proc/self/status")?;
