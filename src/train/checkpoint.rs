@@ -68,13 +68,18 @@ pub(crate) fn budget_policy_path(run_dir: &Path, step: u64) -> PathBuf {
 
 /// The steps at which a run directory holds a policy file (`policies/step-<N>.safetensors`).
 pub fn budget_policy_steps(run_dir: &Path) -> Vec<u64> {
+    policy_file_steps(run_dir, "step-")
+}
+
+/// The steps N of the files `policies/<prefix><N>.safetensors` in `run_dir`, in order.
+pub(crate) fn policy_file_steps(run_dir: &Path, prefix: &str) -> Vec<u64> {
     let mut steps: Vec<u64> = std::fs::read_dir(run_dir.join(BUDGET_POLICY_DIR))
         .into_iter()
         .flatten()
         .flatten()
         .filter_map(|e| {
             let name = e.file_name().into_string().ok()?;
-            name.strip_prefix("step-")?.strip_suffix(".safetensors")?.parse().ok()
+            name.strip_prefix(prefix)?.strip_suffix(".safetensors")?.parse().ok()
         })
         .collect();
     steps.sort_unstable();

@@ -18,8 +18,9 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use serde::{Deserialize, Serialize};
 
-use super::checkpoint::{budget_policy_path, save_actor, BUDGET_POLICY_DIR};
+use super::checkpoint::{budget_policy_path, policy_file_steps, save_actor, BUDGET_POLICY_DIR};
 use super::evaluate::Evaluation;
+use super::scaffold::save_budget_policy;
 use crate::agents::Agent;
 use crate::io::write_bytes_atomic;
 
@@ -52,9 +53,12 @@ impl Snapshot {
     }
 }
 
+/// The name of a best actor's file before its step (`policies/best-step-<N>.safetensors`).
+const SNAPSHOT_PREFIX: &str = "best-step-";
+
 /// Where the best actor evaluated at `step` is kept.
 pub fn snapshot_path(run_dir: &Path, step: u64) -> PathBuf {
-    run_dir.join(BUDGET_POLICY_DIR).join(format!("best-step-{step}.safetensors"))
+    run_dir.join(BUDGET_POLICY_DIR).join(format!("{SNAPSHOT_PREFIX}{step}.safetensors"))
 }
 
 /// The best actor so far, and the one the latest checkpoint names (whose file a resume needs).
@@ -95,7 +99,7 @@ impl BestPolicy {
     /// Removes every best-actor file but the newest best's and the latest checkpoint's.
     fn prune(&self, run_dir: &Path) -> Result<()> {
         let keep = [self.best.map(|b| b.step), self.checkpointed.map(|c| c.step)];
-        for stale in snapshot_steps(run_dir).into_iter().filter(|s| !keep.contains(&Some(*s))) {
+        for stale in policy_file_steps(run_dir, SNAPSHOT_PREFIX).into_iter().filter(|s| !keep.contains(&Some(*s))) {
             let path = snapshot_path(run_dir, stale);
             std::fs::remove_file(&path).with_context(|| format!("removing {}", path.display()))?;
         }
@@ -106,7 +110,7 @@ impl BestPolicy {
     /// yet (the step is then the budget's own, with no figures).
     pub fn save_budget(&self, run_dir: &Path, budget: u64, agent: &dyn Agent) -> Result<()> {
         let Some(best) = self.best else {
-            save_actor(&budget_policy_path(run_dir, budget), agent)?;
+            save_budget_policy(run_dir, budget, agent)?;
             return record_selection(run_dir, budget, None);
         };
         let from = snapshot_path(run_dir, best.step);
@@ -114,19 +118,6 @@ impl BestPolicy {
         write_bytes_atomic(&budget_policy_path(run_dir, budget), &bytes)?;
         record_selection(run_dir, budget, Some(best))
     }
-}
-
-/// The steps of the best-actor files in `run_dir`.
-fn snapshot_steps(run_dir: &Path) -> Vec<u64> {
-    std::fs::read_dir(run_dir.join(BUDGET_POLICY_DIR))
-        .into_iter()
-        .flatten()
-        .flatten()
-        .filter_map(|e| {
-            let name = e.file_name().into_string().ok()?;
-            name.strip_prefix("best-step-")?.strip_suffix(".safetensors")?.parse().ok()
-        })
-        .collect()
 }
 
 /// One row of `policies/selected.csv`.
