@@ -532,10 +532,20 @@ fn actor_tensors(file: &Path) -> Vec<(String, Vec<f32>)> {
     v
 }
 
-/// `budget_policy = "best"` leaves training alone (same weights, same evaluations) and keeps at
-/// the budget the actor of the evaluation it names: the actor a run stopped at that step holds.
+/// `budget_policy = "best"` and `"fewest_falls"` leave training alone (same weights, same
+/// evaluations) and keep at the budget the actor of the evaluation they name: the actor a run
+/// stopped at that step holds.
 #[test]
 fn keeping_the_best_actor_changes_no_training_and_keeps_the_named_actor() {
+    keeps_the_named_actor("best");
+}
+
+#[test]
+fn keeping_the_actor_with_fewest_falls_changes_no_training_and_keeps_the_named_actor() {
+    keeps_the_named_actor("fewest_falls");
+}
+
+fn keeps_the_named_actor(policy: &str) {
     let dir = tempfile::tempdir().unwrap();
     let env = EnvConfig::new("inverted-pendulum");
     let settings = "total_steps=3000,eval_every=250,eval_episodes=3";
@@ -546,7 +556,7 @@ fn keeping_the_best_actor_changes_no_training_and_keeps_the_named_actor() {
         (out, s)
     };
     let (last, last_summary) = run("last", "");
-    let (best, best_summary) = run("best", ",budget_policy=\"best\"");
+    let (best, best_summary) = run("best", &format!(",budget_policy=\"{policy}\""));
     assert_eq!(tensors(&last_summary.checkpoint), tensors(&best_summary.checkpoint));
     assert_eq!(eval_rows(&last), eval_rows(&best));
     assert!(!last.join("policies/selected.csv").exists(), "a run keeping its last actors names none");
@@ -556,6 +566,7 @@ fn keeping_the_best_actor_changes_no_training_and_keeps_the_named_actor() {
     let (budget, step, (min, mean)) = (selected[0].budget, selected[0].step, selected[0].figures.unwrap());
     assert_eq!(budget, 3000);
     assert!(step % 250 == 0 && step <= 3000 && min <= mean, "{selected:?}");
+    assert!(selected[0].falls.is_some_and(|f| f <= 3), "{selected:?}");
     let rows = train::metrics::read(&best.join("metrics.csv")).unwrap();
     let row = rows.iter().find(|r| r.kind == "eval" && r.step == step).expect("an evaluation at the named step");
     assert_eq!(row.eval_mean, Some(mean));
@@ -572,15 +583,18 @@ fn keeping_the_best_actor_changes_no_training_and_keeps_the_named_actor() {
 }
 
 #[test]
-fn budget_policy_takes_last_or_best_and_best_is_for_off_policy_learners() {
+fn budget_policy_takes_last_best_or_fewest_falls_and_picking_is_for_off_policy_learners() {
     assert_eq!(small_config("").budget_policy, locobench::agents::config::BudgetPolicy::Last);
     let o = split_pairs("budget_policy=\"median\"").unwrap();
     let err = build_config("minitaur", Algo::Td3, &o).and_then(|c| c.validate()).unwrap_err();
     assert!(err.to_string().contains("median"), "{err}");
-    let o = split_pairs("budget_policy=\"best\"").unwrap();
-    let err = build_config("minitaur", Algo::Ppo, &o).and_then(|c| c.validate()).unwrap_err();
-    assert!(err.to_string().contains("budget_policy") && err.to_string().contains("ppo"), "{err}");
-    for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg, Algo::Crossq, Algo::Dqn] {
-        assert!(build_config("minitaur", algo, &o).and_then(|c| c.validate()).is_ok(), "{algo:?}");
+    for policy in ["best", "fewest_falls"] {
+        let o = split_pairs(&format!("budget_policy=\"{policy}\"")).unwrap();
+        let err = build_config("minitaur", Algo::Ppo, &o).and_then(|c| c.validate()).unwrap_err().to_string();
+        assert!(err.contains("budget_policy") && err.contains(policy) && err.contains("ppo"), "{err}");
+        for algo in [Algo::Td3, Algo::Sac, Algo::Ddpg, Algo::Crossq, Algo::Dqn] {
+            let cfg = build_config("minitaur", algo, &o).and_then(|c| c.validate().map(|_| c));
+            assert_eq!(cfg.unwrap().budget_policy.name(), policy, "{algo:?}");
+        }
     }
 }

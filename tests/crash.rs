@@ -215,6 +215,17 @@ fn td3_keeping_its_best_actor_killed_anywhere_resumes_to_the_unbroken_run() {
     crash_and_resume_with("td3", "budget_policy=best", &points("td3"));
 }
 
+/// The same with the fewest falls deciding: the falls each kept actor's evaluation counted come
+/// back from the checkpoint.
+#[test]
+fn td3_keeping_its_actor_with_fewest_falls_killed_anywhere_resumes_to_the_unbroken_run() {
+    crash_and_resume_with(
+        "td3",
+        "budget_policy=fewest_falls",
+        &["after-checkpoint:1", "budget-policy-write:1", "step:777"],
+    );
+}
+
 #[test]
 fn ppo_killed_anywhere_resumes_to_the_unbroken_run() {
     crash_and_resume("ppo", &points("ppo"));

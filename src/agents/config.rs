@@ -81,11 +81,29 @@ pub enum BudgetPolicy {
     /// highest minimum episode return (ties: the higher mean): TD7's policy checkpoints
     /// (`train::selection`). Off-policy algorithms only.
     Best,
+    /// Of the same actors, the one whose evaluation ended fewest episodes in a fall (ties: the
+    /// higher mean return). Off-policy algorithms only.
+    #[serde(rename = "fewest_falls")]
+    FewestFalls,
 }
 
 impl BudgetPolicy {
     fn is_last(&self) -> bool {
         *self == BudgetPolicy::Last
+    }
+
+    /// Whether the run picks among its evaluated actors instead of keeping the one at the budget.
+    pub fn selects(&self) -> bool {
+        *self != BudgetPolicy::Last
+    }
+
+    /// The value as `config.toml` spells it.
+    pub fn name(&self) -> &'static str {
+        match self {
+            BudgetPolicy::Last => "last",
+            BudgetPolicy::Best => "best",
+            BudgetPolicy::FewestFalls => "fewest_falls",
+        }
     }
 }
 
@@ -359,9 +377,10 @@ impl TrainConfig {
             self.batch_size
         );
         anyhow::ensure!(
-            !(self.algo.is_on_policy() && self.budget_policy == BudgetPolicy::Best),
-            "budget_policy = \"best\" picks among the actors of the off-policy loop's evaluations; \
+            !(self.algo.is_on_policy() && self.budget_policy.selects()),
+            "budget_policy = \"{}\" picks among the actors of the off-policy loop's evaluations; \
              {} keeps its last actor at each budget (budget_policy = \"last\")",
+            self.budget_policy.name(),
             self.algo.name()
         );
         anyhow::ensure!((0.0..=1.0).contains(&self.gamma), "gamma must lie in [0, 1]");

@@ -108,14 +108,17 @@ impl Run {
     /// Hyperparameters and non-reward environment options that differ from what
     /// `locobench train --env E --algo A` would use today (the algorithm's defaults and the
     /// shipped presets), e.g. `reward_scale=100`; empty when none. Budget and bookkeeping keys
-    /// (steps, evaluation and checkpoint cadence) do not count.
+    /// (steps, evaluation and checkpoint cadence) do not count, but for a run that picks its
+    /// budget actors among its evaluations (`budget_policy`) the evaluations' cadence and length do.
     pub(crate) fn settings_label(&self) -> String {
         const BOOKKEEPING: [&str; 4] = ["total_steps", "eval_every", "eval_episodes", "checkpoint_every"];
+        let picks = self.config.train.budget_policy.selects();
+        let bookkeeping = |k: &str| BOOKKEEPING.contains(&k) && !(picks && k.starts_with("eval_"));
         let mut changed = Vec::new();
         if let Ok(preset) = crate::train::config::build_config(self.env(), self.config.train.algo, &[]) {
             let (ours, theirs) = (self.config.train.to_flat_table(), preset.to_flat_table());
             for (k, v) in &ours {
-                if !BOOKKEEPING.contains(&k.as_str()) && theirs.get(k) != Some(v) {
+                if !bookkeeping(k) && theirs.get(k) != Some(v) {
                     changed.push(format!("{k}={v}"));
                 }
             }
@@ -338,6 +341,15 @@ pub(crate) mod tests {
         assert_eq!(capped.reward_label(), "max_rewarded_speed=1.6");
         assert_eq!(capped.settings_label(), "random_push_max=0.75");
         assert_eq!(run("minitaur", Algo::Ppo, "", &[("max_rewarded_speed", "0")]).reward_label(), DEFAULT_REWARD);
+    }
+
+    /// A run that picks its budget actors among its evaluations picks differently with more
+    /// evaluation episodes, so their number is a setting there and bookkeeping elsewhere.
+    #[test]
+    fn evaluation_length_is_a_setting_only_where_it_picks_the_kept_actor() {
+        assert_eq!(run("minitaur", Algo::Td3, "eval_episodes=20", &[]).settings_label(), "");
+        let picks = run("minitaur", Algo::Td3, "budget_policy=\"fewest_falls\",eval_episodes=50", &[]);
+        assert_eq!(picks.settings_label(), "budget_policy=\"fewest_falls\",eval_episodes=50");
     }
 
     #[test]

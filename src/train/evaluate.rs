@@ -20,6 +20,9 @@ pub struct Evaluation {
     pub term_means: Vec<(&'static str, f64)>,
     /// Episodes ended by a physics blow-up.
     pub unstable_episodes: usize,
+    /// Episodes ended before the time limit: in a terminal state (a fall, on the walkers) or by a
+    /// physics blow-up.
+    pub falls: usize,
     /// Share of action components with |a| >= SATURATED over all steps.
     pub saturation: f64,
 }
@@ -58,6 +61,7 @@ pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed:
         lengths: Vec::with_capacity(episodes),
         term_means: terms.iter().map(|&t| (t, 0.0)).collect(),
         unstable_episodes: 0,
+        falls: 0,
         saturation: 0.0,
     };
     let (mut components, mut saturated) = (0usize, 0usize);
@@ -74,6 +78,7 @@ pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed:
             *mean += total / episodes as f64;
         }
         eval.unstable_episodes += s.unstable as usize;
+        eval.falls += (s.terminated || s.unstable) as usize;
         eval.returns.push(s.episode_return);
         eval.lengths.push(s.length);
         super::fault::reach(super::fault::Point::Evaluation);

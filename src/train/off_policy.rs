@@ -58,7 +58,7 @@ pub(super) fn resume(
     trainer.wall_offset = state.wall_time;
     trainer.losses = state.losses;
     trainer.best_eval = state.best_eval_mean;
-    trainer.best_policy = BestPolicy::resumed(state.best_policy);
+    trainer.best_policy = BestPolicy::resumed(trainer.cfg.budget_policy, state.best_policy);
     trainer.metrics = metrics;
     scaffold::record_stretch(run_dir, state.step, control)?;
     trainer.run(control)
@@ -113,7 +113,7 @@ impl Trainer {
             metrics: Vec::new(),
             losses: None,
             best_eval: None,
-            best_policy: BestPolicy::default(),
+            best_policy: BestPolicy::new(run.train.budget_policy),
             fit_observations: run.init_from.is_none(),
         })
     }
@@ -218,14 +218,14 @@ impl Trainer {
             if scaffold::crossed(self.step - 1, self.step, cfg.eval_every) || self.step == cfg.total_steps {
                 let e = evaluate(self.agent.as_ref(), self.eval_env.as_mut(), cfg.eval_episodes, self.seed)?;
                 self.best_eval = Some(self.best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
-                if cfg.budget_policy == BudgetPolicy::Best {
+                if cfg.budget_policy.selects() {
                     self.best_policy.consider(&self.run_dir, self.step, &e, self.agent.as_ref())?;
                 }
                 let row =
                     MetricsRow::progress("eval", self.step, self.losses, sc.rate(self.step), sc.wall(self.wall_offset));
                 sc.evaluated(&self.run_dir, &mut self.metrics, row, e, control, self.agent.as_ref(), self.seed)?;
             }
-            if at_budget && cfg.budget_policy == BudgetPolicy::Best {
+            if at_budget && cfg.budget_policy.selects() {
                 self.best_policy.save_budget(&self.run_dir, self.step, self.agent.as_ref())?;
             }
             sc.bar.set_position(self.step);
@@ -242,7 +242,9 @@ impl Trainer {
         if outcome == Outcome::Finished && !POLICY_BUDGETS.contains(&self.step) && self.step != cfg.total_steps {
             match cfg.budget_policy {
                 BudgetPolicy::Last => save_budget_policy(&self.run_dir, self.step, self.agent.as_ref())?,
-                BudgetPolicy::Best => self.best_policy.save_budget(&self.run_dir, self.step, self.agent.as_ref())?,
+                BudgetPolicy::Best | BudgetPolicy::FewestFalls => {
+                    self.best_policy.save_budget(&self.run_dir, self.step, self.agent.as_ref())?
+                }
             }
         }
         let checkpoint = self.save(need_reset, sc.wall(self.wall_offset))?;
