@@ -73,9 +73,10 @@ runs=(
   $r/minitaur/td3-combined-ln-seed{0,1,2} $r/minitaur/{sac,ddpg}-combined-ln-seed0
   $r/minitaur/td3-combined-ln-lr3e4-seed{0,1,2}
   # The same TD3 keeping at each budget its best evaluated actor (budget_policy=best, TD7's policy
-  # checkpoints) of 10-, 20- and 50-episode in-training evaluations, seeds 0-2 to 500k; SAC with
+  # checkpoints) of 10-, 20- and 50-episode in-training evaluations, or the one with fewest falls
+  # in 50 (budget_policy=fewest_falls), seeds 0-2 to 500k (the 50-episode best to 300k); SAC with
   # layer-normalised critics and CrossQ's optimiser settings, seeds 0-2 (seed 0 to 500k)
-  $r/minitaur/td3-combined-ln-best{,20,50}-seed{0,1,2}
+  $r/minitaur/td3-combined-ln-{best,best20,best50,ff50}-seed{0,1,2}
   $r/minitaur/sac-combined-ln-crossqopt-seed{0,1,2}
   # Humanoid toward 1M with policies at each budget it has reached: SAC's preset, seed 0 (it
   # replaces the earlier curves-only sac-seed0-300k, the same seed and settings on older code), and
