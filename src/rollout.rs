@@ -24,6 +24,11 @@ pub struct EpisodeSummary {
 }
 
 impl EpisodeSummary {
+    /// Ended before its time limit: a fall (a terminal state) or unstable physics.
+    pub fn fell(&self) -> bool {
+        self.terminated || self.unstable
+    }
+
     /// Why the episode ended, in words.
     pub fn end_reason(&self) -> &'static str {
         if self.unstable {

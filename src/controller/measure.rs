@@ -150,7 +150,7 @@ pub(crate) fn measure_episode(
     let mut e = obs.episode;
     e.episode_return = summary.episode_return;
     e.length = summary.length;
-    e.fell = summary.terminated || summary.unstable;
+    e.fell = summary.fell();
     e.unstable = summary.unstable;
     e.reward_terms = summary.term_totals.clone();
     let time = summary.length as f64 * dt;

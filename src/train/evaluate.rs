@@ -78,7 +78,7 @@ pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed:
             *mean += total / episodes as f64;
         }
         eval.unstable_episodes += s.unstable as usize;
-        eval.falls += (s.terminated || s.unstable) as usize;
+        eval.falls += s.fell() as usize;
         eval.returns.push(s.episode_return);
         eval.lengths.push(s.length);
         super::fault::reach(super::fault::Point::Evaluation);

@@ -19,7 +19,6 @@ use super::run_config::RunConfig;
 use super::scaffold::{self, check_bounded_actions, finish_run, learner_reward, save_budget_policy, Scaffold};
 use super::seeds::{init_rng, train_episode_seed, training_rng, RngState};
 use super::selection::BestPolicy;
-use crate::agents::config::BudgetPolicy;
 use crate::agents::{make_learner_on, Batch, Losses, OffPolicyAgent, ReplayBuffer, TrainConfig};
 use crate::device::ComputeDevice;
 use crate::envs::{make, Env, EnvConfig};
@@ -208,9 +207,9 @@ impl Trainer {
             }
 
             // The actor at each reporting budget, for the report's per-budget rows. Under
-            // `budget_policy = "best"` it waits for this step's evaluation, which may be the best.
+            // a `budget_policy` that selects it waits for this step's evaluation, which may win.
             let at_budget = POLICY_BUDGETS.contains(&self.step) || self.step == cfg.total_steps;
-            if at_budget && cfg.budget_policy == BudgetPolicy::Last {
+            if at_budget && !cfg.budget_policy.selects() {
                 save_budget_policy(&self.run_dir, self.step, self.agent.as_ref())?;
             }
 
@@ -240,11 +239,10 @@ impl Trainer {
         // A run finished early (target_return, an evaluation hook) keeps its actor at the step
         // it reached, as the on-policy loop does; budgets and the full budget are saved above.
         if outcome == Outcome::Finished && !POLICY_BUDGETS.contains(&self.step) && self.step != cfg.total_steps {
-            match cfg.budget_policy {
-                BudgetPolicy::Last => save_budget_policy(&self.run_dir, self.step, self.agent.as_ref())?,
-                BudgetPolicy::Best | BudgetPolicy::FewestFalls => {
-                    self.best_policy.save_budget(&self.run_dir, self.step, self.agent.as_ref())?
-                }
+            if cfg.budget_policy.selects() {
+                self.best_policy.save_budget(&self.run_dir, self.step, self.agent.as_ref())?
+            } else {
+                save_budget_policy(&self.run_dir, self.step, self.agent.as_ref())?
             }
         }
         let checkpoint = self.save(need_reset, sc.wall(self.wall_offset))?;

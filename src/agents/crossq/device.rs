@@ -9,7 +9,7 @@ use crate::agents::common::device::adam::DeviceAdam;
 use crate::agents::common::device::layers::{squashed_sample, DeviceRenorm, DeviceStack, RenormConstants};
 use crate::agents::common::device::{read_scalars, row, standard_normal, DeviceBatch};
 use crate::agents::config::{Algo, TanhCorrection, TrainConfig};
-use crate::agents::crossq::{Passes, D_MAX, EPSILON, R_MAX};
+use crate::agents::crossq::{Passes, Td3Mode, D_MAX, EPSILON, R_MAX};
 use crate::agents::{Agent, CrossqAgent, Losses, OffPolicyAgent};
 use crate::numeric::optim::Optimizer;
 
@@ -55,6 +55,7 @@ pub struct GenericCrossq {
     critic_opt: DeviceAdam,
     alpha_opt: DeviceAdam,
     policy_delay: u64,
+    td3: Option<Td3Mode>,
     passes: Passes,
 }
 
@@ -98,12 +99,57 @@ impl GenericCrossq {
             log_alpha,
             target_entropy: s.target_entropy.unwrap_or(-(act_dim as f64)),
             policy_delay: s.policy_delay as u64,
+            td3: s.td3(),
             passes: Passes::default(),
         })
     }
 
     fn policy(&self, obs: &Tensor, train: bool) -> Result<Tensor> {
         self.actor.forward(obs, train, self.passes.actor, false, self.renorm)
+    }
+
+    /// The deterministic policy of `td3_mode`: tanh of the actor's mean.
+    fn deterministic(&self, obs: &Tensor, train: bool) -> Result<Tensor> {
+        self.policy(obs, train)?.narrow(1, 0, self.act_dim)?.tanh()
+    }
+
+    /// The update in `td3_mode`, with the fused one's draws (the smoothing noise) in its order.
+    fn update_td3(&mut self, batch: &Batch, td3: Td3Mode, rng: &mut ChaCha8Rng) -> Result<Losses> {
+        let n = batch.size;
+        let trains_actor = (self.passes.updates + 1).is_multiple_of(self.policy_delay);
+        let noise = [td3.smoothing_noise(n * self.act_dim, rng)];
+        let b = DeviceBatch::upload(batch, self.obs_dim, self.act_dim, &noise, &self.device)?;
+        let next_a = (self.deterministic(&b.next_obs, false)? + &b.noise[0])?.clamp(-1f32, 1f32)?.detach();
+        let joint =
+            Tensor::cat(&[Tensor::cat(&[&b.obs, &b.actions], 1)?, Tensor::cat(&[&b.next_obs, &next_a], 1)?], 0)?;
+        let q = self
+            .critics
+            .iter()
+            .map(|c| c.forward(&joint, true, self.passes.critic, false, self.renorm))
+            .collect::<Result<Vec<_>>>()?;
+        self.passes.critic += 1;
+        let q_next = q[0].narrow(0, n, n)?.minimum(&q[1].narrow(0, n, n)?)?.detach();
+        let y = (&b.rewards + (&b.not_done * q_next)?.affine(self.gamma, 0.0)?)?.detach();
+        let mut critic_loss = Tensor::zeros((), DType::F32, &self.device)?;
+        for qk in &q {
+            critic_loss =
+                (critic_loss + qk.narrow(0, 0, n)?.broadcast_sub(&y)?.sqr()?.mean_all()?.affine(0.5, 0.0)?)?;
+        }
+        self.critic_opt.step(&critic_loss.backward()?)?;
+        self.passes.updates += 1;
+
+        let mut scalars = vec![critic_loss];
+        if trains_actor {
+            let pi = self.deterministic(&b.obs, true)?;
+            self.passes.actor += 1;
+            let x = Tensor::cat(&[&b.obs, &pi], 1)?;
+            let frozen = |c: &RenormNet| c.forward(&x, false, self.passes.critic, true, self.renorm);
+            let actor_loss = frozen(&self.critics[0])?.minimum(&frozen(&self.critics[1])?)?.mean_all()?.neg()?;
+            self.actor_opt.step(&actor_loss.backward()?)?;
+            scalars.push(actor_loss);
+        }
+        let values = read_scalars(&scalars.iter().collect::<Vec<_>>())?;
+        Ok(Losses { critic: values[0], actor: trains_actor.then(|| values[1]), ..Default::default() })
     }
 }
 
@@ -114,6 +160,9 @@ impl Agent for GenericCrossq {
     }
 
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
+        if let Some(td3) = self.td3 {
+            return Ok(td3.explore(&self.act(obs)?, rng));
+        }
         let eps = Tensor::from_vec(standard_normal(self.act_dim, rng), (1, self.act_dim), &self.device)?;
         let (a, _) = squashed_sample(&self.policy(&row(obs, &self.device)?, false)?, &eps, TanhCorrection::Exact)?;
         a.flatten_all()?.to_vec1::<f32>()
@@ -124,6 +173,9 @@ impl Agent for GenericCrossq {
 
 impl OffPolicyAgent for GenericCrossq {
     fn update(&mut self, batch: &Batch, rng: &mut ChaCha8Rng) -> Result<Losses> {
+        if let Some(td3) = self.td3 {
+            return self.update_td3(batch, td3, rng);
+        }
         let n = batch.size;
         let trains_actor = (self.passes.updates + 1).is_multiple_of(self.policy_delay);
         // the fused update's draws, in its order: the next state's sample, then the policy's

@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 
 use candle_core::{DType, Device, Result, Tensor, Var};
 use rand_chacha::ChaCha8Rng;
+use rand_distr::{Distribution, StandardNormal};
 
 use crate::agents::common::buffer::Batch;
 use crate::agents::common::nets::{batch_tensor, scalar_var, DenseStack, Mlp, Output};
@@ -177,6 +178,7 @@ pub struct CrossqAgent {
     critic_opt: Adam,
     alpha_opt: Adam,
     policy_delay: u64,
+    td3: Option<Td3Mode>,
     passes: Passes,
 }
 
@@ -201,6 +203,7 @@ impl CrossqAgent {
             log_alpha,
             target_entropy: s.target_entropy.unwrap_or(-(act_dim as f64)),
             policy_delay: s.policy_delay as u64,
+            td3: s.td3(),
             passes: Passes::default(),
         })
     }
@@ -212,6 +215,11 @@ impl CrossqAgent {
 
     fn sample(&self, obs: &Tensor, train: bool, rng: &mut ChaCha8Rng) -> Result<(Tensor, Tensor)> {
         sample_squashed(&self.actor.forward(obs, train, self.passes.actor, false)?, TanhCorrection::Exact, rng)
+    }
+
+    /// The deterministic policy of `td3_mode`: tanh of the actor's mean, `[n, act_dim]`.
+    fn deterministic(&self, obs: &Tensor, train: bool) -> Result<Tensor> {
+        self.actor.forward(obs, train, self.passes.actor, false)?.narrow(1, 0, self.act_dim)?.tanh()
     }
 }
 
@@ -279,6 +287,9 @@ impl Agent for CrossqAgent {
     }
 
     fn explore(&mut self, obs: &[f32], rng: &mut ChaCha8Rng) -> Result<Vec<f32>> {
+        if let Some(td3) = self.td3 {
+            return Ok(td3.explore(&self.act(obs)?, rng));
+        }
         let (a, _) = self.sample(&batch_tensor(obs, 1, self.obs_dim)?, false, rng)?;
         a.flatten_all()?.to_vec1::<f32>()
     }
@@ -298,7 +309,15 @@ impl OffPolicyAgent for CrossqAgent {
         let mut losses = Losses::default();
 
         // One pass of both critics over [(s, a); (s', a')]: the halves share batch statistics.
-        let (next_a, next_logp) = self.sample(&next_obs, false, rng)?;
+        let (next_a, next_logp) = match self.td3 {
+            Some(td3) => {
+                let eps =
+                    Tensor::from_vec(td3.smoothing_noise(n * self.act_dim, rng), (n, self.act_dim), &Device::Cpu)?;
+                let a = (self.deterministic(&next_obs, false)? + eps)?.clamp(-1f32, 1f32)?;
+                (a, Tensor::zeros((n, 1), DType::F32, &Device::Cpu)?)
+            }
+            None => self.sample(&next_obs, false, rng)?,
+        };
         let joint = Tensor::cat(&[Tensor::cat(&[&obs, &actions], 1)?, Tensor::cat(&[&next_obs, &next_a], 1)?], 0)?;
         let q: Vec<Tensor> =
             self.critics.iter().map(|c| c.forward(&joint, true, self.passes.critic, false)).collect::<Result<_>>()?;
@@ -315,6 +334,20 @@ impl OffPolicyAgent for CrossqAgent {
         losses.critic = critic_loss.to_scalar::<f32>()? as f64;
         self.passes.updates += 1;
 
+        if self.td3.is_some() {
+            if self.passes.updates.is_multiple_of(self.policy_delay) {
+                let pi_a = self.deterministic(&obs, true)?;
+                self.passes.actor += 1;
+                let x = Tensor::cat(&[&obs, &pi_a], 1)?;
+                let q_pi = self.critics[0]
+                    .forward(&x, false, self.passes.critic, true)?
+                    .minimum(&self.critics[1].forward(&x, false, self.passes.critic, true)?)?;
+                let actor_loss = q_pi.mean_all()?.neg()?;
+                self.actor_opt.step(&actor_loss.backward()?)?;
+                losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
+            }
+            return Ok(losses);
+        }
         if self.passes.updates.is_multiple_of(self.policy_delay) {
             let (pi_a, logp) = self.sample(&obs, true, rng)?;
             self.passes.actor += 1;
@@ -358,6 +391,81 @@ pub struct CrossqConfig {
     pub batch_norm_momentum: f64,
     /// Training passes of plain batch normalisation before the renormalisation's corrections start.
     pub renorm_warmup_steps: u64,
+    /// Train a deterministic actor as TD3 does, on CrossQ's critics: the CrossQ authors' `td3_mode`
+    /// (repository `adityab/CrossQ`, `sbx/sac/sac.py` and `train.py -algo td3 -bn 1`). The tanh of
+    /// the actor's mean is the policy; exploration adds N(0, `exploration_noise`); the next action
+    /// of the critics' target adds TD3's smoothing noise, N(0, `policy_noise`) clipped at
+    /// `noise_clip`; the actor ascends the smaller critic; no entropy term, no temperature. Off
+    /// unless asked for.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub td3_mode: bool,
+    /// With `td3_mode`: the exploration noise's std, in units of the action half-range (TD3's 0.1).
+    #[serde(default = "Td3Mode::exploration_noise", skip_serializing_if = "Td3Mode::is_exploration_noise")]
+    pub exploration_noise: f64,
+    /// With `td3_mode`: the target smoothing noise's std (TD3's 0.2).
+    #[serde(default = "Td3Mode::policy_noise", skip_serializing_if = "Td3Mode::is_policy_noise")]
+    pub policy_noise: f64,
+    /// With `td3_mode`: the smoothing noise's clip (TD3's 0.5).
+    #[serde(default = "Td3Mode::noise_clip", skip_serializing_if = "Td3Mode::is_noise_clip")]
+    pub noise_clip: f64,
+}
+
+/// TD3's noise settings (Fujimoto et al. 2018), which the CrossQ authors' `td3_mode` keeps.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Td3Mode {
+    pub exploration_noise: f64,
+    pub policy_noise: f64,
+    pub noise_clip: f64,
+}
+
+impl Td3Mode {
+    const DEFAULT: Td3Mode = Td3Mode { exploration_noise: 0.1, policy_noise: 0.2, noise_clip: 0.5 };
+
+    fn exploration_noise() -> f64 {
+        Self::DEFAULT.exploration_noise
+    }
+
+    fn is_exploration_noise(v: &f64) -> bool {
+        *v == Self::DEFAULT.exploration_noise
+    }
+
+    fn policy_noise() -> f64 {
+        Self::DEFAULT.policy_noise
+    }
+
+    fn is_policy_noise(v: &f64) -> bool {
+        *v == Self::DEFAULT.policy_noise
+    }
+
+    fn noise_clip() -> f64 {
+        Self::DEFAULT.noise_clip
+    }
+
+    fn is_noise_clip(v: &f64) -> bool {
+        *v == Self::DEFAULT.noise_clip
+    }
+
+    /// Exploration: `action` plus N(0, exploration_noise) per element, within [-1, 1].
+    pub(crate) fn explore(&self, action: &[f32], rng: &mut ChaCha8Rng) -> Vec<f32> {
+        action
+            .iter()
+            .map(|&a| {
+                let z: f64 = StandardNormal.sample(rng);
+                (a as f64 + self.exploration_noise * z).clamp(-1.0, 1.0) as f32
+            })
+            .collect()
+    }
+
+    /// `count` draws of the target smoothing noise, N(0, policy_noise) clipped at `noise_clip`.
+    pub(crate) fn smoothing_noise(&self, count: usize, rng: &mut ChaCha8Rng) -> Vec<f32> {
+        let c = self.noise_clip;
+        (0..count)
+            .map(|_| {
+                let z: f64 = StandardNormal.sample(rng);
+                (self.policy_noise * z).clamp(-c, c) as f32
+            })
+            .collect()
+    }
 }
 
 impl CrossqConfig {
@@ -370,7 +478,20 @@ impl CrossqConfig {
         "target_entropy",
         "batch_norm_momentum",
         "renorm_warmup_steps",
+        "td3_mode",
+        "exploration_noise",
+        "policy_noise",
+        "noise_clip",
     ];
+
+    /// TD3's noise settings when `td3_mode` is on.
+    pub(crate) fn td3(&self) -> Option<Td3Mode> {
+        self.td3_mode.then_some(Td3Mode {
+            exploration_noise: self.exploration_noise,
+            policy_noise: self.policy_noise,
+            noise_clip: self.noise_clip,
+        })
+    }
 
     /// Checks this section's settings (with the shared ones they depend on).
     pub(crate) fn validate(&self, train: &TrainConfig) -> anyhow::Result<()> {
@@ -383,6 +504,17 @@ impl CrossqConfig {
         anyhow::ensure!((0.0..1.0).contains(&self.batch_norm_momentum), "batch_norm_momentum must lie in [0, 1)");
         positive("initial_alpha", self.initial_alpha)?;
         positive("alpha_lr", self.alpha_lr)?;
+        for (name, value, default) in [
+            ("exploration_noise", self.exploration_noise, Td3Mode::DEFAULT.exploration_noise),
+            ("policy_noise", self.policy_noise, Td3Mode::DEFAULT.policy_noise),
+            ("noise_clip", self.noise_clip, Td3Mode::DEFAULT.noise_clip),
+        ] {
+            anyhow::ensure!(value >= 0.0 && value.is_finite(), "{name} must be a finite number >= 0, got {value}");
+            anyhow::ensure!(
+                self.td3_mode || value == default,
+                "{name} = {value} applies only with td3_mode = true (CrossQ's own actor explores by sampling)"
+            );
+        }
         anyhow::ensure!(
             train.batch_size >= 2,
             "batch normalisation needs at least 2 transitions per batch, got batch_size {}",
@@ -413,6 +545,10 @@ impl TrainConfig {
                 target_entropy: None,
                 batch_norm_momentum: 0.99,
                 renorm_warmup_steps: 100_000,
+                td3_mode: false,
+                exploration_noise: Td3Mode::DEFAULT.exploration_noise,
+                policy_noise: Td3Mode::DEFAULT.policy_noise,
+                noise_clip: Td3Mode::DEFAULT.noise_clip,
             }),
             ..TrainConfig::shared_defaults(Algo::Crossq)
         }
@@ -491,6 +627,86 @@ mod tests {
             }
         }
         assert_eq!(layer.running_mean.as_tensor().to_vec1::<f32>().unwrap(), before);
+    }
+
+    fn td3_config() -> TrainConfig {
+        let mut cfg = TrainConfig::crossq_defaults();
+        cfg.hidden = vec![16, 16];
+        cfg.batch_size = 8;
+        let s = cfg.crossq.as_mut().unwrap();
+        s.critic_hidden = vec![16, 16];
+        s.td3_mode = true;
+        cfg
+    }
+
+    #[test]
+    fn td3_mode_explores_around_the_deterministic_action_with_tds_noise() {
+        use rand::SeedableRng;
+        let cfg = td3_config();
+        let mut agent = CrossqAgent::new(&cfg, 3, 2, &mut ChaCha8Rng::seed_from_u64(0)).unwrap();
+        let obs = [0.5f32, -1.0, 2.0];
+        let mean = agent.act(&obs).unwrap();
+        let (mut a, mut b) = (ChaCha8Rng::seed_from_u64(7), ChaCha8Rng::seed_from_u64(7));
+        let explored = agent.explore(&obs, &mut a).unwrap();
+        for (i, e) in explored.iter().enumerate() {
+            let z: f64 = StandardNormal.sample(&mut b);
+            assert_eq!(*e, (mean[i] as f64 + 0.1 * z).clamp(-1.0, 1.0) as f32);
+        }
+        // many draws: the exploration noise has TD3's std; the smoothing noise its std and clip
+        let mut rng = ChaCha8Rng::seed_from_u64(1);
+        let td3 = cfg.crossq().td3().unwrap();
+        let d: Vec<f64> = (0..20000).map(|_| (td3.explore(&[0.0], &mut rng)[0]) as f64).collect();
+        let std = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
+        assert!((std - 0.1).abs() < 0.003, "{std}");
+        let s = td3.smoothing_noise(20000, &mut rng);
+        assert!(s.iter().all(|x| x.abs() <= 0.5) && s.contains(&0.5) && s.contains(&-0.5));
+        // N(0, 0.2) clipped at 0.5 (2.5 std) keeps nearly all its variance
+        let std = (s.iter().map(|x| (*x as f64).powi(2)).sum::<f64>() / s.len() as f64).sqrt();
+        assert!((std - 0.2).abs() < 0.005, "{std}");
+    }
+
+    #[test]
+    fn td3_mode_trains_the_actor_on_the_policy_delay_without_a_temperature() {
+        use rand::SeedableRng;
+        let cfg = td3_config();
+        let mut agent = CrossqAgent::new(&cfg, 3, 2, &mut ChaCha8Rng::seed_from_u64(0)).unwrap();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let batch = Batch {
+            size: 8,
+            obs: (0..24).map(|i| (i as f32 * 0.37).sin()).collect(),
+            actions: (0..16).map(|i| (i as f32 * 0.61).cos() * 0.9).collect(),
+            rewards: (0..8).map(|i| i as f32 * 0.1).collect(),
+            next_obs: (0..24).map(|i| (i as f32 * 0.29).cos()).collect(),
+            terminated: vec![0.0; 8],
+        };
+        let alpha = agent.alpha().unwrap();
+        for u in 1..=6u64 {
+            let l = agent.update(&batch, &mut rng).unwrap();
+            assert!(l.critic.is_finite());
+            assert_eq!(l.actor.is_some(), u % 3 == 0, "update {u}");
+            assert!(l.alpha.is_none() && l.alpha_loss.is_none());
+        }
+        assert_eq!(agent.alpha().unwrap(), alpha, "td3_mode has no temperature to learn");
+        assert_eq!((agent.passes.updates, agent.passes.actor, agent.passes.critic), (6, 2, 6));
+    }
+
+    #[test]
+    fn td3_mode_settings_are_checked_and_omitted_when_off() {
+        let mut cfg = TrainConfig::crossq_defaults();
+        assert!(!toml::to_string(&cfg).unwrap().contains("td3_mode"));
+        assert!(!toml::to_string(&cfg).unwrap().contains("noise"));
+        cfg.crossq.as_mut().unwrap().exploration_noise = 0.2;
+        let err = cfg.crossq().validate(&cfg).unwrap_err().to_string();
+        assert!(err.contains("exploration_noise") && err.contains("td3_mode"), "{err}");
+        let s = cfg.crossq.as_mut().unwrap();
+        s.td3_mode = true;
+        s.noise_clip = -0.1;
+        let err = cfg.crossq().validate(&cfg).unwrap_err().to_string();
+        assert!(err.contains("noise_clip"), "{err}");
+        cfg.crossq.as_mut().unwrap().noise_clip = 0.5;
+        cfg.crossq().validate(&cfg).unwrap();
+        let text = toml::to_string(&cfg).unwrap();
+        assert!(text.contains("td3_mode = true") && text.contains("exploration_noise = 0.2"), "{text}");
     }
 
     #[test]

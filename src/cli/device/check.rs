@@ -72,7 +72,13 @@ pub fn compare(algo: Algo, device: &Device, updates: usize) -> Gap {
     if algo == Algo::Ppo {
         return compare_ppo(&config(algo), device, updates);
     }
-    let cfg = config(algo);
+    compare_config(&config(algo), device, updates)
+}
+
+/// [`compare`] for any off-policy configuration.
+pub fn compare_config(cfg: &TrainConfig, device: &Device, updates: usize) -> Gap {
+    let algo = cfg.algo;
+    let cfg = cfg.clone();
     let mut fused = make_learner(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11)).unwrap();
     let mut generic = make_generic_agent(&cfg, OBS, ACT, &mut ChaCha8Rng::seed_from_u64(11), device).unwrap();
     let (mut rng_f, mut rng_g) = (ChaCha8Rng::seed_from_u64(5), ChaCha8Rng::seed_from_u64(5));

@@ -42,6 +42,15 @@ fn crossq_generic_path_follows_the_fused_one() {
 }
 
 #[test]
+fn crossq_td3_mode_generic_path_follows_the_fused_one() {
+    let mut cfg = config(Algo::Crossq);
+    cfg.crossq.as_mut().unwrap().td3_mode = true;
+    let gap = super::check::compare_config(&cfg, &Device::Cpu, UPDATES);
+    let tol = tolerance(Algo::Crossq);
+    assert!(gap.loss <= tol.loss && gap.weight <= tol.weight, "{gap:?}");
+}
+
+#[test]
 fn dqn_generic_path_follows_the_fused_one() {
     check(Algo::Dqn);
 }
