@@ -443,11 +443,13 @@ mod tests {
             assert!(section.keys().all(|k| section_keys(algo).contains(&k.as_str())), "{algo:?}");
             // target_entropy (SAC, CrossQ) and target_kl (PPO) are absent while None, PPO's
             // activation and log_std_init while at their defaults (tanh, 0), and
-            // critic_layer_norm (SAC, TD3, DDPG) while off, and SAC's policy_delay and adam_beta1
-            // at their defaults (1, 0.9).
+            // critic_layer_norm (SAC, TD3, DDPG) while off, SAC's policy_delay and adam_beta1
+            // at their defaults (1, 0.9), and CrossQ's td3_mode while off with its three noise
+            // settings at TD3's values.
             let optional = match algo {
                 Algo::Sac => 4,
-                Algo::Crossq | Algo::Td3 | Algo::Ddpg => 1,
+                Algo::Crossq => 5,
+                Algo::Td3 | Algo::Ddpg => 1,
                 Algo::Ppo => 3,
                 Algo::Dqn => 0,
             };

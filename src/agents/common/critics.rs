@@ -48,6 +48,15 @@ impl Critics {
         Ok(Critics { body: DenseStack::new(params), norms: None })
     }
 
+    /// [`Critics::with_layer_norm`] when `layer_norm` (an agent's `critic_layer_norm`), else `self`.
+    pub fn layer_normalised_if(self, layer_norm: bool) -> Result<Critics> {
+        if layer_norm {
+            self.with_layer_norm()
+        } else {
+            Ok(self)
+        }
+    }
+
     /// The same critics with layer normalisation after each hidden layer, gains 1 and shifts 0
     /// (no draws from the RNG, so the weights are those of [`Critics::new`]).
     pub fn with_layer_norm(self) -> Result<Critics> {

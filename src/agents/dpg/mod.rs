@@ -61,11 +61,8 @@ impl DeterministicAgent {
         let actor = Mlp::new(&layer_sizes(obs_dim, &cfg.hidden, act_dim), Output::Tanh, cfg.weight_init, rng)?;
         let dpg = cfg.dpg();
         let n_critics = if dpg.twin_critics { 2 } else { 1 };
-        let mut critics =
-            Critics::new(n_critics, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), cfg.weight_init, rng)?;
-        if dpg.critic_layer_norm {
-            critics = critics.with_layer_norm()?;
-        }
+        let critics = Critics::new(n_critics, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), cfg.weight_init, rng)?
+            .layer_normalised_if(dpg.critic_layer_norm)?;
         let actor_target = actor.deep_copy()?;
         let critic_targets = critics.deep_copy()?;
         let actor_opt = Adam::new(actor.params(), cfg.actor_lr);

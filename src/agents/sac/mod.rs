@@ -77,10 +77,8 @@ impl SacAgent {
             actor.scale_output_rows(act_dim..2 * act_dim, std::f64::consts::FRAC_1_SQRT_2)?;
         }
         let settings = cfg.sac();
-        let mut critics = Critics::new(2, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), cfg.weight_init, rng)?;
-        if settings.critic_layer_norm {
-            critics = critics.with_layer_norm()?;
-        }
+        let critics = Critics::new(2, &layer_sizes(obs_dim + act_dim, &cfg.hidden, 1), cfg.weight_init, rng)?
+            .layer_normalised_if(settings.critic_layer_norm)?;
         let critic_targets = critics.deep_copy()?;
         let value = match settings.sac_version {
             SacVersion::V2 => None,
