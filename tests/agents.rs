@@ -536,6 +536,22 @@ fn evaluation_on_a_fresh_thread_matches_the_runs_own() {
     assert_eq!(fresh.to_bits(), logged.to_bits());
 }
 
+/// Under `eval_starts = "fresh"` the logged evaluation is the one `evaluate_at` replays at its
+/// step, on starts other than the fixed ones every evaluation of a default run plays.
+#[test]
+fn fresh_evaluation_starts_replay_at_their_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let s = tiny_pendulum_run(Algo::Sac, "eval_starts=\"fresh\"", &dir.path().join("run"));
+    let logged = s.last_eval.as_ref().unwrap();
+    let (run, agent) = train::load_policy(&s.checkpoint).unwrap();
+    let mut env = locobench::envs::make(&run.env).unwrap();
+    let step = run.train.total_steps;
+    let replayed = train::evaluate::evaluate_at(agent.as_ref(), env.as_mut(), &run.train, run.seed, step).unwrap();
+    assert_eq!(replayed.returns, logged.returns);
+    let fixed = train::evaluate::evaluate(agent.as_ref(), env.as_mut(), run.train.eval_episodes, run.seed).unwrap();
+    assert_ne!(fixed.returns, logged.returns, "the fresh starts are not the fixed ones");
+}
+
 fn actor_tensors(file: &Path) -> Vec<(String, Vec<f32>)> {
     let map = candle_core::safetensors::load(file, &candle_core::Device::Cpu).unwrap();
     let mut v: Vec<_> = map.into_iter().map(|(k, t)| (k, t.flatten_all().unwrap().to_vec1::<f32>().unwrap())).collect();

@@ -138,6 +138,42 @@ fn bad_input_fails_with_a_clear_message_and_writes_nothing() {
     assert!(!out.exists(), "a failed rollout must not leave a partial file");
 }
 
+/// A run whose evaluations each drew fresh starts: `eval --training-seeds` asks which evaluation,
+/// and replays the one named by its step, to the logged mean.
+#[test]
+fn eval_replays_a_fresh_start_evaluation_named_by_its_step() {
+    let dir = tempfile::tempdir().unwrap();
+    let run = dir.path().join("run");
+    let r = run.to_str().unwrap();
+    let set = "warmup_steps=200,learning_starts=200,eval_every=300,eval_episodes=2,hidden=[16,16],batch_size=32,\
+               eval_starts=\"fresh\"";
+    let train = ["train", "--env", "hopper", "--algo", "sac", "--steps", "600", "--set", set, "--out", r, "--quiet"];
+    let (ok, _, err) = locobench(&train);
+    assert!(ok, "{err}");
+    let (ok, _, err) = locobench(&["eval", "--policy", r, "--training-seeds"]);
+    assert!(!ok && err.contains("--eval-step STEP") && err.contains("eval_starts = \"fresh\""), "{err}");
+    let (ok, _, err) = locobench(&["eval", "--policy", r, "--training-seeds", "--eval-step", "0"]);
+    assert!(!ok && err.contains("--eval-step must be"), "{err}");
+    let (ok, _, err) = locobench(&["eval", "--policy", r, "--eval-step", "600"]);
+    assert!(!ok && err.contains("--training-seeds"), "--eval-step alone is refused: {err}");
+
+    let metrics = std::fs::read_to_string(run.join("metrics.csv")).unwrap();
+    let logged = |step: &str| -> f64 {
+        let row = metrics.lines().find(|l| l.starts_with(&format!("eval,{step},"))).unwrap();
+        row.split(',').nth(4).unwrap().parse().unwrap()
+    };
+    let replay = |step: &str| {
+        let (ok, out, err) =
+            locobench(&["eval", "--policy", r, "--training-seeds", "--eval-step", step, "--episodes", "2"]);
+        assert!(ok, "{err}");
+        out
+    };
+    let at_600 = replay("600");
+    assert!(at_600.contains(&format!("return {:.3} ", logged("600"))), "{at_600}\n{metrics}");
+    assert_ne!(logged("300"), logged("600"));
+    assert!(!replay("300").contains(&format!("return {:.3} ", logged("600"))), "another step plays other starts");
+}
+
 #[test]
 fn train_eval_resume_and_fine_tune_from_the_command_line() {
     let dir = tempfile::tempdir().unwrap();
@@ -170,6 +206,9 @@ fn train_eval_resume_and_fine_tune_from_the_command_line() {
     // The run's own evaluation episodes, as during training, on request.
     let (ok, out, err) = locobench(&["eval", "--policy", r, "--episodes", "3", "--training-seeds"]);
     assert!(ok && out.contains("the run's evaluation episodes") && out.contains("over 3 episodes"), "{out}\n{err}");
+    // Its evaluations all played the same starts: no evaluation to name.
+    let (ok, _, err) = locobench(&["eval", "--policy", r, "--training-seeds", "--eval-step", "500"]);
+    assert!(!ok && err.contains("--eval-step") && err.contains("eval_starts = \"fixed\""), "{err}");
     // The actor saved at the run's budget; a budget it never passed is a clear error.
     let (ok, out, err) = locobench(&["eval", "--policy", r, "--episodes", "3", "--budget", "600"]);
     assert!(ok && out.contains("3 held-out episodes"), "{out}\n{err}");

@@ -226,6 +226,17 @@ fn td3_keeping_its_actor_with_fewest_falls_killed_anywhere_resumes_to_the_unbrok
     );
 }
 
+/// Keeping the best actor of evaluations that each draw fresh starts: the starts follow the step,
+/// so a run killed at an evaluation replays the same ones when it resumes.
+#[test]
+fn td3_picking_on_fresh_evaluation_starts_killed_anywhere_resumes_to_the_unbroken_run() {
+    crash_and_resume_with(
+        "td3",
+        "budget_policy=best,eval_starts=fresh",
+        &["evaluation:3", "budget-policy-write:2", "step:777"],
+    );
+}
+
 #[test]
 fn ppo_killed_anywhere_resumes_to_the_unbroken_run() {
     crash_and_resume("ppo", &points("ppo"));

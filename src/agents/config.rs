@@ -107,6 +107,33 @@ impl BudgetPolicy {
     }
 }
 
+/// Which reset seeds a run's in-training evaluations play (`eval_starts` in `[train]`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum EvalStarts {
+    /// Every evaluation replays the same `eval_episodes` starts.
+    #[default]
+    Fixed,
+    /// Each evaluation plays starts of its own, drawn from its step, so that a `budget_policy`
+    /// which picks among many evaluations cannot favour an actor that merely suits one set of
+    /// starts.
+    Fresh,
+}
+
+impl EvalStarts {
+    fn is_fixed(&self) -> bool {
+        *self == EvalStarts::Fixed
+    }
+
+    /// Reset seed of episode `i` of run `run_seed`'s evaluation at `step`.
+    pub fn episode_seed(self, run_seed: u64, step: u64, i: u64) -> u64 {
+        match self {
+            EvalStarts::Fixed => crate::train::seeds::eval_episode_seed(run_seed, i),
+            EvalStarts::Fresh => crate::train::seeds::fresh_eval_episode_seed(run_seed, step, i),
+        }
+    }
+}
+
 /// Every hyperparameter of a training run: the settings all algorithms share, then the run's
 /// algorithm's own section (`[train.td3]`, `[train.ddpg]` or `[train.sac]` in `config.toml`).
 /// Exactly the section of `algo` is present (`validate` checks it).
@@ -161,6 +188,10 @@ pub struct TrainConfig {
     /// Which actor the run keeps at each reporting budget: `last` (the default) or `best`.
     #[serde(default, skip_serializing_if = "BudgetPolicy::is_last")]
     pub budget_policy: BudgetPolicy,
+    /// Which starts the in-training evaluations play: `fixed` (the default, the same ones every
+    /// time) or `fresh` (new ones at every evaluation).
+    #[serde(default, skip_serializing_if = "EvalStarts::is_fixed")]
+    pub eval_starts: EvalStarts,
     /// TD3's own settings (present exactly when `algo` is TD3).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub td3: Option<DpgConfig>,
@@ -202,7 +233,7 @@ fn taken_after_format_2(algo: Algo) -> &'static [&'static str] {
 
 /// Shared settings a config leaves out at their default, so that files written before them stay
 /// byte for byte what they were.
-const OMITTED_AT_DEFAULT: [&str; 1] = ["budget_policy"];
+const OMITTED_AT_DEFAULT: [&str; 2] = ["budget_policy", "eval_starts"];
 
 impl TrainConfig {
     /// Reads a `[train]` table: keys it does not give take the algorithm's defaults (so a run
@@ -332,6 +363,7 @@ impl TrainConfig {
             eval_episodes: 10,
             checkpoint_every: 50_000,
             budget_policy: BudgetPolicy::Last,
+            eval_starts: EvalStarts::Fixed,
             td3: None,
             ddpg: None,
             sac: None,
@@ -495,5 +527,34 @@ mod tests {
             }
         }
         assert!(!toml::to_string(&TrainConfig::sac_defaults()).unwrap().contains("critic_layer_norm"));
+    }
+
+    #[test]
+    fn fresh_evaluation_starts_are_each_evaluations_own_and_fixed_ones_ignore_the_step() {
+        let fixed = |step, i| EvalStarts::Fixed.episode_seed(7, step, i);
+        let fresh = |step, i| EvalStarts::Fresh.episode_seed(7, step, i);
+        assert_eq!(fixed(5000, 3), crate::train::seeds::eval_episode_seed(7, 3));
+        assert_eq!(fixed(5000, 3), fixed(10_000, 3));
+        let drawn: std::collections::HashSet<u64> = (1..=200)
+            .flat_map(|k| (0..20).map(move |i| fresh(k * 5000, i)))
+            .chain((0..20).map(|i| fixed(0, i)))
+            .collect();
+        assert_eq!(drawn.len(), 200 * 20 + 20, "every evaluation's starts are new, and apart from the fixed ones");
+        assert_eq!(fresh(5000, 3), fresh(5000, 3));
+        assert_ne!(EvalStarts::Fresh.episode_seed(8, 5000, 3), fresh(5000, 3));
+
+        // omitted at the default, so older files stay as they were; read back when set
+        let mut cfg = TrainConfig::td3_defaults();
+        assert!(!toml::to_string(&cfg).unwrap().contains("eval_starts"));
+        cfg.eval_starts = EvalStarts::Fresh;
+        let text = toml::to_string(&cfg).unwrap();
+        assert!(text.contains("eval_starts = \"fresh\""), "{text}");
+        let table: toml::Table = toml::from_str(&text).unwrap();
+        assert_eq!(TrainConfig::from_table(&table, OtherAlgorithmKeys::Refuse).unwrap(), cfg);
+        let mut t = toml::Table::new();
+        t.insert("algo".into(), "td3".into());
+        t.insert("eval_starts".into(), "random".into());
+        let err = format!("{:#}", TrainConfig::from_table(&t, OtherAlgorithmKeys::Refuse).unwrap_err());
+        assert!(err.contains("random") && err.contains("fresh"), "{err}");
     }
 }

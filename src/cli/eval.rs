@@ -1,11 +1,12 @@
 use std::path::PathBuf;
 
 use anyhow::Result;
+use locobench::agents::config::EvalStarts;
 use locobench::envs::make;
 use locobench::evaluation::summary::HeldOutSummary;
 use locobench::evaluation::Protocol;
 use locobench::policy::AgentPolicy;
-use locobench::train::{evaluate::evaluate, resolve_policy};
+use locobench::train::{evaluate::evaluate_with, resolve_policy};
 
 #[derive(clap::Args, Debug)]
 pub struct EvalArgs {
@@ -28,6 +29,11 @@ pub struct EvalArgs {
     /// metrics.csv's eval rows were measured on).
     #[arg(long)]
     pub training_seeds: bool,
+    /// With `--training-seeds`, for a run whose evaluations each drew fresh starts
+    /// (`eval_starts = "fresh"`): play the starts of its evaluation at this step (an eval row's
+    /// step in metrics.csv).
+    #[arg(long, requires = "training_seeds", value_name = "STEP")]
+    pub eval_step: Option<u64>,
     /// Where the policy's networks run: cpu (the exact fused path), or cuda / cuda:N (the
     /// device-generic path; actions agree with the CPU's to about 1e-6, so long episodes may
     /// drift apart). Needs a build with the `cuda` feature (docs/gpu.md).
@@ -51,7 +57,23 @@ pub fn run(args: EvalArgs) -> Result<()> {
     let mut env = make(&env_cfg)?;
     let what = format!("{} {} on {}", args.policy.display(), run.train.algo.name(), run.env.name);
     if args.training_seeds {
-        let e = evaluate(agent.as_ref(), env.as_mut(), args.episodes, run.seed)?;
+        let starts = run.train.eval_starts;
+        let step = match (starts, args.eval_step) {
+            (EvalStarts::Fixed, None) => 0,
+            (EvalStarts::Fixed, Some(_)) => anyhow::bail!(
+                "--eval-step: every evaluation of {} replayed the same starts (eval_starts = \"fixed\"); leave it out",
+                args.policy.display()
+            ),
+            (EvalStarts::Fresh, None) => anyhow::bail!(
+                "{} drew fresh starts at each evaluation (eval_starts = \"fresh\"): name the evaluation with --eval-step \
+                 STEP (an eval row's step in its metrics.csv)",
+                args.policy.display()
+            ),
+            (EvalStarts::Fresh, Some(0)) => anyhow::bail!("--eval-step must be a step of an evaluation, at least 1"),
+            (EvalStarts::Fresh, Some(step)) => step,
+        };
+        let seeds = |i: u64| starts.episode_seed(run.seed, step, i);
+        let e = evaluate_with(agent.as_ref(), env.as_mut(), args.episodes, seeds)?;
         println!(
             "{what}, the run's evaluation episodes: return {:.3} ± {:.3} (population std) over {} episodes (mean length {:.1})",
             e.mean(),
@@ -66,7 +88,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
         return Ok(());
     }
     let protocol = Protocol { episodes: args.episodes, seed: args.seed };
-    protocol.check_disjoint(run.seed, run.train.total_steps, run.train.eval_episodes)?;
+    protocol.check_run(run.seed, &run.train)?;
     let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.train.algo.name().into() };
     let eps = protocol.run(env.as_mut(), &mut policy, None, None)?;
     println!("{what}: {} held-out episodes (protocol seed {})", eps.len(), args.seed);

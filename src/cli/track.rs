@@ -59,7 +59,7 @@ pub fn run(args: TrackArgs) -> Result<()> {
                 );
             }
             warn_outside_training_range(&run.env, &args.speeds, &args.yaw_rates, &path.display().to_string())?;
-            protocol.check_disjoint(run.seed, run.train.total_steps, run.train.eval_episodes)?;
+            protocol.check_run(run.seed, &run.train)?;
             let env = args.env_options.apply(run.env.for_evaluation())?;
             let mut policy = AgentPolicy { agent: agent.as_ref(), label: run.train.algo.name().into() };
             (

@@ -6,11 +6,12 @@
 use anyhow::{bail, Result};
 
 use super::push::{Push, Pushed};
+use crate::agents::config::{EvalStarts, TrainConfig};
 use crate::controller::command::SpeedProfile;
 use crate::controller::measure::{measure_episode, GaitEpisode};
 use crate::envs::Env;
 use crate::policy::Policy;
-use crate::train::seeds::{eval_episode_seed, held_out_episode_seed, train_episode_seed};
+use crate::train::seeds::{eval_episode_seed, fresh_eval_episode_seed, held_out_episode_seed, train_episode_seed};
 
 /// Episodes per policy and seed unless asked otherwise.
 pub const DEFAULT_EPISODES: usize = 50;
@@ -51,6 +52,27 @@ impl Protocol {
                 "held-out reset seeds (protocol seed {}) include evaluation episode {i} of run seed {run_seed}",
                 self.seed
             );
+        }
+        Ok(())
+    }
+
+    /// Fails if a held-out reset seed is one run `run_seed` with settings `train` trained or was
+    /// evaluated on. Under `eval_starts = "fresh"` that covers the starts of an evaluation at
+    /// every step up to `total_steps` (a few tenths of a second per million steps).
+    pub fn check_run(&self, run_seed: u64, train: &TrainConfig) -> Result<()> {
+        self.check_disjoint(run_seed, train.total_steps, train.eval_episodes)?;
+        if train.eval_starts == EvalStarts::Fresh {
+            let k = train.eval_episodes as u64;
+            let fresh = (1..=train.total_steps)
+                .flat_map(|step| (0..k).map(move |i| fresh_eval_episode_seed(run_seed, step, i)));
+            if let Some(n) = first_shared(&self.reset_seeds(), fresh) {
+                let (step, i) = (n as u64 / k + 1, n as u64 % k);
+                bail!(
+                    "held-out reset seeds (protocol seed {}) include episode {i} of run seed {run_seed}'s evaluation at \
+                     step {step}",
+                    self.seed
+                );
+            }
         }
         Ok(())
     }
@@ -104,6 +126,10 @@ mod tests {
         for run_seed in 0..5 {
             p.check_disjoint(run_seed, 1_000_000, 10).unwrap();
         }
+        let mut fresh = crate::agents::TrainConfig::td3_defaults();
+        fresh.total_steps = 100_000;
+        fresh.eval_starts = EvalStarts::Fresh;
+        p.check_run(3, &fresh).unwrap();
     }
 
     #[test]

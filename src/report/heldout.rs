@@ -244,7 +244,7 @@ pub(crate) fn evaluate_row(
                 continue;
             }
         };
-        protocol.check_disjoint(cfg.seed, cfg.train.total_steps, cfg.train.eval_episodes)?;
+        protocol.check_run(cfg.seed, &cfg.train)?;
         let env_config = evaluation_env(&cfg.env);
         let key = cache.timed(|| -> Result<Key> {
             let policy_key = format!("agent {}", source.digest(&run.dir)?);

@@ -111,7 +111,7 @@ pub(crate) fn section(
             let Some(budget) = newest.or_else(|| shipped_step(&run.dir)) else { continue };
             let Ok(source) = policy_at(run, budget) else { continue };
             let (cfg, agent) = source.load(&run.dir, budget)?;
-            protocol.check_disjoint(cfg.seed, cfg.train.total_steps, cfg.train.eval_episodes)?;
+            protocol.check_run(cfg.seed, &cfg.train)?;
             let env_config = cfg.env.for_evaluation();
             let digest = source.digest(&run.dir)?;
             for p in points.iter_mut() {

@@ -1,8 +1,9 @@
-//! The evaluation protocol: K deterministic episodes on a separate environment instance, with
-//! fixed episode seeds so that every evaluation of a run sees the same starts.
+//! The in-training evaluation: K deterministic episodes on a separate environment instance, reset
+//! with the run's evaluation seeds (the same starts every time, or fresh ones per evaluation under
+//! `eval_starts = "fresh"`).
 use anyhow::Result;
 
-use crate::agents::Agent;
+use crate::agents::{Agent, TrainConfig};
 use crate::envs::{BoxSpace, Env};
 use crate::policy::AgentPolicy;
 use crate::rollout::{run_episode, StepView};
@@ -52,9 +53,30 @@ impl Evaluation {
     }
 }
 
-/// Runs the protocol's episodes through `rollout::run_episode`, the path `eval`, recordings and
-/// reports take too.
+/// Runs the run's first `episodes` evaluation episodes (the fixed starts) through
+/// `rollout::run_episode`, the path `eval`, recordings and reports take too.
 pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed: u64) -> Result<Evaluation> {
+    evaluate_with(agent, env, episodes, |i| eval_episode_seed(run_seed, i))
+}
+
+/// The evaluation a run makes at `step` under its `eval_starts`.
+pub fn evaluate_at(
+    agent: &dyn Agent,
+    env: &mut dyn Env,
+    train: &TrainConfig,
+    run_seed: u64,
+    step: u64,
+) -> Result<Evaluation> {
+    evaluate_with(agent, env, train.eval_episodes, |i| train.eval_starts.episode_seed(run_seed, step, i))
+}
+
+/// `episodes` episodes, episode `i` reset with `seed_of(i)`.
+pub fn evaluate_with(
+    agent: &dyn Agent,
+    env: &mut dyn Env,
+    episodes: usize,
+    seed_of: impl Fn(u64) -> u64,
+) -> Result<Evaluation> {
     let terms = env.spec().reward_terms.clone();
     let mut eval = Evaluation {
         returns: Vec::with_capacity(episodes),
@@ -67,7 +89,7 @@ pub fn evaluate(agent: &dyn Agent, env: &mut dyn Env, episodes: usize, run_seed:
     let (mut components, mut saturated) = (0usize, 0usize);
     let mut policy = AgentPolicy { agent, label: agent.algo().name().to_string() };
     for i in 0..episodes {
-        let seed = eval_episode_seed(run_seed, i as u64);
+        let seed = seed_of(i as u64);
         let mut count = |v: &StepView| {
             components += v.action.len();
             saturated += saturated_components(&v.env.spec().action_space, v.action);

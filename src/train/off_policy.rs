@@ -11,7 +11,7 @@ use rand_chacha::ChaCha8Rng;
 use super::checkpoint::POLICY_BUDGETS;
 use super::checkpoint::{self, TrainState};
 use super::control::{Outcome, RunControl, RunSummary};
-use super::evaluate::evaluate;
+use super::evaluate::evaluate_at;
 use super::fault::{self, Point};
 use super::metrics::MetricsRow;
 use super::policy_ref::PolicyRef;
@@ -215,7 +215,7 @@ impl Trainer {
 
             // Evaluate.
             if scaffold::crossed(self.step - 1, self.step, cfg.eval_every) || self.step == cfg.total_steps {
-                let e = evaluate(self.agent.as_ref(), self.eval_env.as_mut(), cfg.eval_episodes, self.seed)?;
+                let e = evaluate_at(self.agent.as_ref(), self.eval_env.as_mut(), &cfg, self.seed, self.step)?;
                 self.best_eval = Some(self.best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 if cfg.budget_policy.selects() {
                     self.best_policy.consider(&self.run_dir, self.step, &e, self.agent.as_ref())?;

@@ -21,7 +21,7 @@ use rand_chacha::ChaCha8Rng;
 use super::checkpoint::POLICY_BUDGETS;
 use super::checkpoint::{self, TrainState};
 use super::control::{Outcome, RunControl, RunSummary};
-use super::evaluate::evaluate;
+use super::evaluate::evaluate_at;
 use super::fault::{self, Point};
 use super::metrics::MetricsRow;
 use super::policy_ref::PolicyRef;
@@ -150,7 +150,6 @@ impl OnPolicyTrainer {
         let mut losses: Option<Losses>;
         let checkpoint_every = self.cfg().checkpoint_every;
         let eval_every = self.cfg().eval_every;
-        let eval_episodes = self.cfg().eval_episodes;
         let mut next_checkpoint = (self.step / checkpoint_every + 1) * checkpoint_every;
 
         let outcome = loop {
@@ -172,7 +171,7 @@ impl OnPolicyTrainer {
             losses = Some(Losses { critic: l.value, actor: Some(l.policy), ..Losses::default() });
 
             if scaffold::crossed(before, self.step, eval_every) || self.step >= total {
-                let e = evaluate(&*self.agent, self.eval_env.as_mut(), eval_episodes, self.run.seed)?;
+                let e = evaluate_at(&*self.agent, self.eval_env.as_mut(), &self.run.train, self.run.seed, self.step)?;
                 self.best_eval = Some(self.best_eval.map_or(e.mean(), |b: f64| b.max(e.mean())));
                 let row =
                     MetricsRow::progress("eval", self.step, losses, sc.rate(self.step), sc.wall(self.wall_offset));

@@ -34,6 +34,13 @@ pub(crate) fn eval_episode_seed(run_seed: u64, i: u64) -> u64 {
     mix(mix(run_seed ^ 0xE7A1_0000_0000_0000) ^ i)
 }
 
+/// Reset seed of episode `i` of the in-training evaluation at `step`, for a run whose evaluations
+/// each draw fresh starts: a domain of its own, keyed by the step (no two evaluations of a run
+/// share one).
+pub(crate) fn fresh_eval_episode_seed(run_seed: u64, step: u64, i: u64) -> u64 {
+    mix(mix(mix(run_seed ^ 0xF2E5_0000_0000_0000) ^ step) ^ i)
+}
+
 /// Reset seed of held-out episode `i` of an evaluation protocol seeded `protocol_seed`: a third
 /// domain, apart from every run's training and evaluation episodes (`evaluation::protocol`
 /// checks that no run's seeds collide with them).

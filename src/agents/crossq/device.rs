@@ -113,15 +113,12 @@ impl GenericCrossq {
         self.policy(obs, train)?.narrow(1, 0, self.act_dim)?.tanh()
     }
 
-    /// The update in `td3_mode`, with the fused one's draws (the smoothing noise) in its order.
-    fn update_td3(&mut self, batch: &Batch, td3: Td3Mode, rng: &mut ChaCha8Rng) -> Result<Losses> {
-        let n = batch.size;
-        let trains_actor = (self.passes.updates + 1).is_multiple_of(self.policy_delay);
-        let noise = [td3.smoothing_noise(n * self.act_dim, rng)];
-        let b = DeviceBatch::upload(batch, self.obs_dim, self.act_dim, &noise, &self.device)?;
-        let next_a = (self.deterministic(&b.next_obs, false)? + &b.noise[0])?.clamp(-1f32, 1f32)?.detach();
-        let joint =
-            Tensor::cat(&[Tensor::cat(&[&b.obs, &b.actions], 1)?, Tensor::cat(&[&b.next_obs, &next_a], 1)?], 0)?;
+    /// One pass of both critics over [(s, a); (s', a')], whose halves share batch statistics, and
+    /// their step towards r + γ (min Q(s', a') − `entropy`); returns the loss. `entropy` is SAC
+    /// mode's α·log π(a'|s'), absent in `td3_mode`.
+    fn critic_step(&mut self, b: &DeviceBatch, next_a: &Tensor, entropy: Option<Tensor>) -> Result<Tensor> {
+        let n = b.obs.dim(0)?;
+        let joint = Tensor::cat(&[Tensor::cat(&[&b.obs, &b.actions], 1)?, Tensor::cat(&[&b.next_obs, next_a], 1)?], 0)?;
         let q = self
             .critics
             .iter()
@@ -129,7 +126,11 @@ impl GenericCrossq {
             .collect::<Result<Vec<_>>>()?;
         self.passes.critic += 1;
         let q_next = q[0].narrow(0, n, n)?.minimum(&q[1].narrow(0, n, n)?)?.detach();
-        let y = (&b.rewards + (&b.not_done * q_next)?.affine(self.gamma, 0.0)?)?.detach();
+        let next_value = match entropy {
+            Some(entropy) => (q_next - entropy)?,
+            None => q_next,
+        };
+        let y = (&b.rewards + (&b.not_done * next_value)?.affine(self.gamma, 0.0)?)?.detach();
         let mut critic_loss = Tensor::zeros((), DType::F32, &self.device)?;
         for qk in &q {
             critic_loss =
@@ -137,14 +138,29 @@ impl GenericCrossq {
         }
         self.critic_opt.step(&critic_loss.backward()?)?;
         self.passes.updates += 1;
+        Ok(critic_loss)
+    }
 
-        let mut scalars = vec![critic_loss];
+    /// The smaller critic's value of `(obs, action)` with the critics frozen, so the actor's loss
+    /// trains only the actor.
+    fn frozen_min_q(&self, obs: &Tensor, action: &Tensor) -> Result<Tensor> {
+        let x = Tensor::cat(&[obs, action], 1)?;
+        let frozen = |c: &RenormNet| c.forward(&x, false, self.passes.critic, true, self.renorm);
+        frozen(&self.critics[0])?.minimum(&frozen(&self.critics[1])?)
+    }
+
+    /// The update in `td3_mode`, with the fused one's draws (the smoothing noise) in its order.
+    fn update_td3(&mut self, batch: &Batch, td3: Td3Mode, rng: &mut ChaCha8Rng) -> Result<Losses> {
+        let n = batch.size;
+        let trains_actor = (self.passes.updates + 1).is_multiple_of(self.policy_delay);
+        let noise = [td3.smoothing_noise(n * self.act_dim, rng)];
+        let b = DeviceBatch::upload(batch, self.obs_dim, self.act_dim, &noise, &self.device)?;
+        let next_a = (self.deterministic(&b.next_obs, false)? + &b.noise[0])?.clamp(-1f32, 1f32)?.detach();
+        let mut scalars = vec![self.critic_step(&b, &next_a, None)?];
         if trains_actor {
             let pi = self.deterministic(&b.obs, true)?;
             self.passes.actor += 1;
-            let x = Tensor::cat(&[&b.obs, &pi], 1)?;
-            let frozen = |c: &RenormNet| c.forward(&x, false, self.passes.critic, true, self.renorm);
-            let actor_loss = frozen(&self.critics[0])?.minimum(&frozen(&self.critics[1])?)?.mean_all()?.neg()?;
+            let actor_loss = self.frozen_min_q(&b.obs, &pi)?.mean_all()?.neg()?;
             self.actor_opt.step(&actor_loss.backward()?)?;
             scalars.push(actor_loss);
         }
@@ -186,38 +202,17 @@ impl OffPolicyAgent for GenericCrossq {
         let b = DeviceBatch::upload(batch, self.obs_dim, self.act_dim, &noise, &self.device)?;
         let alpha = self.log_alpha.as_tensor().detach().exp()?;
 
-        // One pass of both critics over [(s, a); (s', a')]: the halves share batch statistics.
         // detached: the critics' loss reaches the next action through the shared batch statistics,
         // but the critics' step does not train the actor
         let (next_a, next_logp) =
             squashed_sample(&self.policy(&b.next_obs, false)?, &b.noise[0], TanhCorrection::Exact)?;
         let (next_a, next_logp) = (next_a.detach(), next_logp.detach());
-        let joint =
-            Tensor::cat(&[Tensor::cat(&[&b.obs, &b.actions], 1)?, Tensor::cat(&[&b.next_obs, &next_a], 1)?], 0)?;
-        let q = self
-            .critics
-            .iter()
-            .map(|c| c.forward(&joint, true, self.passes.critic, false, self.renorm))
-            .collect::<Result<Vec<_>>>()?;
-        self.passes.critic += 1;
-        let q_next = q[0].narrow(0, n, n)?.minimum(&q[1].narrow(0, n, n)?)?.detach();
-        let soft_next = (q_next - next_logp.detach().broadcast_mul(&alpha)?)?;
-        let y = (&b.rewards + (&b.not_done * soft_next)?.affine(self.gamma, 0.0)?)?.detach();
-        let mut critic_loss = Tensor::zeros((), DType::F32, &self.device)?;
-        for qk in &q {
-            critic_loss =
-                (critic_loss + qk.narrow(0, 0, n)?.broadcast_sub(&y)?.sqr()?.mean_all()?.affine(0.5, 0.0)?)?;
-        }
-        self.critic_opt.step(&critic_loss.backward()?)?;
-        self.passes.updates += 1;
-
-        let mut scalars = vec![critic_loss];
+        let entropy = next_logp.broadcast_mul(&alpha)?;
+        let mut scalars = vec![self.critic_step(&b, &next_a, Some(entropy))?];
         if trains_actor {
             let (pi, logp) = squashed_sample(&self.policy(&b.obs, true)?, &b.noise[1], TanhCorrection::Exact)?;
             self.passes.actor += 1;
-            let x = Tensor::cat(&[&b.obs, &pi], 1)?;
-            let frozen = |c: &RenormNet| c.forward(&x, false, self.passes.critic, true, self.renorm);
-            let q_pi = frozen(&self.critics[0])?.minimum(&frozen(&self.critics[1])?)?;
+            let q_pi = self.frozen_min_q(&b.obs, &pi)?;
             let actor_loss = (logp.broadcast_mul(&alpha)? - q_pi)?.mean_all()?;
             self.actor_opt.step(&actor_loss.backward()?)?;
 

@@ -221,6 +221,14 @@ impl CrossqAgent {
     fn deterministic(&self, obs: &Tensor, train: bool) -> Result<Tensor> {
         self.actor.forward(obs, train, self.passes.actor, false)?.narrow(1, 0, self.act_dim)?.tanh()
     }
+
+    /// The smaller critic's value of `(obs, action)` with the critics frozen (in evaluation mode,
+    /// scale and bias held), so the actor's loss trains only the actor.
+    fn frozen_min_q(&self, obs: &Tensor, action: &Tensor) -> Result<Tensor> {
+        let x = Tensor::cat(&[obs, action], 1)?;
+        let frozen = |c: &RenormMlp| c.forward(&x, false, self.passes.critic, true);
+        frozen(&self.critics[0])?.minimum(&frozen(&self.critics[1])?)
+    }
 }
 
 /// A batch-renormalised network's parameters, for both versions: `trained_vars` are the
@@ -338,11 +346,7 @@ impl OffPolicyAgent for CrossqAgent {
             if self.passes.updates.is_multiple_of(self.policy_delay) {
                 let pi_a = self.deterministic(&obs, true)?;
                 self.passes.actor += 1;
-                let x = Tensor::cat(&[&obs, &pi_a], 1)?;
-                let q_pi = self.critics[0]
-                    .forward(&x, false, self.passes.critic, true)?
-                    .minimum(&self.critics[1].forward(&x, false, self.passes.critic, true)?)?;
-                let actor_loss = q_pi.mean_all()?.neg()?;
+                let actor_loss = self.frozen_min_q(&obs, &pi_a)?.mean_all()?.neg()?;
                 self.actor_opt.step(&actor_loss.backward()?)?;
                 losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
             }
@@ -351,10 +355,7 @@ impl OffPolicyAgent for CrossqAgent {
         if self.passes.updates.is_multiple_of(self.policy_delay) {
             let (pi_a, logp) = self.sample(&obs, true, rng)?;
             self.passes.actor += 1;
-            let x = Tensor::cat(&[&obs, &pi_a], 1)?;
-            let q_pi = self.critics[0]
-                .forward(&x, false, self.passes.critic, true)?
-                .minimum(&self.critics[1].forward(&x, false, self.passes.critic, true)?)?;
+            let q_pi = self.frozen_min_q(&obs, &pi_a)?;
             let actor_loss = (logp.affine(alpha, 0.0)? - q_pi)?.mean_all()?;
             self.actor_opt.step(&actor_loss.backward()?)?;
             losses.actor = Some(actor_loss.to_scalar::<f32>()? as f64);
