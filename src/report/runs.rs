@@ -85,6 +85,15 @@ impl Run {
         self.config.train.algo.name()
     }
 
+    /// The algorithm a reader compares the run as: its registered name, except that CrossQ in
+    /// `td3_mode` (TD3's actor on CrossQ's critics) is `crossq-td3`, apart from CrossQ's own actor.
+    pub fn family(&self) -> &'static str {
+        match &self.config.train.crossq {
+            Some(c) if c.td3_mode => "crossq-td3",
+            _ => self.algo(),
+        }
+    }
+
     /// Reward options that differ from the environment's defaults, e.g. `drift=0.25` or
     /// `max_rewarded_speed=1.6`, or `DEFAULT_REWARD`.
     pub(crate) fn reward_label(&self) -> String {
@@ -111,7 +120,8 @@ impl Run {
     /// (steps, evaluation and checkpoint cadence) do not count, but for a run that picks its
     /// budget actors among its evaluations (`budget_policy`) the evaluations' cadence and length do.
     pub(crate) fn settings_label(&self) -> String {
-        const BOOKKEEPING: [&str; 4] = ["total_steps", "eval_every", "eval_episodes", "checkpoint_every"];
+        const BOOKKEEPING: [&str; 5] =
+            ["total_steps", "eval_every", "eval_episodes", "eval_starts", "checkpoint_every"];
         let picks = self.config.train.budget_policy.selects();
         let bookkeeping = |k: &str| BOOKKEEPING.contains(&k) && !(picks && k.starts_with("eval_"));
         let mut changed = Vec::new();
@@ -149,7 +159,7 @@ impl Run {
             // Its own row, never pooled with runs trained here.
             return Group {
                 env: self.env().to_string(),
-                algo: self.algo().to_string(),
+                algo: self.family().to_string(),
                 reward: self.reward_label(),
                 settings: format!("imported from {}", imported.library),
                 variant: format!("{} (imported, {})", self.variant_name(), imported.library),
@@ -158,7 +168,7 @@ impl Run {
         let settings = self.settings_label();
         Group {
             env: self.env().to_string(),
-            algo: self.algo().to_string(),
+            algo: self.family().to_string(),
             reward: self.reward_label(),
             variant: if settings.is_empty() { String::new() } else { self.variant_name() },
             settings,
@@ -350,6 +360,18 @@ pub(crate) mod tests {
         assert_eq!(run("minitaur", Algo::Td3, "eval_episodes=20", &[]).settings_label(), "");
         let picks = run("minitaur", Algo::Td3, "budget_policy=\"fewest_falls\",eval_episodes=50", &[]);
         assert_eq!(picks.settings_label(), "budget_policy=\"fewest_falls\",eval_episodes=50");
+        assert_eq!(run("minitaur", Algo::Ppo, "eval_starts=\"fresh\"", &[]).settings_label(), "");
+        let fresh = run("minitaur", Algo::Crossq, "budget_policy=\"best\",eval_starts=\"fresh\"", &[]);
+        assert_eq!(fresh.settings_label(), "budget_policy=\"best\",eval_starts=\"fresh\"");
+    }
+
+    /// TD3's actor on CrossQ's critics is its own row in the per-algorithm summary, not CrossQ's.
+    #[test]
+    fn crossq_in_td3_mode_is_compared_as_its_own_algorithm() {
+        let td3_mode = run("minitaur", Algo::Crossq, "td3_mode=true", &[]);
+        assert_eq!((td3_mode.algo(), td3_mode.family()), ("crossq", "crossq-td3"));
+        assert_eq!(td3_mode.group().algo, "crossq-td3");
+        assert_eq!(run("minitaur", Algo::Crossq, "", &[]).group().algo, "crossq");
     }
 
     #[test]

@@ -48,6 +48,7 @@ pub fn sections(root: &Path) -> Result<Vec<Section>> {
             name: "minitaur-probes",
             text: command::probes(root, "benches/results/minitaur/probes-100k/probes.csv")?,
         },
+        Section { file: "docs/training.md", name: "minitaur-selection", text: results::minitaur_selection(&report)? },
         Section { file: "docs/controller.md", name: "controller-speeds", text: results::controller(&report)? },
         Section { file: "docs/benchmarks.md", name: "speed", text: benchmarks::speed(&root.join(BENCH_RESULTS_DIR))? },
         Section {

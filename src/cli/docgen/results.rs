@@ -97,6 +97,48 @@ pub(crate) fn glance(report: &Path) -> Result<String> {
     Ok(out)
 }
 
+/// The rules for keeping an actor at each budget that docs/training.md compares on the Minitaur:
+/// (the report's row label, the rule in words). The runs are `benches/results/minitaur/LABEL-seedN`.
+pub(crate) const MINITAUR_SELECTION: [(&str, &str); 8] = [
+    ("td3-combined-ln", "TD3, layer-normalised critics: the actor at that step"),
+    ("td3-combined-ln-best", "TD3, layer-normalised critics: highest minimum of 10 fixed starts"),
+    ("td3-combined-ln-best20", "TD3, layer-normalised critics: highest minimum of 20 fixed starts"),
+    ("td3-combined-ln-best50", "TD3, layer-normalised critics: highest minimum of 50 fixed starts"),
+    ("td3-combined-ln-ff50", "TD3, layer-normalised critics: fewest falls of 50 fixed starts"),
+    ("crossq-td3-combined-best20", "TD3's actor on CrossQ's critics: highest minimum of 20 fixed starts"),
+    ("crossq-combined", "CrossQ: the actor at that step"),
+    ("crossq-combined-fresh20", "CrossQ: highest minimum of 20 fresh starts per evaluation"),
+];
+
+/// The report's held-out rows of the runs that compare ways of keeping an actor
+/// (`MINITAUR_SELECTION`), at 300k and 500k steps.
+pub(crate) fn minitaur_selection(report: &Path) -> Result<String> {
+    let held_out = read(&report.join(HELD_OUT_CSV))?;
+    let mut out = String::from(
+        "| budget | runs | kept actor | seeds × episodes | return [95% CI] | falls | speed (m/s) |\n\
+         |---|---|---|---|---|---|---|\n",
+    );
+    for step in [300_000u64, 500_000] {
+        for (label, rule) in MINITAUR_SELECTION {
+            let row = held_out
+                .iter()
+                .find(|r| r.text("env") == "minitaur" && r.text("policy") == label && r.num("budget") as u64 == step);
+            let Some(r) = row.filter(|r| r.count("seeds") > 0) else { continue };
+            let _ = writeln!(
+                out,
+                "| {} | `{label}-seed*` | {rule} | {} × {} | {} | {} | {} |",
+                budget(step),
+                r.count("seeds"),
+                r.count("episodes_per_seed"),
+                ci(r, "mean", "mean_low", "mean_high"),
+                rate(r.count("falls"), r.count("episodes")),
+                fixed(r.num("speed"), 2),
+            );
+        }
+    }
+    Ok(out)
+}
+
 /// Evaluation during training at the published curves' marks, ours beside theirs.
 pub fn curves(report: &Path) -> Result<String> {
     let rows = read(&report.join(CURVES_CSV))?;
