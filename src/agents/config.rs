@@ -124,14 +124,6 @@ impl EvalStarts {
     fn is_fixed(&self) -> bool {
         *self == EvalStarts::Fixed
     }
-
-    /// Reset seed of episode `i` of run `run_seed`'s evaluation at `step`.
-    pub fn episode_seed(self, run_seed: u64, step: u64, i: u64) -> u64 {
-        match self {
-            EvalStarts::Fixed => crate::train::seeds::eval_episode_seed(run_seed, i),
-            EvalStarts::Fresh => crate::train::seeds::fresh_eval_episode_seed(run_seed, step, i),
-        }
-    }
 }
 
 /// Every hyperparameter of a training run: the settings all algorithms share, then the run's
@@ -530,19 +522,7 @@ mod tests {
     }
 
     #[test]
-    fn fresh_evaluation_starts_are_each_evaluations_own_and_fixed_ones_ignore_the_step() {
-        let fixed = |step, i| EvalStarts::Fixed.episode_seed(7, step, i);
-        let fresh = |step, i| EvalStarts::Fresh.episode_seed(7, step, i);
-        assert_eq!(fixed(5000, 3), crate::train::seeds::eval_episode_seed(7, 3));
-        assert_eq!(fixed(5000, 3), fixed(10_000, 3));
-        let drawn: std::collections::HashSet<u64> = (1..=200)
-            .flat_map(|k| (0..20).map(move |i| fresh(k * 5000, i)))
-            .chain((0..20).map(|i| fixed(0, i)))
-            .collect();
-        assert_eq!(drawn.len(), 200 * 20 + 20, "every evaluation's starts are new, and apart from the fixed ones");
-        assert_eq!(fresh(5000, 3), fresh(5000, 3));
-        assert_ne!(EvalStarts::Fresh.episode_seed(8, 5000, 3), fresh(5000, 3));
-
+    fn eval_starts_is_omitted_at_its_default_and_checked() {
         // omitted at the default, so older files stay as they were; read back when set
         let mut cfg = TrainConfig::td3_defaults();
         assert!(!toml::to_string(&cfg).unwrap().contains("eval_starts"));

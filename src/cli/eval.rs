@@ -6,6 +6,7 @@ use locobench::envs::make;
 use locobench::evaluation::summary::HeldOutSummary;
 use locobench::evaluation::Protocol;
 use locobench::policy::AgentPolicy;
+use locobench::train::seeds::evaluation_seed;
 use locobench::train::{evaluate::evaluate_with, resolve_policy};
 
 #[derive(clap::Args, Debug)]
@@ -72,7 +73,7 @@ pub fn run(args: EvalArgs) -> Result<()> {
             (EvalStarts::Fresh, Some(0)) => anyhow::bail!("--eval-step must be a step of an evaluation, at least 1"),
             (EvalStarts::Fresh, Some(step)) => step,
         };
-        let seeds = |i: u64| starts.episode_seed(run.seed, step, i);
+        let seeds = |i: u64| evaluation_seed(starts, run.seed, step, i);
         let e = evaluate_with(agent.as_ref(), env.as_mut(), args.episodes, seeds)?;
         println!(
             "{what}, the run's evaluation episodes: return {:.3} ± {:.3} (population std) over {} episodes (mean length {:.1})",

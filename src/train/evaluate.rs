@@ -8,7 +8,7 @@ use crate::envs::{BoxSpace, Env};
 use crate::policy::AgentPolicy;
 use crate::rollout::{run_episode, StepView};
 
-use super::seeds::eval_episode_seed;
+use super::seeds::{eval_episode_seed, evaluation_seed};
 
 /// The results of evaluating a policy over some episodes.
 #[derive(Debug, Clone, PartialEq)]
@@ -67,7 +67,7 @@ pub fn evaluate_at(
     run_seed: u64,
     step: u64,
 ) -> Result<Evaluation> {
-    evaluate_with(agent, env, train.eval_episodes, |i| train.eval_starts.episode_seed(run_seed, step, i))
+    evaluate_with(agent, env, train.eval_episodes, |i| evaluation_seed(train.eval_starts, run_seed, step, i))
 }
 
 /// `episodes` episodes, episode `i` reset with `seed_of(i)`.

@@ -2,6 +2,8 @@
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
 
+use crate::agents::config::EvalStarts;
+
 /// SplitMix64 finaliser: turns structured inputs into well-mixed seeds.
 fn mix(mut z: u64) -> u64 {
     z = z.wrapping_add(0x9E37_79B9_7F4A_7C15);
@@ -41,6 +43,15 @@ pub(crate) fn fresh_eval_episode_seed(run_seed: u64, step: u64, i: u64) -> u64 {
     mix(mix(mix(run_seed ^ 0xF2E5_0000_0000_0000) ^ step) ^ i)
 }
 
+/// Reset seed of episode `i` of run `run_seed`'s in-training evaluation at `step`, under its
+/// `eval_starts`.
+pub fn evaluation_seed(starts: EvalStarts, run_seed: u64, step: u64, i: u64) -> u64 {
+    match starts {
+        EvalStarts::Fixed => eval_episode_seed(run_seed, i),
+        EvalStarts::Fresh => fresh_eval_episode_seed(run_seed, step, i),
+    }
+}
+
 /// Reset seed of held-out episode `i` of an evaluation protocol seeded `protocol_seed`: a third
 /// domain, apart from every run's training and evaluation episodes (`evaluation::protocol`
 /// checks that no run's seeds collide with them).
@@ -69,5 +80,25 @@ impl RngState {
         r.set_stream(self.stream);
         r.set_word_pos(self.word_pos.parse::<u128>()?);
         Ok(r)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn fresh_evaluation_starts_are_each_evaluations_own_and_fixed_ones_ignore_the_step() {
+        let fixed = |step, i| evaluation_seed(EvalStarts::Fixed, 7, step, i);
+        let fresh = |step, i| evaluation_seed(EvalStarts::Fresh, 7, step, i);
+        assert_eq!(fixed(5000, 3), eval_episode_seed(7, 3));
+        assert_eq!(fixed(5000, 3), fixed(10_000, 3));
+        let drawn: std::collections::HashSet<u64> = (1..=200)
+            .flat_map(|k| (0..20).map(move |i| fresh(k * 5000, i)))
+            .chain((0..20).map(|i| fixed(0, i)))
+            .collect();
+        assert_eq!(drawn.len(), 200 * 20 + 20, "every evaluation's starts are new, and apart from the fixed ones");
+        assert_eq!(fresh(5000, 3), fresh(5000, 3));
+        assert_ne!(evaluation_seed(EvalStarts::Fresh, 8, 5000, 3), fresh(5000, 3));
     }
 }

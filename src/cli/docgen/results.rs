@@ -26,6 +26,18 @@ fn probability(r: &Row, prefix: &str) -> String {
     }
 }
 
+/// A held-out row's cells: seeds × episodes, return [95% CI], falls, speed.
+fn held_out_cells(r: &Row) -> String {
+    format!(
+        "{} × {} | {} | {} | {}",
+        r.count("seeds"),
+        r.count("episodes_per_seed"),
+        ci(r, "mean", "mean_low", "mean_high"),
+        rate(r.count("falls"), r.count("episodes")),
+        fixed(r.num("speed"), 2),
+    )
+}
+
 /// The controller's best working speed per env: (env, row).
 fn controller_best(rows: &[Row]) -> Vec<(String, &Row)> {
     let mut best: Vec<(String, &Row)> = Vec::new();
@@ -84,14 +96,10 @@ pub(crate) fn glance(report: &Path) -> Result<String> {
         };
         let _ = writeln!(
             out,
-            "| {env} | {} | {} | {} × {} | {} | {} | {} | {controller_there} | {p} |",
+            "| {env} | {} | {} | {} | {controller_there} | {p} |",
             r.text("policy"),
             budget(r.num("budget") as u64),
-            r.count("seeds"),
-            r.count("episodes_per_seed"),
-            ci(r, "mean", "mean_low", "mean_high"),
-            rate(r.count("falls"), r.count("episodes")),
-            fixed(r.num("speed"), 2),
+            held_out_cells(r),
         );
     }
     Ok(out)
@@ -124,16 +132,7 @@ pub(crate) fn minitaur_selection(report: &Path) -> Result<String> {
                 .iter()
                 .find(|r| r.text("env") == "minitaur" && r.text("policy") == label && r.num("budget") as u64 == step);
             let Some(r) = row.filter(|r| r.count("seeds") > 0) else { continue };
-            let _ = writeln!(
-                out,
-                "| {} | `{label}-seed*` | {rule} | {} × {} | {} | {} | {} |",
-                budget(step),
-                r.count("seeds"),
-                r.count("episodes_per_seed"),
-                ci(r, "mean", "mean_low", "mean_high"),
-                rate(r.count("falls"), r.count("episodes")),
-                fixed(r.num("speed"), 2),
-            );
+            let _ = writeln!(out, "| {} | `{label}-seed*` | {rule} | {} |", budget(step), held_out_cells(r));
         }
     }
     Ok(out)
