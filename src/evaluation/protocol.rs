@@ -58,7 +58,7 @@ impl Protocol {
 
     /// Fails if a held-out reset seed is one run `run_seed` with settings `train` trained or was
     /// evaluated on. Under `eval_starts = "fresh"` that covers the starts of an evaluation at
-    /// every step up to `total_steps` (a few tenths of a second per million steps).
+    /// every step up to `total_steps`: `eval_episodes` hashes a step, cheap beside any episode.
     pub fn check_run(&self, run_seed: u64, train: &TrainConfig) -> Result<()> {
         self.check_disjoint(run_seed, train.total_steps, train.eval_episodes)?;
         if train.eval_starts == EvalStarts::Fresh {
