@@ -81,6 +81,8 @@ runs=(
   # TD3's actor on CrossQ's critics (CrossQ's td3_mode) with the same four changes, keeping its
   # best actor of 20-episode evaluations, seeds 0-2 with policies at 100k, 300k and 500k
   $r/minitaur/crossq-td3-combined-best20-seed{0,1,2}
+  # CrossQ's combined settings keeping the best actor of 20-episode evaluations on fresh starts
+  $r/minitaur/crossq-combined-fresh20-seed{0,1,2}
   # Humanoid toward 1M with policies at each budget it has reached: SAC's preset, seed 0 (it
   # replaces the earlier curves-only sac-seed0-300k, the same seed and settings on older code), and
   # CrossQ with 512-wide critics, seed 0
