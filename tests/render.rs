@@ -410,3 +410,33 @@ fn tiled_panels_hold_their_last_frame() {
     assert_eq!(tiled[1].pixel(2, 0), [9, 9, 9], "the shorter panel holds its last frame");
     assert!(tile(&[vec![f(1, 1)], vec![Frame { width: 1, height: 3, rgb: vec![0; 9] }]]).is_err());
 }
+
+/// The report's compact encoding (its clips are committed) writes the same frames as the standard
+/// one in fewer bytes, for MP4, WebM and the JPEG poster alike.
+#[test]
+fn compact_videos_hold_the_same_frames_in_fewer_bytes() {
+    use locobench::render::clip::write_video_at;
+    use locobench::render::video::{write_poster, Quality};
+    let mut env = minitaur();
+    let mut renderer = Renderer::new(&model(env.as_ref()), free_side_camera()).unwrap();
+    let clip: Vec<Frame> = (0..30).map(|i| render_moved(env.as_mut(), &mut renderer, 0.01 * i as f64, 0.0)).collect();
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = |p: &std::path::Path| std::fs::metadata(p).unwrap().len();
+    for ext in ["mp4", "webm"] {
+        let standard = write_video_at(&dir.path().join(format!("s.{ext}")), &clip, 25.0, Quality::Standard).unwrap();
+        let compact = write_video_at(&dir.path().join(format!("c.{ext}")), &clip, 25.0, Quality::Compact).unwrap();
+        assert!(bytes(&compact) < bytes(&standard), "{ext}: {} against {}", bytes(&compact), bytes(&standard));
+        for path in [&standard, &compact] {
+            let probe = std::process::Command::new("ffprobe")
+                .args(["-v", "error", "-count_frames", "-select_streams", "v:0", "-show_entries"])
+                .args(["stream=nb_read_frames,width,height", "-of", "csv=p=0"])
+                .arg(path)
+                .output()
+                .expect("ffprobe (Debian's ffmpeg, installed by scripts/setup.sh)");
+            assert_eq!(String::from_utf8_lossy(&probe.stdout).trim(), format!("{W},{H},30"), "{}", path.display());
+        }
+    }
+    let standard = write_poster(&dir.path().join("s.jpg"), &clip[15], Quality::Standard).unwrap();
+    let compact = write_poster(&dir.path().join("c.jpg"), &clip[15], Quality::Compact).unwrap();
+    assert!(bytes(&compact) < bytes(&standard) && std::fs::read(&compact).unwrap().starts_with(&[0xff, 0xd8]));
+}

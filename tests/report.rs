@@ -344,5 +344,28 @@ fn committed_reports_are_light_and_self_contained() {
         for file in ["held_out.csv", "controller.csv", "README.md"] {
             assert!(root.join(report).join(file).is_file(), "{report}/{file}");
         }
+        // Every regeneration that changes a clip adds its bytes to the repository's history, so
+        // the whole folder has a budget, and no single file takes much of it.
+        let mut files = Vec::new();
+        let mut dirs = vec![root.join(report)];
+        while let Some(dir) = dirs.pop() {
+            for entry in std::fs::read_dir(&dir).unwrap().map(Result::unwrap) {
+                let meta = entry.metadata().unwrap();
+                if meta.is_dir() {
+                    dirs.push(entry.path());
+                } else {
+                    files.push((entry.path(), meta.len()));
+                }
+            }
+        }
+        let total: u64 = files.iter().map(|f| f.1).sum();
+        assert!(total < REPORT_BYTES, "{report}: {total} bytes in {} files", files.len());
+        for (path, bytes) in &files {
+            assert!(*bytes < FILE_BYTES, "{}: {bytes} bytes", path.display());
+        }
     }
 }
+
+/// The committed report's budgets: the whole folder, and any one file in it.
+const REPORT_BYTES: u64 = 18_000_000;
+const FILE_BYTES: u64 = 800_000;

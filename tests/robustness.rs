@@ -129,8 +129,12 @@ fn a_small_suite_writes_every_cell_the_same_on_any_thread_count() {
         let stem = format!("minitaur_robustness_{axis}");
         let mp4 = std::fs::read(report.join("videos").join(format!("{stem}.mp4"))).unwrap();
         assert_eq!(&mp4[4..8], b"ftyp", "{stem}.mp4");
-        assert!(md.contains(&format!("](videos/{stem}.gif)")), "{stem} in the Markdown");
-        let caption = md.split(&format!("videos/{stem}.gif")).next().unwrap().rsplit("![").next().unwrap();
+        // No GIF: the Markdown page shows the poster, linked to the MP4.
+        assert!(!report.join("videos").join(format!("{stem}.gif")).exists(), "{stem}.gif");
+        let jpg = std::fs::read(report.join("videos").join(format!("{stem}.jpg"))).unwrap();
+        assert!(jpg.starts_with(&[0xff, 0xd8]), "{stem}.jpg");
+        assert!(md.contains(&format!("](videos/{stem}.jpg)](videos/{stem}.mp4)")), "{stem} in the Markdown");
+        let caption = md.split(&format!("videos/{stem}.jpg")).next().unwrap().rsplit("![").next().unwrap();
         assert!(caption.contains("left to right ppo (") && caption.contains("as the suite recorded them"), "{caption}");
         assert!(!caption.contains("The replay ended otherwise"), "{caption}");
     }

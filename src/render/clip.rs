@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{ensure, Result};
 
-use super::video::VideoWriter;
+use super::video::{Quality, VideoWriter};
 use super::{Film, Frame, RenderSettings, Renderer};
 use crate::envs::push::{Push, Pushed};
 use crate::envs::{make, Env, EnvConfig};
@@ -117,8 +117,13 @@ pub fn tile_panels(panels: &[Panel]) -> Result<(Vec<Frame>, f64)> {
 
 /// Writes `frames` as the video `path` (its extension picks the format) at `fps`.
 pub fn write_video(path: &Path, frames: &[Frame], fps: f64) -> Result<PathBuf> {
+    write_video_at(path, frames, fps, Quality::Standard)
+}
+
+/// [`write_video`] at `quality`.
+pub fn write_video_at(path: &Path, frames: &[Frame], fps: f64, quality: Quality) -> Result<PathBuf> {
     let first = frames.first().ok_or_else(|| anyhow::anyhow!("{}: no frames to write", path.display()))?;
-    let mut writer = VideoWriter::create(path, first.width, first.height, fps)?;
+    let mut writer = VideoWriter::create_at(path, first.width, first.height, fps, quality)?;
     for f in frames {
         writer.push(f)?;
     }

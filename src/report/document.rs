@@ -34,11 +34,12 @@ pub enum Block {
         caption: String,
     },
     /// A video: the HTML page plays `video` (with `poster`, if any, shown before it plays); the
-    /// Markdown page shows the GIF `gif` and links the video. `timing`: the episode's length (s)
-    /// and the video's frames per second, kept on the page for checks.
+    /// Markdown page shows the GIF `gif` (else the poster, else nothing) and links the video.
+    /// `timing`: the episode's length (s) and the video's frames per second, kept on the page for
+    /// checks.
     Video {
         video: String,
-        gif: String,
+        gif: Option<String>,
         poster: Option<String>,
         caption: String,
         timing: Option<(f64, f64)>,
@@ -141,8 +142,17 @@ impl Document {
                     }
                     md.push('\n');
                 }
-                Block::Video { video, gif, caption, .. } => {
-                    let _ = writeln!(md, "![{caption}]({gif})\n\n{caption}. [The whole episode (MP4)]({video})\n");
+                Block::Video { video, gif, poster, caption, .. } => {
+                    match (gif, poster) {
+                        (Some(gif), _) => {
+                            let _ = writeln!(md, "![{caption}]({gif})\n");
+                        }
+                        (None, Some(poster)) => {
+                            let _ = writeln!(md, "[![{caption}]({poster})]({video})\n");
+                        }
+                        (None, None) => {}
+                    }
+                    let _ = writeln!(md, "{caption}. [The whole episode (MP4)]({video})\n");
                 }
             }
         }

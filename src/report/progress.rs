@@ -67,7 +67,7 @@ pub fn write_progress(run: &Path, out: &Path) -> Result<(PathBuf, usize)> {
             None => format!("step {step} ({})", budget(*step)),
         };
         doc.heading(1, format!("Step {}", budget(*step)));
-        let gif = if gif.is_file() { copy(gif)? } else { String::new() };
+        let gif = if gif.is_file() { Some(copy(gif)?) } else { None };
         doc.blocks.push(Block::Video { video: copy(mp4)?, gif, poster: None, caption, timing: None });
     }
     write_bytes_atomic(&out.join("index.html"), doc.to_html().as_bytes())?;

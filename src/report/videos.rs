@@ -2,7 +2,9 @@
 //! first held-out episode, beside the controller commanded to that row's speed on the same
 //! episode where the env has a controller; and on those envs the same pair under a push (the
 //! evaluation's push, marked in the frame). Each clip is an MP4 for `index.html` (the whole
-//! episode, with a poster frame) and a short GIF for the Markdown page, under `videos/`.
+//! episode, with a poster frame) and, for the clips the Markdown page plays, a short GIF, under
+//! `videos/`. The robustness suite's clips get no GIF: the Markdown page shows their poster,
+//! linked to the MP4, so that the committed report stays light.
 use std::path::Path;
 
 use anyhow::{Context, Result};
@@ -17,7 +19,8 @@ use crate::evaluation::cache::{EvalCache, Key};
 use crate::evaluation::parallel::map_in_order;
 use crate::evaluation::{Protocol, Push};
 use crate::policy::AgentPolicy;
-use crate::render::clip::{film_episode, tile_panels, write_video, Panel};
+use crate::render::clip::{film_episode, tile_panels, write_video_at, Panel};
+use crate::render::video::Quality;
 use crate::render::{Camera, RenderSettings};
 
 /// The folder of the clips, in the report's directory.
@@ -69,6 +72,8 @@ pub struct ClipPlan {
     /// End the clip a second after the last panel that falls has fallen (the whole episode when
     /// none falls): what a robustness clip is about is decided by then.
     until_decided: bool,
+    /// Write a GIF for the Markdown page (else it shows the poster, linked to the MP4).
+    gif: bool,
 }
 
 impl ClipPlan {
@@ -85,7 +90,17 @@ impl ClipPlan {
         if crate::controller::baseline::baseline_env_like(&cfg).is_ok() {
             panels.push(Actor::Controller { speed: 0.0 });
         }
-        ClipPlan { stem, caption, panels, push: None, env: cfg, episode_seed: None, panel: PANEL, until_decided: false }
+        ClipPlan {
+            stem,
+            caption,
+            panels,
+            push: None,
+            env: cfg,
+            episode_seed: None,
+            panel: PANEL,
+            until_decided: false,
+            gif: true,
+        }
     }
 
     /// A clip of a robustness suite's contenders side by side, left to right, on one episode of
@@ -119,6 +134,7 @@ impl ClipPlan {
             episode_seed: Some(episode_seed),
             panel: SMALL_PANEL,
             until_decided: true,
+            gif: false,
         })
     }
 }
@@ -132,8 +148,8 @@ pub struct Clip {
     pub caption: String,
     /// The MP4, relative to the report.
     pub video: String,
-    /// The GIF, relative to the report.
-    pub gif: String,
+    /// The GIF, relative to the report, if the plan asked for one.
+    pub gif: Option<String>,
     /// The poster frame (JPEG), relative to the report.
     pub poster: String,
     /// The longest panel's episode, in simulated seconds: what the MP4 lasts (it plays in real
@@ -141,16 +157,16 @@ pub struct Clip {
     pub duration: f64,
     /// The MP4's frames per second.
     pub fps: f64,
-    /// Bytes of the MP4 and the GIF.
+    /// Bytes of the MP4 and the GIF (0 without one).
     pub bytes: (u64, u64),
     /// How each panel's episode ended, left to right: whether it fell (a blow-up counts as one).
     pub fell: Vec<bool>,
 }
 
 impl Clip {
-    /// Its MP4, GIF and poster, relative to the report.
-    pub fn files(&self) -> [String; 3] {
-        [self.video.clone(), self.gif.clone(), self.poster.clone()]
+    /// Its MP4, GIF (if any) and poster, relative to the report.
+    pub fn files(&self) -> Vec<String> {
+        [Some(self.video.clone()), self.gif.clone(), Some(self.poster.clone())].into_iter().flatten().collect()
     }
 }
 
@@ -261,6 +277,7 @@ pub fn plan(
             episode_seed: None,
             panel: PANEL,
             until_decided: false,
+            gif: true,
         });
         if push {
             plans.push(ClipPlan {
@@ -274,6 +291,7 @@ pub fn plan(
                 episode_seed: None,
                 panel: PANEL,
                 until_decided: false,
+                gif: true,
             });
         }
     }
@@ -335,6 +353,7 @@ fn clip_key(plan: &ClipPlan, runs: &[(&Group, &Vec<&Run>)], episode_seed: u64) -
         format!("push = {:?}", plan.push),
         format!("panel = {:?}", plan.panel),
         format!("until decided = {}", plan.until_decided),
+        format!("gif = {}", plan.gif),
         // The OpenGL the frames are drawn with (Mesa's OSMesa, or EGL on a GPU's driver).
         format!("gl = {:?}", crate::render::gl::Backend::from_env()?),
     ];
@@ -372,31 +391,38 @@ fn clip_entry(clip: &Clip, out: &Path) -> Result<String> {
         clip.fps,
         fell.join(","),
         digest(&clip.video)?,
-        digest(&clip.gif)?,
+        clip.gif.as_deref().map_or(Ok(NO_GIF.to_string()), digest)?,
         digest(&clip.poster)?
     ))
 }
 
-/// The clip of `plan` from its cache entry, when its three files in `dir` are the ones the entry
-/// names; None (film it) otherwise.
+/// A cache entry's `gif` for a clip without one.
+const NO_GIF: &str = "none";
+
+/// The clip of `plan` from its cache entry, when its files in `dir` are the ones the entry names;
+/// None (film it) otherwise.
 fn kept_clip(plan: &ClipPlan, body: &str, dir: &Path) -> Option<Clip> {
     let field = |name: &str| body.lines().find_map(|l| l.strip_prefix(name)?.strip_prefix(" = "));
     let file = |ext: &str| format!("{}.{ext}", plan.stem);
-    for ext in ["mp4", "gif", "jpg"] {
+    let exts: &[&str] = if plan.gif { &["mp4", "gif", "jpg"] } else { &["mp4", "jpg"] };
+    for ext in exts {
         if crate::io::files_digest(&[dir.join(file(ext))]).ok()? != field(ext)? {
             return None;
         }
+    }
+    if !plan.gif && field("gif")? != NO_GIF {
+        return None;
     }
     let size = |ext: &str| std::fs::metadata(dir.join(file(ext))).map(|m| m.len()).ok();
     Some(Clip {
         stem: plan.stem.clone(),
         caption: plan.caption.clone(),
         video: format!("{VIDEO_DIR}/{}", file("mp4")),
-        gif: format!("{VIDEO_DIR}/{}", file("gif")),
+        gif: plan.gif.then(|| format!("{VIDEO_DIR}/{}", file("gif"))),
         poster: format!("{VIDEO_DIR}/{}", file("jpg")),
         duration: field("duration")?.parse().ok()?,
         fps: field("fps")?.parse().ok()?,
-        bytes: (size("mp4")?, size("gif")?),
+        bytes: (size("mp4")?, if plan.gif { size("gif")? } else { 0 }),
         fell: field("fell")?.split(',').map(|f| f.parse().ok()).collect::<Option<Vec<bool>>>()?,
     })
 }
@@ -482,25 +508,30 @@ fn write_clip(plan: &ClipPlan, panels: &[Panel], dir: &Path) -> Result<Clip> {
         duration = (kept - 1) as f64 / fps;
     }
     let name = |ext: &str| format!("{}.{ext}", plan.stem);
-    let video = write_video(&dir.join(name("mp4")), &frames, fps)?;
-    crate::render::video::write_poster(&dir.join(name("jpg")), &frames[frames.len() / 2])?;
-    let every = (fps / GIF_FPS).ceil().max(1.0) as usize;
-    let push = panels.iter().filter_map(|p| p.push_time).reduce(f64::min);
-    let first_fall = falls.iter().copied().reduce(f64::min);
-    // At half the size: a GIF's frames compress far worse than a video's.
-    let gif_frames: Vec<_> =
-        frames[gif_window(push, first_fall, fps, frames.len())].iter().step_by(every).map(|f| f.half()).collect();
-    let gif = write_video(&dir.join(name("gif")), &gif_frames, fps / every as f64)?;
+    // Compact: the report's clips are committed with its results.
+    let video = write_video_at(&dir.join(name("mp4")), &frames, fps, Quality::Compact)?;
+    crate::render::video::write_poster(&dir.join(name("jpg")), &frames[frames.len() / 2], Quality::Compact)?;
     let size = |p: &Path| std::fs::metadata(p).map(|m| m.len()).unwrap_or(0);
+    let gif = if plan.gif {
+        let every = (fps / GIF_FPS).ceil().max(1.0) as usize;
+        let push = panels.iter().filter_map(|p| p.push_time).reduce(f64::min);
+        let first_fall = falls.iter().copied().reduce(f64::min);
+        // At half the size: a GIF's frames compress far worse than a video's.
+        let gif_frames: Vec<_> =
+            frames[gif_window(push, first_fall, fps, frames.len())].iter().step_by(every).map(|f| f.half()).collect();
+        Some(write_video_at(&dir.join(name("gif")), &gif_frames, fps / every as f64, Quality::Compact)?)
+    } else {
+        None
+    };
     Ok(Clip {
         stem: plan.stem.clone(),
         caption: plan.caption.clone(),
         video: format!("{VIDEO_DIR}/{}", name("mp4")),
-        gif: format!("{VIDEO_DIR}/{}", name("gif")),
+        gif: plan.gif.then(|| format!("{VIDEO_DIR}/{}", name("gif"))),
         poster: format!("{VIDEO_DIR}/{}", name("jpg")),
         duration,
         fps,
-        bytes: (size(&video), size(&gif)),
+        bytes: (size(&video), gif.as_deref().map_or(0, size)),
         fell: panels.iter().map(|p| p.fell || p.unstable).collect(),
     })
 }
