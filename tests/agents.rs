@@ -631,3 +631,59 @@ fn budget_policy_takes_last_best_or_fewest_falls_and_picking_is_for_off_policy_l
         }
     }
 }
+
+/// An actor trained on a base env starts its command task (`minitaur-command` over `minitaur`)
+/// acting as it did there: its input grows by the task's observations, which it ignores until
+/// training changes that. A checkpoint, whose critics cannot take the new inputs, is refused.
+#[test]
+fn an_actor_starts_its_command_task_as_it_acted_on_the_base_env() {
+    use locobench::envs::make;
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        (
+            Algo::Crossq,
+            "normalize_observations=true,critic_hidden=[16,16],warmup_steps=100,learning_starts=100,batch_size=32",
+        ),
+        (Algo::Ppo, "num_envs=2,num_steps=50,num_minibatches=2,update_epochs=1"),
+    ];
+    for (algo, extra) in cases {
+        let run = dir.path().join(algo.name());
+        let settings = format!("{extra},total_steps=200,eval_every=200,eval_episodes=1,hidden=[16,16]");
+        let cfg = build_config("minitaur", algo, &split_pairs(&settings).unwrap()).unwrap();
+        let summary =
+            train::train(EnvConfig::new("minitaur"), cfg.clone(), 0, &run, None, false, &RunControl::default())
+                .unwrap();
+        let source = train::resolve_policy(&run, Some(200)).unwrap();
+        let (_, base_actor) = source.load().unwrap();
+
+        let task = EnvConfig::new("minitaur-command");
+        let mut env = make(&task).unwrap();
+        let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
+        let base_dim = make(&EnvConfig::new("minitaur")).unwrap().spec().observation_space.dim();
+        assert_eq!(obs_dim, base_dim + locobench::envs::command::EXTRA_OBSERVATIONS);
+        let actor = locobench::agents::make_agent(&cfg, obs_dim, act_dim, &mut ChaCha8Rng::seed_from_u64(9)).unwrap();
+        source.load_into_env(actor.as_ref(), &task).unwrap();
+        let obs: Vec<f32> = env.reset(Some(3)).unwrap().0.iter().map(|&x| x as f32).collect();
+        let mut commanded = obs.clone();
+        for x in &mut commanded[base_dim..] {
+            *x += 0.75;
+        }
+        let close = |a: &[f32], b: &[f32]| a.iter().zip(b).all(|(x, y)| (x - y).abs() <= 1e-5);
+        let on_base = base_actor.act(&obs[..base_dim]).unwrap();
+        assert!(close(&actor.act(&obs).unwrap(), &on_base), "{algo:?} acts as on the base env");
+        assert!(close(&actor.act(&commanded).unwrap(), &on_base), "{algo:?} ignores the command at first");
+
+        // The checkpoint holds critics of the base env's inputs: refused, naming the way out.
+        let err = train::resolve_policy(&summary.checkpoint, None).unwrap().load_into_env(actor.as_ref(), &task);
+        let err = format!("{:#}", err.unwrap_err());
+        assert!(err.contains("cannot take") && err.contains("--init-budget"), "{err}");
+    }
+    // Another env's actor still has to match the agent's shapes exactly.
+    let ant = EnvConfig::new("ant-command");
+    let env = make(&ant).unwrap();
+    let cfg = build_config("ant-command", Algo::Ppo, &split_pairs("hidden=[16,16]").unwrap()).unwrap();
+    let (obs_dim, act_dim) = (env.spec().observation_space.dim(), env.spec().action_space.dim());
+    let actor = locobench::agents::make_agent(&cfg, obs_dim, act_dim, &mut ChaCha8Rng::seed_from_u64(9)).unwrap();
+    let err = train::resolve_policy(&dir.path().join("ppo"), Some(200)).unwrap().load_into_env(actor.as_ref(), &ant);
+    assert!(format!("{:#}", err.unwrap_err()).contains("shape"));
+}

@@ -128,21 +128,58 @@ pub(crate) fn save_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
 /// Loads an exported actor into `agent`, checking every actor tensor's name and shape; the
 /// agent's other networks keep their initial weights (acting does not use them).
 pub(crate) fn load_actor(path: &Path, agent: &dyn Agent) -> Result<()> {
+    load_actor_with_inputs(path, agent, None)
+}
+
+/// Loads an exported actor into an agent whose observation extends the actor's: `inputs` is
+/// (the actor's observation length, the agent's), the agent's having the extra entries at its end
+/// (a command task's over its base env's). Every tensor along the observation is extended so that
+/// the new inputs change nothing at first: a layer's weights from them are zero, and normalisation
+/// statistics see them as standard inputs (mean and shift 0, variance and scale 1). With `inputs`
+/// None this is [`load_actor`].
+pub(crate) fn load_actor_with_inputs(path: &Path, agent: &dyn Agent, inputs: Option<(usize, usize)>) -> Result<()> {
     let tensors = read_tensors(path)?;
     for (name, var) in agent.parameters().into_iter().filter(|(n, _)| is_actor(n)) {
         let t = tensors.get(&name).with_context(|| {
             format!("{} has no tensor '{name}': was it exported from another algorithm?", path.display())
         })?;
+        let widened = inputs.filter(|&(from, to)| {
+            from < to
+                && t.rank() == var.rank()
+                && t.dims().last() == Some(&from)
+                && var.dims().last() == Some(&to)
+                && t.dims()[..t.rank() - 1] == var.dims()[..var.rank() - 1]
+        });
+        let t = match widened {
+            Some((from, to)) => widen_inputs(&name, t, to - from)?,
+            None => t.clone(),
+        };
         anyhow::ensure!(
             t.dims() == var.dims(),
             "{} tensor '{name}' has shape {:?} but this agent needs {:?}",
             path.display(),
-            t.dims(),
+            tensors[&name].dims(),
             var.dims()
         );
         var.set(&t.to_dtype(var.dtype())?.to_device(var.device())?)?;
     }
     Ok(())
+}
+
+/// `t` with `appended` entries added along its last axis (the observation's): ones for a
+/// variance, an inverse standard deviation or a scale, zeros for anything else (a weight, a mean,
+/// a shift).
+fn widen_inputs(name: &str, t: &Tensor, appended: usize) -> Result<Tensor> {
+    let leaf = name.rsplit('.').next().unwrap_or(name);
+    let fill = match leaf {
+        "running_var" | "obs_var" | "obs_inv_std" | "scale" => 1.0,
+        "weight" | "running_mean" | "obs_mean" | "bias" => 0.0,
+        _ => bail!("actor tensor '{name}' runs along the observation, and there is no rule to extend it"),
+    };
+    let mut shape = t.dims().to_vec();
+    *shape.last_mut().expect("a widened tensor has an axis") = appended;
+    let extra = (Tensor::ones(shape, t.dtype(), t.device())? * fill)?;
+    Ok(Tensor::cat(&[t, &extra], t.rank() - 1)?)
 }
 
 pub(crate) fn checkpoints_dir(run_dir: &Path) -> PathBuf {

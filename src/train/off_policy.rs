@@ -34,7 +34,7 @@ pub(super) fn train(
 ) -> Result<RunSummary> {
     let mut trainer = Trainer::new(run_dir, run, control.device)?;
     if let Some(policy) = init_from {
-        policy.load_into(trainer.agent.as_ref())?;
+        policy.load_into_env(trainer.agent.as_ref(), &run.env)?;
     }
     let _lock = scaffold::create_run_dir(run_dir, run, control)?;
     trainer.run(control)

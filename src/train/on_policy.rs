@@ -76,7 +76,7 @@ pub(super) fn train(
 ) -> Result<RunSummary> {
     let mut t = OnPolicyTrainer::new(run_dir, run, control)?;
     if let Some(policy) = init_from {
-        policy.load_into(&*t.agent)?;
+        policy.load_into_env(&*t.agent, &run.env)?;
     }
     let _lock = scaffold::create_run_dir(run_dir, run, control)?;
     t.obs = t.envs.reset(run.seed)?;

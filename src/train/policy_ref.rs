@@ -205,6 +205,29 @@ impl PolicyRef {
             _ => checkpoint::load_actor(&self.weights_file(), agent),
         }
     }
+
+    /// Loads the weights into `agent`, which acts in `env`. Where `env` is the command task over
+    /// the env this policy was trained in (`ant-command` over `ant`), an actor alone is taken, and
+    /// its input grows by the command task's observations, which it ignores at first: a policy
+    /// that walks starts the task walking and learns to follow the command from there.
+    pub fn load_into_env(&self, agent: &dyn Agent, env: &crate::envs::EnvConfig) -> Result<()> {
+        use crate::envs::command::{is_command_task, EXTRA_OBSERVATIONS};
+        let source = read_run_config(&self.run_dir()?)?;
+        if !(is_command_task(&env.name) && env.name == format!("{}-command", source.env.name)) {
+            return self.load_into(agent);
+        }
+        if self.has_critics() {
+            bail!(
+                "{} is a checkpoint of a {} run: the networks it holds beside the actor cannot take {}'s command inputs; start from the run's \
+                 actor instead (a run directory with --init-budget, or a policies/step-N.safetensors file)",
+                self.path().display(),
+                source.env.name,
+                env.name
+            );
+        }
+        let base = make(&source.env)?.spec().observation_space.dim();
+        checkpoint::load_actor_with_inputs(&self.weights_file(), agent, Some((base, base + EXTRA_OBSERVATIONS)))
+    }
 }
 
 /// The config of the run in `dir` and a freshly initialised agent of its shape on `device`.
