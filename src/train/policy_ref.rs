@@ -208,12 +208,12 @@ impl PolicyRef {
 
     /// Loads the weights into `agent`, which acts in `env`. Where `env` is the command task over
     /// the env this policy was trained in (`ant-command` over `ant`), an actor alone is taken, and
-    /// its input grows by the command task's observations, which it ignores at first: a policy
-    /// that walks starts the task walking and learns to follow the command from there.
+    /// its input grows by the command task's observations, which it ignores at first: training
+    /// starts from the gait it had on the base env.
     pub fn load_into_env(&self, agent: &dyn Agent, env: &crate::envs::EnvConfig) -> Result<()> {
-        use crate::envs::command::{is_command_task, EXTRA_OBSERVATIONS};
+        use crate::envs::command::EXTRA_OBSERVATIONS;
         let source = read_run_config(&self.run_dir()?)?;
-        if !(is_command_task(&env.name) && env.name == format!("{}-command", source.env.name)) {
+        if env.name != format!("{}-command", source.env.name) {
             return self.load_into(agent);
         }
         if self.has_critics() {
