@@ -38,7 +38,8 @@ pub use inverted_pendulum::{InvertedPendulum, InvertedPendulumOptions};
 pub use minitaur::{Minitaur, MinitaurOptions};
 pub use mujoco_env::MujocoEnv;
 pub use registry::{
-    env_names, lookup, make, model_xml, parse_overrides, reward_weight_option, EnvConfig, EnvEntry, Registered, ENVS,
+    command_base, env_names, lookup, make, model_xml, parse_overrides, reward_weight_option, EnvConfig, EnvEntry,
+    Registered, ENVS,
 };
 pub use simulation::{Simulation, VelocityNoise};
 pub use task::{Task, TaskStep, Timing};

@@ -50,6 +50,8 @@ pub struct EnvEntry {
     pub model_xml: &'static str,
     /// Reward term names (as `--reward` takes them) and the option that weighs each.
     pub reward_weights: &'static [(&'static str, &'static str)],
+    /// For a command task, the registered env whose body it commands (`ant` under `ant-command`).
+    pub command_base: Option<&'static str>,
     build: fn(&EnvConfig) -> Result<Box<dyn Env>, EnvError>,
     resolve: fn(&EnvConfig) -> Result<toml::Table, EnvError>,
 }
@@ -59,7 +61,13 @@ const fn entry<E: Registered>(
     model_xml: &'static str,
     reward_weights: &'static [(&'static str, &'static str)],
 ) -> EnvEntry {
-    EnvEntry { name, model_xml, reward_weights, build: build::<E>, resolve: resolve::<E> }
+    EnvEntry { name, model_xml, reward_weights, command_base: None, build: build::<E>, resolve: resolve::<E> }
+}
+
+/// The declaration of the command task over `base` (its registered name), named by the base's
+/// [`CommandBase::COMMAND_NAME`].
+const fn command<B: CommandBase>(base: &'static str, model_xml: &'static str) -> EnvEntry {
+    EnvEntry { command_base: Some(base), ..entry::<CommandEnv<B>>(B::COMMAND_NAME, model_xml, COMMAND_REWARD) }
 }
 
 /// The declaration of a [`Task`]: its name and model come from the task itself.
@@ -113,8 +121,8 @@ pub const ENVS: &[EnvEntry] = &[
             ("shake", "shake_weight"),
         ],
     ),
-    entry::<CommandEnv<Minitaur>>("minitaur-command", minitaur::MODEL_XML, COMMAND_REWARD),
-    entry::<CommandEnv<Ant>>("ant-command", super::ant::MODEL_XML, COMMAND_REWARD),
+    command::<Minitaur>("minitaur", minitaur::MODEL_XML),
+    command::<Ant>(AntTask::NAME, super::ant::MODEL_XML),
     entry::<super::notch::NotchWalker>(super::notch::NAME, super::walker2d::MODEL_XML, PLANAR_WALKER_REWARD),
 ];
 
@@ -133,6 +141,11 @@ pub fn lookup(name: &str) -> Result<&'static EnvEntry, EnvError> {
     ENVS.iter()
         .find(|e| e.name == name)
         .ok_or_else(|| EnvError::UnknownEnv { name: name.to_string(), known: env_names().join(", ") })
+}
+
+/// The env whose body the command task `name` commands; None when `name` is not a command task.
+pub fn command_base(name: &str) -> Option<&'static str> {
+    ENVS.iter().find(|e| e.name == name).and_then(|e| e.command_base)
 }
 
 /// Every registered environment name, in registration order.
@@ -301,6 +314,18 @@ mod tests {
                 assert_eq!(reward_weight_option(e.name, term).unwrap(), *key);
             }
             assert_eq!(model_xml(e.name).unwrap(), e.model_xml);
+            if let Some(base) = e.command_base {
+                // A command task observes its base env's observations first, then the command's.
+                let base_dim = make(&EnvConfig::new(base)).unwrap().spec().observation_space.dim();
+                let extra = crate::envs::command::EXTRA_OBSERVATIONS;
+                assert_eq!(env.spec().observation_space.dim(), base_dim + extra, "{} over {base}", e.name);
+                assert_eq!(lookup(base).unwrap().model_xml, e.model_xml);
+            }
+        }
+        assert_eq!(command_base("minitaur-command"), Some("minitaur"));
+        assert_eq!(command_base("ant-command"), Some("ant"));
+        for not_a_command_task in ["ant", "walker2d-notch", "hopper-command", ""] {
+            assert_eq!(command_base(not_a_command_task), None);
         }
         for bad in [make(&EnvConfig::new("hoper")).err(), model_xml("hoper").err(), lookup("").err()] {
             assert!(matches!(bad, Some(EnvError::UnknownEnv { .. })));

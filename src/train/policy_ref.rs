@@ -213,7 +213,7 @@ impl PolicyRef {
     pub fn load_into_env(&self, agent: &dyn Agent, env: &crate::envs::EnvConfig) -> Result<()> {
         use crate::envs::command::EXTRA_OBSERVATIONS;
         let source = read_run_config(&self.run_dir()?)?;
-        if env.name != format!("{}-command", source.env.name) {
+        if crate::envs::command_base(&env.name) != Some(source.env.name.as_str()) {
             return self.load_into(agent);
         }
         if self.has_critics() {

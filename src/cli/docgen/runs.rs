@@ -7,7 +7,7 @@ use anyhow::Result;
 
 use locobench::report::budgets::{reached, shipped_step};
 use locobench::report::format::budget;
-use locobench::report::runs::find_runs;
+use locobench::report::runs::{find_runs, Run};
 use locobench::train::{budget_policy_steps, provenance};
 
 /// Every run directory under `dirs` (relative to `root`): where, what, how far, which policies.
@@ -44,8 +44,45 @@ pub fn list(root: &Path, dirs: &[&str]) -> Result<String> {
             run.algo(),
             run.config.seed,
             budget(reached(run)),
-            run.group().description(),
+            settings(run),
         );
     }
     Ok(out)
+}
+
+/// The run's group description, and for a run that started from another's weights
+/// (`train --init-from`), which run and step it started from.
+fn settings(run: &Run) -> String {
+    let description = run.group().description();
+    match &run.config.init_from {
+        None => description,
+        Some(from) => format!("{description}; started from {}", started_from(from)),
+    }
+}
+
+/// `benches/results/ant/crossq-256-seed0/policies/step-300000.safetensors` reads
+/// `` `ant/crossq-256-seed0` at 300k ``; a path of another shape is quoted as it is.
+fn started_from(path: &str) -> String {
+    let shortened = path.strip_prefix("benches/results/").unwrap_or(path);
+    let step = shortened
+        .rsplit_once("/policies/step-")
+        .and_then(|(run, file)| Some((run, file.strip_suffix(".safetensors")?.parse::<u64>().ok()?)));
+    match step {
+        Some((run, step)) => format!("`{run}` at {}", budget(step)),
+        None => format!("`{shortened}`"),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::started_from;
+
+    #[test]
+    fn a_fine_tune_names_the_run_and_step_it_started_from() {
+        assert_eq!(
+            started_from("benches/results/ant/crossq-256-seed0/policies/step-300000.safetensors"),
+            "`ant/crossq-256-seed0` at 300k"
+        );
+        assert_eq!(started_from("/tmp/runs/x/checkpoints/step_000001000"), "`/tmp/runs/x/checkpoints/step_000001000`");
+    }
 }

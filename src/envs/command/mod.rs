@@ -43,7 +43,7 @@ pub use process::{CommandProcess, Schedule};
 
 /// Whether `env` names a command task (`minitaur-command`, `ant-command`).
 pub fn is_command_task(env: &str) -> bool {
-    env.ends_with("-command")
+    super::command_base(env).is_some()
 }
 
 /// A command task's (`speed_range`, `yaw_rate_range`), each [low, high].
