@@ -83,6 +83,8 @@ runs=(
   $r/minitaur/crossq-td3-combined-best20-seed{0,1,2}
   # CrossQ's combined settings keeping the best actor of 20-episode evaluations on fresh starts
   $r/minitaur/crossq-combined-fresh20-seed{0,1,2}
+  # The 20-episode TD3 with every foot's friction scaled by 1.2 in training (held-out unchanged)
+  $r/minitaur/td3-combined-ln-best20-fric1.2-seed{0,1,2}
   # Humanoid toward 1M with policies at each budget it has reached: SAC's preset, seed 0 (it
   # replaces the earlier curves-only sac-seed0-300k, the same seed and settings on older code), and
   # CrossQ with 512-wide critics, seed 0

@@ -105,12 +105,17 @@ pub(crate) fn glance(report: &Path) -> Result<String> {
     Ok(out)
 }
 
-/// The rules for keeping an actor at each budget that docs/training.md compares on the Minitaur:
-/// (the report's row label, the rule in words). The runs are `benches/results/minitaur/LABEL-seedN`.
-pub(crate) const MINITAUR_SELECTION: [(&str, &str); 8] = [
+/// The rules for keeping an actor at each budget that docs/training.md compares on the Minitaur,
+/// and one training change under the 20-episode rule: (the report's row label, the rule in words).
+/// The runs are `benches/results/minitaur/LABEL-seedN`.
+pub(crate) const MINITAUR_SELECTION: [(&str, &str); 9] = [
     ("td3-combined-ln", "TD3, layer-normalised critics: the actor at that step"),
     ("td3-combined-ln-best", "TD3, layer-normalised critics: highest minimum of 10 fixed starts"),
     ("td3-combined-ln-best20", "TD3, layer-normalised critics: highest minimum of 20 fixed starts"),
+    (
+        "td3-combined-ln-best20-fric1.2",
+        "TD3, layer-normalised critics, trained on feet 1.2 times as grippy: highest minimum of 20 fixed starts",
+    ),
     ("td3-combined-ln-best50", "TD3, layer-normalised critics: highest minimum of 50 fixed starts"),
     ("td3-combined-ln-ff50", "TD3, layer-normalised critics: fewest falls of 50 fixed starts"),
     ("crossq-td3-combined-best20", "TD3's actor on CrossQ's critics: highest minimum of 20 fixed starts"),
