@@ -9,7 +9,9 @@ import math
 import sys
 
 
-def wilson(k, n, z=1.96):
+def wilson(k, n, z=1.959963984540054):
+    """The same interval as locobench::evaluation::stats::wilson (src/evaluation/stats.rs), which
+    `eval` prints per run; pooled counts over seeds are not something the CLI takes."""
     p = k / n
     d = 1 + z * z / n
     centre = (p + z * z / (2 * n)) / d

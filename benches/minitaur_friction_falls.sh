@@ -18,23 +18,19 @@ benches/results/minitaur/crossq-combined-seed0@500000
 benches/results/minitaur/crossq-combined-seed1@500000
 benches/results/minitaur/crossq-combined-seed2@500000
 controller@1.5"}
-field() { sed -n "s/^  $1 *\([-0-9.]*\).*/\1/p" | head -1; }
 echo "contender,budget,friction_scale,episodes,falls,mean_return,mean_speed"
 for c in $CONTENDERS; do
   path=${c%@*}; at=${c#*@}
   for s in $SCALES; do
     if [ "$path" = controller ]; then
       out=$("$bin" baseline --env minitaur --speed "$at" --episodes "$EPISODES" --seed "$SEED" --option "friction_scale=$s" 2>&1)
-    else
-      out=$("$bin" eval --policy "$path" --budget "$at" --episodes "$EPISODES" --seed "$SEED" --option "friction_scale=$s" 2>&1)
-    fi
-    if [ "$path" = controller ]; then
       # The sweep table's one row: speed, return ± std, achieved speed, ..., falls as k/n.
       row=$(printf '%s\n' "$out" | tail -1)
       ret=$(echo "$row" | awk '{print $2}')
       speed=$(echo "$row" | awk '{print $5}')
       falls=$(echo "$row" | awk '{for (i = 1; i <= NF; i++) if ($i ~ /^[0-9]+\/[0-9]+$/) {split($i, f, "/"); print f[1]}}')
     else
+      out=$("$bin" eval --policy "$path" --budget "$at" --episodes "$EPISODES" --seed "$SEED" --option "friction_scale=$s" 2>&1)
       falls=$(printf '%s\n' "$out" | sed -n 's/^ *falls *\([0-9]*\)\/.*/\1/p' | head -1)
       ret=$(printf '%s\n' "$out" | sed -n 's/^ *return *mean *\([-0-9.]*\).*/\1/p' | head -1)
       speed=$(printf '%s\n' "$out" | sed -n 's/^ *speed *\([-0-9.]*\) m\/s.*/\1/p' | head -1)
