@@ -145,7 +145,7 @@ pub fn lookup(name: &str) -> Result<&'static EnvEntry, EnvError> {
 
 /// The env whose body the command task `name` commands; None when `name` is not a command task.
 pub fn command_base(name: &str) -> Option<&'static str> {
-    ENVS.iter().find(|e| e.name == name).and_then(|e| e.command_base)
+    lookup(name).ok().and_then(|e| e.command_base)
 }
 
 /// Every registered environment name, in registration order.
@@ -193,7 +193,7 @@ impl EnvConfig {
     pub fn for_evaluation(&self) -> EnvConfig {
         let mut out = self.clone();
         // A command task takes its base env's perturbations.
-        let perturbations: &[&str] = match self.name.trim_end_matches("-command") {
+        let perturbations: &[&str] = match command_base(&self.name).unwrap_or(&self.name) {
             "minitaur" => &super::minitaur::perturb::OPTIONS,
             "ant" => &super::world::OPTIONS,
             _ => &[],

@@ -63,8 +63,11 @@ pub struct MinitaurOptions {
     /// Seconds the motors are held at their reset angles before the episode starts.
     pub reset_hold_time: f64,
     /// PyBullet's default randomisation at each reset: masses x U(0.8, 1.2), battery
-    /// U(14.8, 16.8) V, motor viscous damping U(0, 0.01), foot friction U(0.8, 1.5).
+    /// U(14.8, 16.8) V, motor viscous damping U(0, 0.01), foot friction U(foot_friction_range).
     pub randomize_dynamics: bool,
+    /// [low, high] of the feet's sliding friction drawn each episode with the dynamics randomised;
+    /// PyBullet's randomiser draws from [0.8, 1.5] (`minitaur_gym_env.py`).
+    pub foot_friction_range: [f64; 2],
     /// Motor PD gains (PWM per rad and per rad/s).
     pub motor_kp: f64,
     /// Motor damping gain (PWM per rad/s).
@@ -131,6 +134,7 @@ impl Default for MinitaurOptions {
             reset_noise_scale: 0.0,
             reset_hold_time: 0.2,
             randomize_dynamics: true,
+            foot_friction_range: [0.8, 1.5],
             motor_kp: 1.0,
             motor_kd: 0.02,
             overheat_protection: true,
@@ -364,7 +368,8 @@ impl Minitaur {
             for m in model.body_mass_mut().iter_mut().skip(1) {
                 *m *= rng.random_range(0.8..1.2);
             }
-            let friction = rng.random_range(0.8..1.5);
+            let [low, high] = self.opts.foot_friction_range;
+            let friction = rng.random_range(low..high);
             let friction_all = model.geom_friction_mut();
             for &g in &self.foot_geoms {
                 friction_all[3 * g] = friction;
@@ -550,5 +555,37 @@ mod tests {
         assert!(bad.err().unwrap().to_string().contains("random_battery_min"));
         let bad = Minitaur::new(MinitaurOptions { random_battery_min: 20.0, ..Default::default() });
         assert!(bad.err().unwrap().to_string().contains("random_battery_min"));
+    }
+
+    /// `foot_friction_range` sets the bounds of PyBullet's per-episode foot friction draw and
+    /// nothing else: the masses before it and the motor draws after it are those of the default.
+    #[test]
+    fn the_foot_friction_is_drawn_from_its_range_and_the_other_draws_stay() {
+        let draws = |opts: MinitaurOptions| {
+            let mut e = Minitaur::new(opts).unwrap();
+            (0..40)
+                .map(|s| {
+                    e.reset(Some(s)).unwrap();
+                    let m = e.core.sim.data.model();
+                    let feet: Vec<f64> = e.foot_geoms.iter().map(|&g| m.geom_friction()[3 * g]).collect();
+                    (feet, m.body_mass().to_vec(), e.params.map(|p| (p.voltage, p.viscous_damping)))
+                })
+                .collect::<Vec<_>>()
+        };
+        let nominal = draws(MinitaurOptions::default());
+        let wide = draws(MinitaurOptions { foot_friction_range: [0.4, 2.2], ..Default::default() });
+        for ((feet0, mass0, motors0), (feet, mass, motors)) in nominal.iter().zip(&wide) {
+            assert!(feet0.iter().all(|&f| f == feet0[0] && (0.8..1.5).contains(&f)), "{feet0:?}");
+            assert!(feet.iter().all(|&f| f == feet[0] && (0.4..2.2).contains(&f)), "{feet:?}");
+            assert_eq!((mass0, motors0), (mass, motors));
+        }
+        let wide_feet: Vec<f64> = wide.iter().map(|(f, _, _)| f[0]).collect();
+        assert!(wide_feet.iter().any(|&f| f < 0.8) && wide_feet.iter().any(|&f| f > 1.5), "{wide_feet:?}");
+        for bad in [[1.5, 0.8], [1.0, 1.0], [-0.2, 1.0], [0.5, f64::NAN]] {
+            let err = Minitaur::new(MinitaurOptions { foot_friction_range: bad, ..Default::default() });
+            assert!(err.err().unwrap().to_string().contains("foot_friction_range"), "{bad:?}");
+        }
+        let off = MinitaurOptions { foot_friction_range: [0.4, 2.2], randomize_dynamics: false, ..Default::default() };
+        assert!(Minitaur::new(off).err().unwrap().to_string().contains("randomize_dynamics"));
     }
 }

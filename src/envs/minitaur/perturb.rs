@@ -40,8 +40,9 @@ const PUSH_DURATION: usize = 10;
 
 /// Every perturbation option: what the held-out protocol resets to nominal, so a policy trained
 /// under perturbations is evaluated in the same world as every other.
-pub const OPTIONS: [&str; 17] = [
+pub const OPTIONS: [&str; 18] = [
     "friction_scale",
+    "foot_friction_range",
     "payload_mass",
     "com_shift",
     "random_payload_max",
@@ -64,6 +65,15 @@ pub const OPTIONS: [&str; 17] = [
 pub(crate) fn validate(o: &MinitaurOptions) -> Result<(), EnvError> {
     let c = Check { env: "minitaur" };
     c.within("friction_scale", o.friction_scale, 0.0, 10.0)?;
+    c.range("foot_friction_range", o.foot_friction_range)?;
+    c.within("foot_friction_range", o.foot_friction_range[0], 0.0, 10.0)?;
+    c.within("foot_friction_range", o.foot_friction_range[1], 0.0, 10.0)?;
+    if o.foot_friction_range != [0.8, 1.5] && !o.randomize_dynamics {
+        return Err(EnvError::InvalidOption {
+            env: "minitaur".into(),
+            message: "foot_friction_range draws with the randomised dynamics: set randomize_dynamics = true".into(),
+        });
+    }
     c.within("payload_mass", o.payload_mass, 0.0, 60.0)?;
     c.within("com_shift", o.com_shift, -0.3, 0.3)?;
     c.within("random_payload_max", o.random_payload_max, 0.0, 60.0)?;
