@@ -189,11 +189,14 @@ fn the_protocol_evaluates_a_policy_trained_under_perturbations_in_the_nominal_wo
         .with_overrides(&[
             ("random_push_max".into(), "0.75".into()),
             ("terrain_step_height".into(), "0.02".into()),
+            ("foot_friction_range".into(), "[0.5, 2.0]".into()),
             ("drift_weight".into(), "0.5".into()),
         ])
         .unwrap();
     let eval = trained.for_evaluation();
-    assert!(!eval.options.contains_key("random_push_max") && !eval.options.contains_key("terrain_step_height"));
+    for perturbation in ["random_push_max", "terrain_step_height", "foot_friction_range"] {
+        assert!(!eval.options.contains_key(perturbation), "{perturbation}");
+    }
     assert_eq!(eval.options.get("drift_weight"), trained.options.get("drift_weight"), "the reward stays the run's");
     assert_eq!(EnvConfig::new("ant").for_evaluation(), EnvConfig::new("ant"));
     // a command task's base perturbations too, its command settings kept
