@@ -68,7 +68,7 @@ pub(crate) fn validate(o: &MinitaurOptions) -> Result<(), EnvError> {
     c.range("foot_friction_range", o.foot_friction_range)?;
     c.within("foot_friction_range", o.foot_friction_range[0], 0.0, 10.0)?;
     c.within("foot_friction_range", o.foot_friction_range[1], 0.0, 10.0)?;
-    if o.foot_friction_range != [0.8, 1.5] && !o.randomize_dynamics {
+    if o.foot_friction_range != MinitaurOptions::default().foot_friction_range && !o.randomize_dynamics {
         return Err(EnvError::InvalidOption {
             env: "minitaur".into(),
             message: "foot_friction_range draws with the randomised dynamics: set randomize_dynamics = true".into(),
