@@ -61,18 +61,27 @@ pub const OPTIONS: [&str; 18] = [
     "random_push_max",
 ];
 
+/// An option that changes one of PyBullet's randomised draws means nothing without them.
+fn drawn_with_randomized_dynamics(name: &str, o: &MinitaurOptions) -> Result<(), EnvError> {
+    if o.randomize_dynamics {
+        return Ok(());
+    }
+    Err(EnvError::InvalidOption {
+        env: "minitaur".into(),
+        message: format!("{name} draws with the randomised dynamics: set randomize_dynamics = true"),
+    })
+}
+
 /// Checks the perturbation options; the error names the option.
 pub(crate) fn validate(o: &MinitaurOptions) -> Result<(), EnvError> {
     let c = Check { env: "minitaur" };
     c.within("friction_scale", o.friction_scale, 0.0, 10.0)?;
     c.range("foot_friction_range", o.foot_friction_range)?;
-    c.within("foot_friction_range", o.foot_friction_range[0], 0.0, 10.0)?;
-    c.within("foot_friction_range", o.foot_friction_range[1], 0.0, 10.0)?;
-    if o.foot_friction_range != MinitaurOptions::default().foot_friction_range && !o.randomize_dynamics {
-        return Err(EnvError::InvalidOption {
-            env: "minitaur".into(),
-            message: "foot_friction_range draws with the randomised dynamics: set randomize_dynamics = true".into(),
-        });
+    for bound in o.foot_friction_range {
+        c.within("foot_friction_range", bound, 0.0, 10.0)?;
+    }
+    if o.foot_friction_range != MinitaurOptions::default().foot_friction_range {
+        drawn_with_randomized_dynamics("foot_friction_range", o)?;
     }
     c.within("payload_mass", o.payload_mass, 0.0, 60.0)?;
     c.within("com_shift", o.com_shift, -0.3, 0.3)?;
@@ -95,12 +104,7 @@ pub(crate) fn validate(o: &MinitaurOptions) -> Result<(), EnvError> {
     }
     if o.random_battery_min != 0.0 {
         c.within("random_battery_min", o.random_battery_min, 1.0, 16.7)?;
-        if !o.randomize_dynamics {
-            return Err(EnvError::InvalidOption {
-                env: "minitaur".into(),
-                message: "random_battery_min draws with the randomised dynamics: set randomize_dynamics = true".into(),
-            });
-        }
+        drawn_with_randomized_dynamics("random_battery_min", o)?;
     }
     c.within("latency", o.latency, 0.0, 0.5)?;
     c.within("random_latency_max", o.random_latency_max, 0.0, 0.5)?;
